@@ -1,0 +1,60 @@
+// Command-line parsing for the thin mains. A command declares its flags; anything else is an error.
+//   Args args(argv...);  args.flag("--quiet");  args.value("--scene")  ...  args.finish()
+// Values: "--key value" or "--key=value". Errors name the flag, what was expected and what was found.
+#pragma once
+
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "attention/runtime/status.h"
+
+namespace macro::cli {
+
+class Args {
+ public:
+  Args(std::vector<std::string> argv);
+
+  // Boolean flag present?
+  bool flag(const std::string& name);
+  // Optional value.
+  std::optional<std::string> value(const std::string& name);
+  std::string value_or(const std::string& name, const std::string& fallback);
+  // Required value: records an error if missing.
+  std::string required(const std::string& name);
+  int int_or(const std::string& name, int fallback, int min_value, int max_value);
+  double double_or(const std::string& name, double fallback, double min_value, double max_value);
+  // Comma-separated floats, e.g. --background 1,1,1.
+  std::vector<double> doubles_or(const std::string& name, std::vector<double> fallback,
+                                 size_t count);
+  // Positional arguments (not starting with --), in order.
+  std::vector<std::string> positionals();
+
+  // Unknown flags and all recorded errors; call after reading every flag.
+  Status finish();
+
+ private:
+  void fail(const std::string& message);
+  std::vector<std::string> argv_;
+  std::vector<bool> used_;
+  std::vector<std::string> errors_;
+};
+
+// Common flags every command accepts: --threads N, --quiet, --isa NAME. Applies them.
+Status apply_common_flags(Args& args);
+
+using CommandFn = int (*)(std::vector<std::string> argv);
+struct Command {
+  const char* name;
+  const char* summary;
+  CommandFn run;
+};
+// Commands register themselves from their own file: static const bool r = register_command({...});
+bool register_command(Command command);
+const std::vector<Command>& commands();
+
+// Print "macro <command>: <message>" on stderr and return the exit code 1 (bad input).
+int fail(const std::string& command, const Status& status);
+
+}  // namespace macro::cli

@@ -1,0 +1,77 @@
+#include "attention/runtime/progress.h"
+
+#include <atomic>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+
+namespace macro {
+namespace {
+std::atomic<int> g_quiet{-1};
+std::string format_seconds(double s) {
+  char buf[32];
+  if (s < 60) std::snprintf(buf, sizeof buf, "%.1fs", s);
+  else if (s < 3600) std::snprintf(buf, sizeof buf, "%dm%02ds", int(s) / 60, int(s) % 60);
+  else std::snprintf(buf, sizeof buf, "%dh%02dm", int(s) / 3600, (int(s) / 60) % 60);
+  return buf;
+}
+}  // namespace
+
+void set_quiet(bool q) { g_quiet.store(q ? 1 : 0); }
+
+bool quiet() {
+  int v = g_quiet.load();
+  if (v < 0) {
+    const char* env = std::getenv("MACRO_QUIET");
+    v = (env && *env && std::strcmp(env, "0") != 0) ? 1 : 0;
+    g_quiet.store(v);
+  }
+  return v == 1;
+}
+
+Progress::Progress(std::string stage, size_t total)
+    : stage_(std::move(stage)), total_(total), start_(std::chrono::steady_clock::now()) {
+  last_draw_ = start_ - std::chrono::seconds(1);
+}
+
+Progress::~Progress() { finish(); }
+
+void Progress::advance(size_t n) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  done_ += n;
+  draw(false);
+}
+
+void Progress::set(size_t done) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  done_ = done;
+  draw(false);
+}
+
+void Progress::finish() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (finished_) return;
+  finished_ = true;
+  draw(true);
+}
+
+void Progress::draw(bool final_line) {
+  if (quiet()) return;
+  auto now = std::chrono::steady_clock::now();
+  if (!final_line && now - last_draw_ < std::chrono::milliseconds(250)) return;
+  last_draw_ = now;
+  double elapsed = std::chrono::duration<double>(now - start_).count();
+  std::string eta = "?";
+  if (done_ > 0 && total_ >= done_) eta = format_seconds(elapsed * double(total_ - done_) / double(done_));
+  std::fprintf(stderr, "\r[%s] %zu/%zu  elapsed %s  eta %s%s", stage_.c_str(), done_, total_,
+               format_seconds(elapsed).c_str(), final_line ? "0.0s" : eta.c_str(),
+               final_line ? "\n" : "   ");
+  std::fflush(stderr);
+}
+
+void log_info(const std::string& stage, const std::string& message) {
+  if (quiet()) return;
+  std::fprintf(stderr, "[%s] %s\n", stage.c_str(), message.c_str());
+}
+
+}  // namespace macro

@@ -1,0 +1,37 @@
+// Progress of long jobs on stderr: stage, count, elapsed, ETA. Silenced by set_quiet(true)
+// (--quiet) or the environment variable MACRO_QUIET=1. Thread-safe; redraws at most ~4 times a second.
+#pragma once
+
+#include <chrono>
+#include <cstddef>
+#include <mutex>
+#include <string>
+
+namespace macro {
+
+void set_quiet(bool quiet);
+bool quiet();
+
+class Progress {
+ public:
+  Progress(std::string stage, size_t total);
+  ~Progress();
+  void advance(size_t n = 1);
+  void set(size_t done);
+  void finish();
+
+ private:
+  void draw(bool final_line);
+  std::string stage_;
+  size_t total_;
+  size_t done_ = 0;
+  bool finished_ = false;
+  std::chrono::steady_clock::time_point start_;
+  std::chrono::steady_clock::time_point last_draw_;
+  std::mutex mutex_;
+};
+
+// A one-line note on stderr unless quiet ("stage: message").
+void log_info(const std::string& stage, const std::string& message);
+
+}  // namespace macro

@@ -1,0 +1,77 @@
+// Shared helpers for the Catch2 tests: where the reference data lives, temporary folders, and
+// the comparison measures the goldens' tolerances are stated in.
+#pragma once
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <algorithm>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace macro::test {
+
+// ../shared/golden beside the clone, or a copy under data/golden; MACRO_GOLDEN overrides.
+inline std::string golden_dir() {
+  if (const char* env = std::getenv("MACRO_GOLDEN"); env && *env) return env;
+  namespace fs = std::filesystem;
+  for (const char* rel : {"/../shared/golden", "/data/golden"}) {
+    std::string p = std::string(MACRO_SOURCE_DIR) + rel;
+    if (fs::is_directory(p)) return fs::weakly_canonical(p).string();
+  }
+  return std::string(MACRO_SOURCE_DIR) + "/../shared/golden";
+}
+inline std::string shared_dir() { return golden_dir() + "/.."; }
+inline std::string source_dir() { return MACRO_SOURCE_DIR; }
+inline std::string macro_exe() { return std::string(MACRO_BINARY_DIR) + "/macro"; }
+
+// A fresh empty folder under the build tree, removed when the object dies.
+struct TempDir {
+  std::string path;
+  explicit TempDir(const std::string& tag) {
+    namespace fs = std::filesystem;
+    static int counter = 0;
+    path = std::string(MACRO_BINARY_DIR) + "/test-tmp/" + tag + "-" + std::to_string(::getpid()) +
+           "-" + std::to_string(counter++);
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~TempDir() { std::filesystem::remove_all(path); }
+  std::string file(const std::string& name) const { return path + "/" + name; }
+};
+
+struct Diff {
+  double max_abs = 0;
+  double rel_l2 = 0;  // ||a-b|| / ||b||
+  double psnr = 0;    // 10 log10(1 / mse), peak 1
+};
+
+inline Diff compare(const float* a, const float* b, size_t n) {
+  double se = 0, ref = 0, mx = 0;
+  for (size_t i = 0; i < n; ++i) {
+    double d = double(a[i]) - double(b[i]);
+    if (!(std::abs(d) <= mx)) mx = std::isnan(d) ? INFINITY : std::abs(d);
+    se += d * d;
+    ref += double(b[i]) * double(b[i]);
+  }
+  Diff r;
+  r.max_abs = mx;
+  r.rel_l2 = ref > 0 ? std::sqrt(se / ref) : std::sqrt(se);
+  double mse = n ? se / double(n) : 0;
+  r.psnr = mse > 0 ? 10.0 * std::log10(1.0 / mse) : 999.0;
+  return r;
+}
+inline Diff compare(const std::vector<float>& a, const std::vector<float>& b) {
+  return compare(a.data(), b.data(), std::min(a.size(), b.size()));
+}
+
+// Run a shell command, return its exit status (0..255).
+inline int run_command(const std::string& cmd) {
+  int rc = std::system(cmd.c_str());
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : 255;
+}
+
+}  // namespace macro::test
