@@ -68,6 +68,10 @@ class SafeTensors {
   std::map<std::string, std::string> metadata_;
 };
 
+// Convert a mapped tensor's elements to float32 into dst (n must equal its element count).
+// Used by loaders that fill preallocated buffers; read_f32 is the allocating form.
+Status convert_to_f32(const TensorEntry& entry, float* dst, size_t n);
+
 // One tensor to write; data is dtype-sized little-endian elements, row-major.
 struct TensorToWrite {
   std::string name;
@@ -76,8 +80,8 @@ struct TensorToWrite {
   const void* data = nullptr;
 };
 
-// Written atomically (temporary + rename). Tensors are laid out in the given order, 8-byte aligned
-// header as the format requires.
+// Written atomically (temporary + rename). Tensors are laid out in the given order; the JSON header
+// is padded with spaces to a multiple of 8 bytes so the data section starts 8-byte aligned.
 Status write_safetensors(const std::string& path, const std::vector<TensorToWrite>& tensors,
                          const std::map<std::string, std::string>& metadata = {});
 
