@@ -1,0 +1,79 @@
+// 2-D convolution, NCHW activations with OIHW weights, as an implicit GEMM.
+//
+//   y[n, co, oy, ox] = bias[co] + residual[n, co, oy, ox]
+//                    + sum_{ci, dy, dx} w[co, ci, dy, dx] * x[n, ci, oy*s + dy - pad_top, ox*s + dx - pad_left]
+//   (x outside [0, H) x [0, W) reads as zero)
+//   OH = (H + pad_top + pad_bottom - KH) / s + 1,  OW = (W + pad_left + pad_right - KW) / s + 1
+//
+// Legend: N batch, Cin/Cout channels, H x W input, OH x OW output, KH x KW kernel, s stride.
+// Covers the networks' convs: 1x1 and 3x3, stride 1 and 2, symmetric pad 1 (UNet, VAE decoder),
+// the VAE encoder downsampler's right/bottom-only pad (pad_bottom = pad_right = 1, others 0), bias,
+// and a fused residual add (ResnetBlock2D's `shortcut(x) + h`).
+//
+// As a GEMM per image: Y[Cout, OH*OW] = Wt[Cout, Cin*KH*KW] . im2col(x)[Cin*KH*KW, OH*OW]. The
+// weights are packed once (ConvWeights, at load); the im2col panels are built tile by tile into
+// per-thread buffers owned by the GEMM driver, never materialised whole.
+#pragma once
+
+#include <cstdint>
+
+#include "attention/runtime/gemm.h"
+
+namespace macro {
+
+struct Conv2dShape {
+  int64_t n = 1;            // batch
+  int64_t c_in = 0, h = 0, w = 0;
+  int64_t c_out = 0;
+  int kh = 3, kw = 3;
+  int stride = 1;
+  int pad_top = 0, pad_left = 0, pad_bottom = 0, pad_right = 0;
+
+  int64_t out_h() const { return (h + pad_top + pad_bottom - kh) / stride + 1; }
+  int64_t out_w() const { return (w + pad_left + pad_right - kw) / stride + 1; }
+  // Symmetric padding helper: conv(3x3, pad 1) is Conv2dShape::same(...).
+  static Conv2dShape make(int64_t n, int64_t c_in, int64_t h, int64_t w, int64_t c_out, int k,
+                          int stride, int pad) {
+    Conv2dShape s;
+    s.n = n, s.c_in = c_in, s.h = h, s.w = w, s.c_out = c_out, s.kh = k, s.kw = k;
+    s.stride = stride;
+    s.pad_top = s.pad_left = s.pad_bottom = s.pad_right = pad;
+    return s;
+  }
+};
+
+// Conv weights [Cout, Cin, KH, KW] (+ bias [Cout]) packed once for one kernel path.
+class ConvWeights {
+ public:
+  ConvWeights() = default;
+  static ConvWeights pack(const float* w, const float* bias, int64_t c_out, int64_t c_in, int kh,
+                          int kw, Isa isa = active_isa());
+  int64_t c_out() const { return c_out_; }
+  int64_t c_in() const { return c_in_; }
+  int kh() const { return kh_; }
+  int kw() const { return kw_; }
+  bool has_bias() const { return !bias_.empty(); }
+  const PackedWeights& packed() const { return packed_; }
+  const float* bias() const { return bias_.empty() ? nullptr : bias_.data(); }
+
+ private:
+  int64_t c_out_ = 0, c_in_ = 0;
+  int kh_ = 0, kw_ = 0;
+  PackedWeights packed_;  // rows = Cout, K = Cin*KH*KW, packed as A panels
+  std::vector<float> bias_;
+};
+
+// y [N, Cout, OH, OW] = conv(x [N, Cin, H, W]) (+ bias) (+ residual [N, Cout, OH, OW], may be null;
+// it may alias y). The weights' shape must match `s` (MACRO_CHECK). pool == nullptr: calling thread.
+void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const float* residual,
+            float* y, ThreadPool* pool = nullptr);
+
+// Convenience for tests and one-off calls: packs the weights on each call.
+void conv2d(const Conv2dShape& s, const float* x, const float* weight, const float* bias,
+            const float* residual, float* y, ThreadPool* pool = nullptr);
+
+// The plain loop nest above, in double accumulation: the reference the tests compare against.
+void conv2d_reference(const Conv2dShape& s, const float* x, const float* weight, const float* bias,
+                      const float* residual, float* y);
+
+}  // namespace macro

@@ -1,0 +1,139 @@
+// AMX-BF16 GEMM micro-kernel: a 32x32 fp32 C block as 2x2 tiles of 16x16, with TDPBF16PS.
+//
+// UNTESTED ON THE DEVELOPMENT MACHINE (AMD EPYC, no AMX): this path is compiled, and selected only
+// when cpu_features().amx is true (AMX-TILE + AMX-BF16, OS tile state, XTILEDATA permission granted
+// in cpu.cpp); otherwise the AVX512-BF16 kernel is used. Its tests run wherever AMX is present.
+//
+// Tiles: 0-3 C (16 rows x 64 B), 4-5 A (16 rows x 32 bf16), 6-7 B (16 k-pairs x 16 cols x 2).
+// A panel layout kBf16Amx: [K/32][32 rows][32 bf16] -> tile rows are 64 B apart.
+// B panel layout kBf16Pairs with NR = 32: [K/2][32][2] -> per 32-k step 16 rows of 128 B; the
+// left 16 columns are the first 64 B of each row, the right 16 the next 64 B.
+// The tile configuration is loaded on every call (other code on the thread may use other shapes).
+// GCC 12's AVX-512 headers trip -W(maybe-)uninitialized on their own _mm512_undefined_*() idiom.
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include <immintrin.h>
+
+#include <cstring>
+
+#include "attention/runtime/kernels.h"
+
+namespace macro {
+namespace {
+
+constexpr int kMr = 32, kNr = 32;
+
+struct alignas(64) TileConfig {
+  uint8_t palette = 1;
+  uint8_t start_row = 0;
+  uint8_t reserved[14] = {};
+  uint16_t colsb[16] = {};
+  uint8_t rows[16] = {};
+};
+
+inline void load_config() {
+  TileConfig cfg;
+  for (int i = 0; i < 8; ++i) {
+    cfg.colsb[i] = 64;
+    cfg.rows[i] = 16;
+  }
+  _tile_loadconfig(&cfg);
+}
+
+void micro_amx(const MicroTile& t) {
+  load_config();
+  const uint16_t* a = static_cast<const uint16_t*>(t.a);
+  const uint16_t* b = static_cast<const uint16_t*>(t.b);
+  _tile_zero(0);
+  _tile_zero(1);
+  _tile_zero(2);
+  _tile_zero(3);
+  for (int64_t k = 0; k < t.kc; k += 32) {
+    const uint16_t* ak = a + k * kMr;  // [32 rows][32]
+    const uint16_t* bk = b + k * kNr;  // [16 pairs][32 cols][2]
+    _tile_loadd(4, ak, 64);
+    _tile_loadd(5, ak + 16 * 32, 64);
+    _tile_loadd(6, bk, 128);
+    _tile_loadd(7, bk + 32, 128);
+    _tile_dpbf16ps(0, 4, 6);
+    _tile_dpbf16ps(1, 4, 7);
+    _tile_dpbf16ps(2, 5, 6);
+    _tile_dpbf16ps(3, 5, 7);
+  }
+  alignas(64) float acc[kMr * kNr];
+  _tile_stored(0, acc, kNr * 4);
+  _tile_stored(1, acc + 16, kNr * 4);
+  _tile_stored(2, acc + 16 * kNr, kNr * 4);
+  _tile_stored(3, acc + 16 * kNr + 16, kNr * 4);
+
+  const __mmask16 k0 = t.n >= 16 ? __mmask16(0xffff) : __mmask16((1u << t.n) - 1);
+  const __mmask16 k1 = t.n >= 32 ? __mmask16(0xffff)
+                       : t.n <= 16 ? __mmask16(0)
+                                   : __mmask16((1u << (t.n - 16)) - 1);
+  const __m512 alpha = _mm512_set1_ps(t.alpha), beta = _mm512_set1_ps(t.beta);
+  __m512 bn0 = _mm512_setzero_ps(), bn1 = _mm512_setzero_ps();
+  if (t.bias_n) {
+    bn0 = _mm512_maskz_loadu_ps(k0, t.bias_n);
+    bn1 = _mm512_maskz_loadu_ps(k1, t.bias_n + 16);
+  }
+  for (int r = 0; r < t.m; ++r) {
+    float* c = t.c + r * t.ldc;
+    __m512 v0 = _mm512_mul_ps(_mm512_load_ps(acc + r * kNr), alpha);
+    __m512 v1 = _mm512_mul_ps(_mm512_load_ps(acc + r * kNr + 16), alpha);
+    if (t.load_c) {
+      v0 = _mm512_fmadd_ps(beta, _mm512_maskz_loadu_ps(k0, c), v0);
+      v1 = _mm512_fmadd_ps(beta, _mm512_maskz_loadu_ps(k1, c + 16), v1);
+    }
+    v0 = _mm512_add_ps(v0, bn0);
+    v1 = _mm512_add_ps(v1, bn1);
+    if (t.bias_m) {
+      const __m512 bm = _mm512_set1_ps(t.bias_m[r]);
+      v0 = _mm512_add_ps(v0, bm);
+      v1 = _mm512_add_ps(v1, bm);
+    }
+    if (t.res) {
+      const float* rr = t.res + r * t.ldr;
+      v0 = _mm512_add_ps(v0, _mm512_maskz_loadu_ps(k0, rr));
+      v1 = _mm512_add_ps(v1, _mm512_maskz_loadu_ps(k1, rr + 16));
+    }
+    _mm512_mask_storeu_ps(c, k0, v0);
+    _mm512_mask_storeu_ps(c + 16, k1, v1);
+  }
+}
+
+// Four independent TDPBF16PS chains over fixed tiles: 16 x 16 x 32 MACs each.
+double probe_amx(int64_t iters) {
+  load_config();
+  alignas(64) uint16_t ones[16 * 32];
+  for (auto& v : ones) v = 0x3f80;  // 1.0
+  _tile_loadd(4, ones, 64);
+  _tile_loadd(6, ones, 64);
+  _tile_zero(0);
+  _tile_zero(1);
+  _tile_zero(2);
+  _tile_zero(3);
+  for (int64_t it = 0; it < iters; ++it) {
+    _tile_dpbf16ps(0, 4, 6);
+    _tile_dpbf16ps(1, 4, 6);
+    _tile_dpbf16ps(2, 4, 6);
+    _tile_dpbf16ps(3, 4, 6);
+  }
+  alignas(64) float out[16 * 16];
+  _tile_stored(0, out, 64);
+  _tile_release();
+  volatile float sink = out[0];
+  (void)sink;
+  return double(iters) * 4 * 16 * 16 * 32 * 2;
+}
+
+}  // namespace
+
+namespace detail {
+void fill_amx_kernels(KernelTable& t) {
+  fill_avx512bf16_kernels(t);
+  t.bf16 = GemmKernel{kMr, kNr, 32, 256, PackLayout::kBf16Amx, micro_amx, "amx bf16 32x32"};
+  t.probe_bf16 = probe_amx;
+}
+}  // namespace detail
+
+}  // namespace macro

@@ -1,0 +1,144 @@
+// AVX2+FMA GEMM micro-kernels: fp32 6x16 (12 ymm accumulators) and bf16 4x16 widened with shifts.
+// Packed layouts and the MicroTile contract: kernels.h.
+#include <immintrin.h>
+
+#include "attention/runtime/kernels.h"
+
+namespace macro {
+namespace {
+
+constexpr int kNr = 16;
+
+template <int MR>
+inline void store_tile(const MicroTile& t, const __m256* c0, const __m256* c1) {
+  if (t.n < kNr) {
+    // Column tail: go through a buffer and plain loops.
+    alignas(32) float acc[MR * kNr];
+    for (int r = 0; r < MR; ++r) {
+      _mm256_store_ps(acc + r * kNr, c0[r]);
+      _mm256_store_ps(acc + r * kNr + 8, c1[r]);
+    }
+    for (int i = 0; i < t.m; ++i) {
+      float* c = t.c + i * t.ldc;
+      for (int j = 0; j < t.n; ++j) {
+        float v = t.alpha * acc[i * kNr + j];
+        if (t.load_c) v += t.beta * c[j];
+        if (t.bias_n) v += t.bias_n[j];
+        if (t.bias_m) v += t.bias_m[i];
+        if (t.res) v += t.res[i * t.ldr + j];
+        c[j] = v;
+      }
+    }
+    return;
+  }
+  const __m256 alpha = _mm256_set1_ps(t.alpha), beta = _mm256_set1_ps(t.beta);
+  const bool scale = t.alpha != 1.0f;
+  for (int r = 0; r < MR; ++r) {
+    if (r >= t.m) break;
+    float* c = t.c + r * t.ldc;
+    __m256 v0 = scale ? _mm256_mul_ps(c0[r], alpha) : c0[r];
+    __m256 v1 = scale ? _mm256_mul_ps(c1[r], alpha) : c1[r];
+    if (t.load_c) {
+      v0 = _mm256_fmadd_ps(beta, _mm256_loadu_ps(c), v0);
+      v1 = _mm256_fmadd_ps(beta, _mm256_loadu_ps(c + 8), v1);
+    }
+    if (t.bias_n) {
+      v0 = _mm256_add_ps(v0, _mm256_loadu_ps(t.bias_n));
+      v1 = _mm256_add_ps(v1, _mm256_loadu_ps(t.bias_n + 8));
+    }
+    if (t.bias_m) {
+      const __m256 bm = _mm256_set1_ps(t.bias_m[r]);
+      v0 = _mm256_add_ps(v0, bm);
+      v1 = _mm256_add_ps(v1, bm);
+    }
+    if (t.res) {
+      const float* rr = t.res + r * t.ldr;
+      v0 = _mm256_add_ps(v0, _mm256_loadu_ps(rr));
+      v1 = _mm256_add_ps(v1, _mm256_loadu_ps(rr + 8));
+    }
+    _mm256_storeu_ps(c, v0);
+    _mm256_storeu_ps(c + 8, v1);
+  }
+}
+
+constexpr int kMrF32 = 6;
+
+void micro_f32(const MicroTile& t) {
+  __m256 c0[kMrF32], c1[kMrF32];
+  for (int r = 0; r < kMrF32; ++r) c0[r] = c1[r] = _mm256_setzero_ps();
+  const float* a = static_cast<const float*>(t.a);
+  const float* b = static_cast<const float*>(t.b);
+  for (int64_t k = 0; k < t.kc; ++k) {
+    const __m256 b0 = _mm256_loadu_ps(b), b1 = _mm256_loadu_ps(b + 8);
+#pragma GCC unroll 8
+    for (int r = 0; r < kMrF32; ++r) {
+      const __m256 ar = _mm256_broadcast_ss(a + r);
+      c0[r] = _mm256_fmadd_ps(ar, b0, c0[r]);
+      c1[r] = _mm256_fmadd_ps(ar, b1, c1[r]);
+    }
+    a += kMrF32;
+    b += kNr;
+  }
+  store_tile<kMrF32>(t, c0, c1);
+}
+
+constexpr int kMrBf16 = 4;
+
+void micro_bf16_emulated(const MicroTile& t) {
+  __m256 c0[kMrBf16], c1[kMrBf16];
+  for (int r = 0; r < kMrBf16; ++r) c0[r] = c1[r] = _mm256_setzero_ps();
+  const uint32_t* a = static_cast<const uint32_t*>(t.a);
+  const __m256i* b = static_cast<const __m256i*>(t.b);
+  const __m256i hi = _mm256_set1_epi32(int(0xffff0000u));
+  for (int64_t kp = 0; kp < t.kc / 2; ++kp) {
+    const __m256i w0 = _mm256_loadu_si256(b), w1 = _mm256_loadu_si256(b + 1);
+    const __m256 b0o = _mm256_castsi256_ps(_mm256_and_si256(w0, hi));
+    const __m256 b0e = _mm256_castsi256_ps(_mm256_slli_epi32(w0, 16));
+    const __m256 b1o = _mm256_castsi256_ps(_mm256_and_si256(w1, hi));
+    const __m256 b1e = _mm256_castsi256_ps(_mm256_slli_epi32(w1, 16));
+#pragma GCC unroll 8
+    for (int r = 0; r < kMrBf16; ++r) {
+      const uint32_t pair = a[r];
+      const __m256 ao = _mm256_castsi256_ps(_mm256_set1_epi32(int(pair & 0xffff0000u)));
+      const __m256 ae = _mm256_castsi256_ps(_mm256_set1_epi32(int(pair << 16)));
+      c0[r] = _mm256_fmadd_ps(ao, b0o, c0[r]);
+      c1[r] = _mm256_fmadd_ps(ao, b1o, c1[r]);
+      c0[r] = _mm256_fmadd_ps(ae, b0e, c0[r]);
+      c1[r] = _mm256_fmadd_ps(ae, b1e, c1[r]);
+    }
+    a += kMrBf16;
+    b += 2;
+  }
+  store_tile<kMrBf16>(t, c0, c1);
+}
+
+double probe_fma(int64_t iters) {
+  __m256 x[12];
+  for (int i = 0; i < 12; ++i) x[i] = _mm256_set1_ps(1.0f + 0.001f * float(i));
+  const __m256 m = _mm256_set1_ps(0.99999f), c = _mm256_set1_ps(1e-6f);
+  for (int64_t it = 0; it < iters; ++it) {
+#pragma GCC unroll 12
+    for (int i = 0; i < 12; ++i) x[i] = _mm256_fmadd_ps(x[i], m, c);
+  }
+  __m256 s = x[0];
+  for (int i = 1; i < 12; ++i) s = _mm256_add_ps(s, x[i]);
+  alignas(32) float out[8];
+  _mm256_store_ps(out, s);
+  volatile float sink = out[0];
+  (void)sink;
+  return double(iters) * 12 * 8 * 2;
+}
+
+}  // namespace
+
+namespace detail {
+void fill_avx2_kernels(KernelTable& t) {
+  t.f32 = GemmKernel{kMrF32, kNr, 1, 256, PackLayout::kF32, micro_f32, "avx2 f32 6x16"};
+  t.bf16 = GemmKernel{kMrBf16, kNr, 2, 256, PackLayout::kBf16Pairs, micro_bf16_emulated,
+                      "avx2 bf16 4x16 (shift-widened)"};
+  t.probe_fma = probe_fma;
+  t.probe_bf16 = probe_fma;
+}
+}  // namespace detail
+
+}  // namespace macro

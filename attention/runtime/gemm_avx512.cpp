@@ -1,0 +1,143 @@
+// AVX-512 GEMM micro-kernels: fp32 14x32 (28 zmm accumulators, A broadcast from memory) and a
+// bf16 12x32 kernel that widens bf16 pairs with shifts (for CPUs with AVX-512 but no AVX512-BF16).
+// Packed layouts and the MicroTile contract: kernels.h.
+// GCC 12's AVX-512 headers trip -W(maybe-)uninitialized on their own _mm512_undefined_*() idiom.
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include <immintrin.h>
+
+#include "attention/runtime/kernels.h"
+
+namespace macro {
+namespace {
+
+constexpr int kNr = 32;
+
+// C = alpha*acc + beta*C (if load_c) + bias_n + bias_m + res, masked to t.n columns, t.m rows.
+template <int MR>
+inline void store_tile(const MicroTile& t, const __m512* c0, const __m512* c1) {
+  const __mmask16 k0 = t.n >= 16 ? __mmask16(0xffff) : __mmask16((1u << t.n) - 1);
+  const __mmask16 k1 = t.n >= 32 ? __mmask16(0xffff)
+                       : t.n <= 16 ? __mmask16(0)
+                                   : __mmask16((1u << (t.n - 16)) - 1);
+  const __m512 alpha = _mm512_set1_ps(t.alpha), beta = _mm512_set1_ps(t.beta);
+  const bool scale = t.alpha != 1.0f;
+  __m512 bn0 = _mm512_setzero_ps(), bn1 = _mm512_setzero_ps();
+  if (t.bias_n) {
+    bn0 = _mm512_maskz_loadu_ps(k0, t.bias_n);
+    bn1 = _mm512_maskz_loadu_ps(k1, t.bias_n + 16);
+  }
+#pragma GCC unroll 16
+  for (int r = 0; r < MR; ++r) {
+    if (r >= t.m) break;
+    float* c = t.c + r * t.ldc;
+    __m512 v0 = scale ? _mm512_mul_ps(c0[r], alpha) : c0[r];
+    __m512 v1 = scale ? _mm512_mul_ps(c1[r], alpha) : c1[r];
+    if (t.load_c) {
+      v0 = _mm512_fmadd_ps(beta, _mm512_maskz_loadu_ps(k0, c), v0);
+      v1 = _mm512_fmadd_ps(beta, _mm512_maskz_loadu_ps(k1, c + 16), v1);
+    }
+    if (t.bias_n) {
+      v0 = _mm512_add_ps(v0, bn0);
+      v1 = _mm512_add_ps(v1, bn1);
+    }
+    if (t.bias_m) {
+      const __m512 bm = _mm512_set1_ps(t.bias_m[r]);
+      v0 = _mm512_add_ps(v0, bm);
+      v1 = _mm512_add_ps(v1, bm);
+    }
+    if (t.res) {
+      const float* rr = t.res + r * t.ldr;
+      v0 = _mm512_add_ps(v0, _mm512_maskz_loadu_ps(k0, rr));
+      v1 = _mm512_add_ps(v1, _mm512_maskz_loadu_ps(k1, rr + 16));
+    }
+    _mm512_mask_storeu_ps(c, k0, v0);
+    _mm512_mask_storeu_ps(c + 16, k1, v1);
+  }
+}
+
+constexpr int kMrF32 = 14;
+
+void micro_f32(const MicroTile& t) {
+  __m512 c0[kMrF32], c1[kMrF32];
+#pragma GCC unroll 16
+  for (int r = 0; r < kMrF32; ++r) c0[r] = c1[r] = _mm512_setzero_ps();
+  const float* a = static_cast<const float*>(t.a);
+  const float* b = static_cast<const float*>(t.b);
+  for (int64_t k = 0; k < t.kc; ++k) {
+    const __m512 b0 = _mm512_loadu_ps(b), b1 = _mm512_loadu_ps(b + 16);
+    _mm_prefetch(reinterpret_cast<const char*>(b + 8 * kNr), _MM_HINT_T0);
+#pragma GCC unroll 16
+    for (int r = 0; r < kMrF32; ++r) {
+      const __m512 ar = _mm512_set1_ps(a[r]);
+      c0[r] = _mm512_fmadd_ps(ar, b0, c0[r]);
+      c1[r] = _mm512_fmadd_ps(ar, b1, c1[r]);
+    }
+    a += kMrF32;
+    b += kNr;
+  }
+  store_tile<kMrF32>(t, c0, c1);
+}
+
+// bf16 pairs without vdpbf16ps: lane i of a 32-bit view holds (even | odd << 16); even << 16 and
+// odd & 0xffff0000 are the exact fp32 values. Odd products first, as vdpbf16ps does.
+constexpr int kMrBf16 = 12;
+
+void micro_bf16_emulated(const MicroTile& t) {
+  __m512 c0[kMrBf16], c1[kMrBf16];
+#pragma GCC unroll 16
+  for (int r = 0; r < kMrBf16; ++r) c0[r] = c1[r] = _mm512_setzero_ps();
+  const uint32_t* a = static_cast<const uint32_t*>(t.a);
+  const __m512i* b = static_cast<const __m512i*>(t.b);
+  const __m512i hi = _mm512_set1_epi32(int(0xffff0000u));
+  for (int64_t kp = 0; kp < t.kc / 2; ++kp) {
+    const __m512i w0 = _mm512_loadu_si512(b), w1 = _mm512_loadu_si512(b + 1);
+    const __m512 b0o = _mm512_castsi512_ps(_mm512_and_si512(w0, hi));
+    const __m512 b0e = _mm512_castsi512_ps(_mm512_slli_epi32(w0, 16));
+    const __m512 b1o = _mm512_castsi512_ps(_mm512_and_si512(w1, hi));
+    const __m512 b1e = _mm512_castsi512_ps(_mm512_slli_epi32(w1, 16));
+#pragma GCC unroll 16
+    for (int r = 0; r < kMrBf16; ++r) {
+      const uint32_t pair = a[r];
+      const __m512 ao = _mm512_castsi512_ps(_mm512_set1_epi32(int(pair & 0xffff0000u)));
+      const __m512 ae = _mm512_castsi512_ps(_mm512_set1_epi32(int(pair << 16)));
+      c0[r] = _mm512_fmadd_ps(ao, b0o, c0[r]);
+      c1[r] = _mm512_fmadd_ps(ao, b1o, c1[r]);
+      c0[r] = _mm512_fmadd_ps(ae, b0e, c0[r]);
+      c1[r] = _mm512_fmadd_ps(ae, b1e, c1[r]);
+    }
+    a += kMrBf16;
+    b += 2;
+  }
+  store_tile<kMrBf16>(t, c0, c1);
+}
+
+// 24 independent FMA chains (enough to cover latency x throughput on current cores).
+double probe_fma(int64_t iters) {
+  __m512 x[24];
+  for (int i = 0; i < 24; ++i) x[i] = _mm512_set1_ps(1.0f + 0.001f * float(i));
+  const __m512 m = _mm512_set1_ps(0.99999f), c = _mm512_set1_ps(1e-6f);
+  for (int64_t it = 0; it < iters; ++it) {
+#pragma GCC unroll 24
+    for (int i = 0; i < 24; ++i) x[i] = _mm512_fmadd_ps(x[i], m, c);
+  }
+  __m512 s = x[0];
+  for (int i = 1; i < 24; ++i) s = _mm512_add_ps(s, x[i]);
+  volatile float sink = _mm512_reduce_add_ps(s);
+  (void)sink;
+  return double(iters) * 24 * 16 * 2;
+}
+
+}  // namespace
+
+namespace detail {
+void fill_avx512_kernels(KernelTable& t) {
+  t.f32 = GemmKernel{kMrF32, kNr, 1, 256, PackLayout::kF32, micro_f32, "avx512 f32 14x32"};
+  t.bf16 = GemmKernel{kMrBf16, kNr, 2, 256, PackLayout::kBf16Pairs, micro_bf16_emulated,
+                      "avx512 bf16 12x32 (shift-widened)"};
+  t.probe_fma = probe_fma;
+  t.probe_bf16 = probe_fma;
+}
+}  // namespace detail
+
+}  // namespace macro

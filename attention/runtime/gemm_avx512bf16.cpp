@@ -1,0 +1,106 @@
+// AVX512-BF16 GEMM micro-kernel: 14x32 with vdpbf16ps on pair-interleaved panels (kernels.h).
+// fp32 GEMM on this path is the AVX-512 kernel.
+// GCC 12's AVX-512 headers trip -W(maybe-)uninitialized on their own _mm512_undefined_*() idiom.
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include <immintrin.h>
+
+#include "attention/runtime/kernels.h"
+
+namespace macro {
+namespace {
+
+constexpr int kMr = 14, kNr = 32;
+
+template <int MR>
+inline void store_tile(const MicroTile& t, const __m512* c0, const __m512* c1) {
+  const __mmask16 k0 = t.n >= 16 ? __mmask16(0xffff) : __mmask16((1u << t.n) - 1);
+  const __mmask16 k1 = t.n >= 32 ? __mmask16(0xffff)
+                       : t.n <= 16 ? __mmask16(0)
+                                   : __mmask16((1u << (t.n - 16)) - 1);
+  const __m512 alpha = _mm512_set1_ps(t.alpha), beta = _mm512_set1_ps(t.beta);
+  const bool scale = t.alpha != 1.0f;
+  __m512 bn0 = _mm512_setzero_ps(), bn1 = _mm512_setzero_ps();
+  if (t.bias_n) {
+    bn0 = _mm512_maskz_loadu_ps(k0, t.bias_n);
+    bn1 = _mm512_maskz_loadu_ps(k1, t.bias_n + 16);
+  }
+#pragma GCC unroll 16
+  for (int r = 0; r < MR; ++r) {
+    if (r >= t.m) break;
+    float* c = t.c + r * t.ldc;
+    __m512 v0 = scale ? _mm512_mul_ps(c0[r], alpha) : c0[r];
+    __m512 v1 = scale ? _mm512_mul_ps(c1[r], alpha) : c1[r];
+    if (t.load_c) {
+      v0 = _mm512_fmadd_ps(beta, _mm512_maskz_loadu_ps(k0, c), v0);
+      v1 = _mm512_fmadd_ps(beta, _mm512_maskz_loadu_ps(k1, c + 16), v1);
+    }
+    if (t.bias_n) {
+      v0 = _mm512_add_ps(v0, bn0);
+      v1 = _mm512_add_ps(v1, bn1);
+    }
+    if (t.bias_m) {
+      const __m512 bm = _mm512_set1_ps(t.bias_m[r]);
+      v0 = _mm512_add_ps(v0, bm);
+      v1 = _mm512_add_ps(v1, bm);
+    }
+    if (t.res) {
+      const float* rr = t.res + r * t.ldr;
+      v0 = _mm512_add_ps(v0, _mm512_maskz_loadu_ps(k0, rr));
+      v1 = _mm512_add_ps(v1, _mm512_maskz_loadu_ps(k1, rr + 16));
+    }
+    _mm512_mask_storeu_ps(c, k0, v0);
+    _mm512_mask_storeu_ps(c + 16, k1, v1);
+  }
+}
+
+void micro_bf16(const MicroTile& t) {
+  __m512 c0[kMr], c1[kMr];
+#pragma GCC unroll 16
+  for (int r = 0; r < kMr; ++r) c0[r] = c1[r] = _mm512_setzero_ps();
+  const uint32_t* a = static_cast<const uint32_t*>(t.a);  // [kc/2][MR] pairs
+  const __m512i* b = static_cast<const __m512i*>(t.b);    // [kc/2][NR] pairs, 2 zmm per step
+  for (int64_t kp = 0; kp < t.kc / 2; ++kp) {
+    const __m512bh b0 = (__m512bh)_mm512_loadu_si512(b);
+    const __m512bh b1 = (__m512bh)_mm512_loadu_si512(b + 1);
+    _mm_prefetch(reinterpret_cast<const char*>(b + 16), _MM_HINT_T0);
+#pragma GCC unroll 16
+    for (int r = 0; r < kMr; ++r) {
+      const __m512bh ar = (__m512bh)_mm512_set1_epi32(int(a[r]));
+      c0[r] = _mm512_dpbf16_ps(c0[r], ar, b0);
+      c1[r] = _mm512_dpbf16_ps(c1[r], ar, b1);
+    }
+    a += kMr;
+    b += 2;
+  }
+  store_tile<kMr>(t, c0, c1);
+}
+
+// 24 independent vdpbf16ps chains; each does 16 lanes x 2 products x 2 flops.
+double probe_bf16(int64_t iters) {
+  __m512 x[24];
+  for (int i = 0; i < 24; ++i) x[i] = _mm512_setzero_ps();
+  const __m512bh a = (__m512bh)_mm512_set1_epi32(0x3f803f80);  // (1.0, 1.0)
+  const __m512bh b = (__m512bh)_mm512_set1_epi32(0x33d633d6);  // tiny values
+  for (int64_t it = 0; it < iters; ++it) {
+#pragma GCC unroll 24
+    for (int i = 0; i < 24; ++i) x[i] = _mm512_dpbf16_ps(x[i], a, b);
+  }
+  __m512 s = x[0];
+  for (int i = 1; i < 24; ++i) s = _mm512_add_ps(s, x[i]);
+  volatile float sink = _mm512_reduce_add_ps(s);
+  (void)sink;
+  return double(iters) * 24 * 16 * 4;
+}
+
+}  // namespace
+
+namespace detail {
+void fill_avx512bf16_kernels(KernelTable& t) {
+  fill_avx512_kernels(t);
+  t.bf16 = GemmKernel{kMr, kNr, 2, 256, PackLayout::kBf16Pairs, micro_bf16, "avx512bf16 14x32"};
+  t.probe_bf16 = probe_bf16;
+}
+}  // namespace detail
+
+}  // namespace macro

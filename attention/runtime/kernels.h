@@ -1,0 +1,78 @@
+// The SIMD kernel table: register-blocked GEMM micro-kernels, one set per instruction-set path.
+//
+// Highway-style dispatch: the table is chosen once from active_isa() and read through kernels();
+// tests call set_isa() and then kernels() again (the table is re-read on every call, it is a
+// pointer load). Everything above the micro-kernels (cache blocking, packing, threading, epilogue
+// arguments) is ISA-independent and lives in gemm.cpp; conv.cpp reuses the same driver.
+//
+// Legend: M rows of A and C, N columns of B and C, K the reduction. MR x NR is the register tile.
+//
+// Packed layouts (all zero-padded to whole panels; K padded up to k_align):
+//   kF32        A micro-panel [K][MR] fp32,          B micro-panel [K][NR] fp32
+//   kBf16Pairs  A micro-panel [K/2][MR][2] bf16,     B micro-panel [K/2][NR][2] bf16 (k pairs
+//               interleaved, the vdpbf16ps operand order)
+//   kBf16Amx    A micro-panel [K/32][MR][32] bf16 (row-major 16x32 tiles), B as kBf16Pairs
+// A packed panel holds the whole (padded) K, so the slice for k0.. starts at k0 * MR elements
+// (k0 * NR for B) in every layout; k0 is always a multiple of k_align.
+#pragma once
+
+#include <cstdint>
+
+#include "attention/runtime/cpu.h"
+
+namespace macro {
+
+enum class PackLayout { kF32, kBf16Pairs, kBf16Amx };
+
+// One call of a micro-kernel: C[0:m, 0:n] (m <= MR, n <= NR) =
+//   alpha * (A_panel . B_panel) + (load_c ? beta * C : 0) + bias_n[j] + bias_m[i] + res[i, j]
+// where the optional terms are skipped when their pointer is null (already offset to this tile).
+struct MicroTile {
+  int64_t kc = 0;        // reduction length of this call, a multiple of k_align
+  const void* a = nullptr;  // packed A micro-panel, slice start
+  const void* b = nullptr;  // packed B micro-panel, slice start
+  float* c = nullptr;    // [m, ldc]
+  int64_t ldc = 0;
+  int m = 0, n = 0;
+  float alpha = 1, beta = 0;
+  bool load_c = false;
+  const float* bias_n = nullptr;  // [n]
+  const float* bias_m = nullptr;  // [m]
+  const float* res = nullptr;     // [m, ldr]
+  int64_t ldr = 0;
+};
+using MicroKernel = void (*)(const MicroTile& t);
+
+struct GemmKernel {
+  int mr = 0, nr = 0;    // register tile
+  int k_align = 1;       // packed K is padded to a multiple of this
+  int kc = 256;          // cache block over K (a multiple of k_align)
+  PackLayout layout = PackLayout::kF32;
+  MicroKernel micro = nullptr;
+  const char* name = "";
+};
+
+struct KernelTable {
+  Isa isa = Isa::kScalar;
+  GemmKernel f32;   // fp32 x fp32 -> fp32
+  GemmKernel bf16;  // bf16 x bf16 -> fp32 accumulate (emulated with shifts where the ISA lacks it)
+  // Peak probes for the benchmarks: run `iters` iterations of a dependency-free loop of FMAs (or
+  // bf16 dot products) and return the number of floating-point operations done (1 FMA = 2).
+  double (*probe_fma)(int64_t iters) = nullptr;
+  double (*probe_bf16)(int64_t iters) = nullptr;
+};
+
+// The table for the active path (active_isa()), and for a given path (it must be supported).
+const KernelTable& kernels();
+const KernelTable& kernels_for(Isa isa);
+
+// Per-ISA tables, defined in gemm.cpp (scalar) and gemm_<isa>.cpp.
+namespace detail {
+void fill_scalar_kernels(KernelTable& t);
+void fill_avx2_kernels(KernelTable& t);
+void fill_avx512_kernels(KernelTable& t);
+void fill_avx512bf16_kernels(KernelTable& t);
+void fill_amx_kernels(KernelTable& t);
+}  // namespace detail
+
+}  // namespace macro
