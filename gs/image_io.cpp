@@ -1,0 +1,312 @@
+// Image files (see image_io.h). stb_image / stb_image_write are instantiated here and only here
+// (static linkage, no stdio: bytes go through our bounded reader and atomic writer); PNG deflate
+// uses zlib. OpenEXR is used through its C++ API; its exceptions are caught at this file's edge.
+#include "gs/image_io.h"
+
+#include <zlib.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <exception>
+#include <limits>
+
+#include "attention/runtime/file_io.h"
+
+// ---- stb, instantiated once ---------------------------------------------------------------------
+namespace {
+// stb_image_write's deflate replaced by zlib (smaller files, the same bytes everywhere).
+unsigned char* zlib_compress_for_stb(unsigned char* data, int data_len, int* out_len, int quality) {
+  uLongf cap = compressBound(static_cast<uLong>(data_len));
+  auto* out = static_cast<unsigned char*>(std::malloc(cap));
+  if (!out) return nullptr;
+  if (compress2(out, &cap, data, static_cast<uLong>(data_len), std::clamp(quality, 1, 9)) != Z_OK) {
+    std::free(out);
+    return nullptr;
+  }
+  *out_len = static_cast<int>(cap);
+  return out;
+}
+}  // namespace
+
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wunused-function"
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+#pragma GCC diagnostic ignored "-Wsign-compare"
+#pragma GCC diagnostic ignored "-Wunused-but-set-variable"
+#pragma GCC diagnostic ignored "-Wimplicit-fallthrough"
+#pragma GCC diagnostic ignored "-Wdouble-promotion"
+#pragma GCC diagnostic ignored "-Wpedantic"
+#define STB_IMAGE_STATIC
+#define STBI_NO_STDIO
+#define STBI_NO_HDR
+#define STBI_NO_LINEAR
+#define STBI_ONLY_PNG
+#define STBI_ONLY_JPEG
+#define STBI_ONLY_BMP
+#define STBI_ONLY_TGA
+#define STB_IMAGE_IMPLEMENTATION
+#include <stb/stb_image.h>
+#define STB_IMAGE_WRITE_STATIC
+#define STBI_WRITE_NO_STDIO
+#define STBIW_ZLIB_COMPRESS zlib_compress_for_stb
+#define STB_IMAGE_WRITE_IMPLEMENTATION
+#include <stb/stb_image_write.h>
+#pragma GCC diagnostic pop
+
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfInputFile.h>
+#include <OpenEXR/ImfOutputFile.h>
+
+namespace macro::gs {
+namespace {
+
+std::string dims(uint64_t w, uint64_t h) { return std::to_string(w) + "x" + std::to_string(h); }
+
+Status check_size(const std::string& name, int64_t w, int64_t h, const ImageLimits& limits) {
+  if (w <= 0 || h <= 0) {
+    return Status::error(name + ": expected a positive image size, found " + std::to_string(w) +
+                         "x" + std::to_string(h));
+  }
+  if (uint64_t(w) * uint64_t(h) > limits.max_pixels) {
+    return Status::error(name + ": image " + dims(w, h) + " has more than the limit of " +
+                         std::to_string(limits.max_pixels) + " pixels");
+  }
+  return Status::ok();
+}
+
+}  // namespace
+
+// ---- PNG / JPEG read -----------------------------------------------------------------------------
+
+Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string& name,
+                           const ImageLimits& limits) {
+  if (size == 0) return Status::error(name + ": empty file, expected an image");
+  if (size > uint64_t(std::numeric_limits<int>::max())) {
+    return Status::error(name + ": file of " + std::to_string(size) +
+                         " bytes is larger than the image decoder accepts (2 GiB)");
+  }
+  const int len = static_cast<int>(size);
+  // PNG: the size from IHDR first, so an absurd size gets our limit message (stb's own cap says
+  // only "too large").
+  static constexpr uint8_t kPngMagic[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  if (size >= 24 && std::memcmp(bytes, kPngMagic, 8) == 0 && std::memcmp(bytes + 12, "IHDR", 4) == 0) {
+    auto be32 = [&](size_t at) {
+      return (uint32_t(bytes[at]) << 24) | (uint32_t(bytes[at + 1]) << 16) |
+             (uint32_t(bytes[at + 2]) << 8) | uint32_t(bytes[at + 3]);
+    };
+    MACRO_TRY(check_size(name, be32(16), be32(20), limits));
+  }
+  int w = 0, h = 0, comp = 0;
+  if (!stbi_info_from_memory(bytes, len, &w, &h, &comp)) {
+    return Status::error(name + ": not a readable PNG/JPEG/BMP/TGA image (" +
+                         std::string(stbi_failure_reason() ? stbi_failure_reason() : "unknown") +
+                         ")");
+  }
+  MACRO_TRY(check_size(name, w, h, limits));
+  if (comp < 1 || comp > 4) {
+    return Status::error(name + ": expected 1 to 4 channels, found " + std::to_string(comp));
+  }
+  Image out(w, h, 3);
+  const size_t n = out.pixels();
+  int dw = 0, dh = 0, dc = 0;
+  if (stbi_is_16_bit_from_memory(bytes, len)) {
+    stbi_us* px = stbi_load_16_from_memory(bytes, len, &dw, &dh, &dc, 0);
+    if (!px) {
+      return Status::error(name + ": cannot decode the 16-bit image (" +
+                           std::string(stbi_failure_reason()) + "): truncated or corrupt");
+    }
+    if (dw != w || dh != h || dc != comp) {
+      stbi_image_free(px);
+      return Status::error(name + ": header and decoded image disagree");
+    }
+    const float s = 1.f / 65535.f;
+    for (size_t p = 0; p < n; ++p) {
+      const stbi_us* q = px + p * size_t(comp);
+      for (int c = 0; c < 3; ++c) out.data[p * 3 + c] = float(q[comp < 3 ? 0 : c]) * s;
+    }
+    stbi_image_free(px);
+  } else {
+    stbi_uc* px = stbi_load_from_memory(bytes, len, &dw, &dh, &dc, 0);
+    if (!px) {
+      return Status::error(name + ": cannot decode the image (" +
+                           std::string(stbi_failure_reason()) + "): truncated or corrupt");
+    }
+    if (dw != w || dh != h || dc != comp) {
+      stbi_image_free(px);
+      return Status::error(name + ": header and decoded image disagree");
+    }
+    const float s = 1.f / 255.f;
+    for (size_t p = 0; p < n; ++p) {
+      const stbi_uc* q = px + p * size_t(comp);
+      for (int c = 0; c < 3; ++c) out.data[p * 3 + c] = float(q[comp < 3 ? 0 : c]) * s;
+    }
+    stbi_image_free(px);
+  }
+  return out;
+}
+
+Result<Image> read_image(const std::string& path, const ImageLimits& limits) {
+  MACRO_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, read_file(path, limits.max_file_bytes));
+  return decode_image(bytes.data(), bytes.size(), path, limits);
+}
+
+// ---- PNG write -----------------------------------------------------------------------------------
+
+namespace {
+uint8_t to_u8(float v) {
+  if (!(v > 0.f)) return 0;  // also NaN
+  if (v >= 1.f) return 255;
+  return static_cast<uint8_t>(v * 255.f + 0.5f);
+}
+void append_bytes(void* context, void* data, int size) {
+  auto* out = static_cast<std::vector<uint8_t>*>(context);
+  const auto* p = static_cast<const uint8_t*>(data);
+  out->insert(out->end(), p, p + size);
+}
+}  // namespace
+
+Result<std::vector<uint8_t>> encode_png(const Image& image) {
+  const int c = image.channels;
+  if (c != 1 && c != 3 && c != 4) {
+    return Status::error("PNG: expected 1, 3 or 4 channels, found " + std::to_string(c));
+  }
+  if (image.width <= 0 || image.height <= 0 || image.width > (1 << 24) ||
+      image.height > (1 << 24)) {
+    return Status::error("PNG: expected a positive size below 16M, found " +
+                         dims(image.width, image.height));
+  }
+  if (image.data.size() != image.pixels() * size_t(c)) {
+    return Status::error("PNG: image data holds " + std::to_string(image.data.size()) +
+                         " values, expected " + std::to_string(image.pixels() * size_t(c)));
+  }
+  std::vector<uint8_t> px(image.data.size());
+  for (size_t k = 0; k < px.size(); ++k) px[k] = to_u8(image.data[k]);
+  std::vector<uint8_t> out;
+  if (!stbi_write_png_to_func(append_bytes, &out, image.width, image.height, c, px.data(),
+                              image.width * c)) {
+    return Status::error("PNG: encoding failed");
+  }
+  return out;
+}
+
+Status write_png(const std::string& path, const Image& image) {
+  auto bytes = encode_png(image);
+  if (!bytes) return bytes.status().with_context(path);
+  return write_file_atomic(path, bytes->data(), bytes->size());
+}
+
+// ---- EXR -----------------------------------------------------------------------------------------
+
+Status write_exr(const std::string& path, int width, int height,
+                 const std::vector<ExrChannel>& channels) {
+  if (width <= 0 || height <= 0) {
+    return Status::error(path + ": EXR: expected a positive size, found " + dims(width, height));
+  }
+  if (channels.empty()) return Status::error(path + ": EXR: no channels to write");
+  for (size_t k = 0; k < channels.size(); ++k) {
+    if (channels[k].name.empty()) return Status::error(path + ": EXR: a channel has no name");
+    if (!channels[k].data) return Status::error(path + ": EXR: channel '" + channels[k].name + "' has no data");
+    for (size_t m = 0; m < k; ++m) {
+      if (channels[m].name == channels[k].name) {
+        return Status::error(path + ": EXR: channel '" + channels[k].name + "' given twice");
+      }
+    }
+  }
+  const std::string temp = temp_path_for(path);
+  try {
+    Imf::Header header(width, height);
+    header.compression() = Imf::ZIP_COMPRESSION;
+    Imf::FrameBuffer fb;
+    for (const ExrChannel& ch : channels) {
+      header.channels().insert(ch.name, Imf::Channel(Imf::FLOAT));
+      fb.insert(ch.name, Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(const_cast<float*>(ch.data)),
+                                    sizeof(float), sizeof(float) * size_t(width)));
+    }
+    Imf::OutputFile file(temp.c_str(), header, 0);
+    file.setFrameBuffer(fb);
+    file.writePixels(height);
+  } catch (const std::exception& e) {
+    remove_temp_file(temp);
+    return Status::error(path + ": cannot write EXR: " + e.what());
+  }
+  return commit_temp_file(temp, path);
+}
+
+const std::vector<float>* ExrImage::find(const std::string& name) const {
+  for (size_t k = 0; k < names.size(); ++k) {
+    if (names[k] == name) return &planes[k];
+  }
+  return nullptr;
+}
+
+Result<ExrImage> read_exr(const std::string& path, const ImageLimits& limits) {
+  MACRO_ASSIGN_OR_RETURN(uint64_t bytes, file_size(path));
+  if (bytes == 0) return Status::error(path + ": empty file, expected an EXR image");
+  if (bytes > limits.max_file_bytes) {
+    return Status::error(path + ": file of " + std::to_string(bytes) + " bytes exceeds the limit");
+  }
+  ExrImage out;
+  try {
+    Imf::InputFile file(path.c_str(), 0);
+    const Imath::Box2i dw = file.header().dataWindow();
+    const int64_t w = int64_t(dw.max.x) - dw.min.x + 1;
+    const int64_t h = int64_t(dw.max.y) - dw.min.y + 1;
+    MACRO_TRY(check_size(path, w, h, limits));
+    size_t count = 0;
+    const Imf::ChannelList& list = file.header().channels();
+    for (auto it = list.begin(); it != list.end(); ++it) {
+      if (it.channel().xSampling != 1 || it.channel().ySampling != 1) {
+        return Status::error(path + ": channel '" + it.name() +
+                             "' is subsampled, expected full-resolution channels");
+      }
+      ++count;
+    }
+    if (count == 0) return Status::error(path + ": EXR has no channels");
+    if (count * uint64_t(w) * uint64_t(h) > 4 * limits.max_pixels) {
+      return Status::error(path + ": " + std::to_string(count) + " channels of " + dims(w, h) +
+                           " exceed the limit of " + std::to_string(4 * limits.max_pixels) +
+                           " values");
+    }
+    out.width = int(w);
+    out.height = int(h);
+    Imf::FrameBuffer fb;
+    out.names.reserve(count);
+    out.planes.reserve(count);
+    const ptrdiff_t origin = ptrdiff_t(dw.min.x) + ptrdiff_t(dw.min.y) * ptrdiff_t(w);
+    for (auto it = list.begin(); it != list.end(); ++it) {
+      out.names.push_back(it.name());
+      out.planes.emplace_back(size_t(w) * size_t(h), 0.f);
+      char* base = reinterpret_cast<char*>(out.planes.back().data()) -
+                   origin * ptrdiff_t(sizeof(float));
+      fb.insert(it.name(), Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * size_t(w)));
+    }
+    file.setFrameBuffer(fb);
+    file.readPixels(dw.min.y, dw.max.y);
+  } catch (const std::exception& e) {
+    return Status::error(path + ": cannot read EXR (truncated or corrupt?): " + e.what());
+  }
+  return out;
+}
+
+// ---- colour map ----------------------------------------------------------------------------------
+
+void colormap(float value, float rgb[3]) {
+  static constexpr float kStops[5][3] = {
+      {0.05f, 0.03f, 0.22f},  // 0: far / empty
+      {0.40f, 0.10f, 0.55f},
+      {0.85f, 0.30f, 0.30f},
+      {0.98f, 0.65f, 0.15f},
+      {1.00f, 0.97f, 0.70f},  // 1: near
+  };
+  float v = std::isfinite(value) ? std::clamp(value, 0.f, 1.f) : 0.f;
+  float x = v * 4.f;
+  int k = std::min(3, int(x));
+  float f = x - float(k);
+  for (int c = 0; c < 3; ++c) rgb[c] = kStops[k][c] * (1.f - f) + kStops[k + 1][c] * f;
+}
+
+}  // namespace macro::gs

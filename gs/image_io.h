@@ -1,0 +1,75 @@
+// Image files: PNG/JPEG read, 8-bit PNG write, OpenEXR float read/write with named channels.
+//
+// Legend: H x W pixels, C channels; data is row-major [H,W,C], row 0 at the top.
+//
+// Reading validates before decoding: the file must exist and be non-empty, the header must give a
+// positive size whose pixel count is at most ImageLimits::max_pixels (checked from the header,
+// before the pixels are allocated), and a truncated or corrupt file is an error naming it.
+// PNG (8- or 16-bit, gray, gray+alpha, RGB, RGBA) and the other formats stb decodes (JPEG, BMP,
+// TGA) come back as float RGB in [0, 1] (value / 255 or / 65535; gray is copied to R, G, B; alpha
+// is dropped, not composited). Writing clamps to [0, 1] and rounds to 8 bits (round half up).
+// EXR holds 32-bit float channels under names (e.g. R, G, B, A, depth); OpenEXR stores channels
+// sorted by name, so callers look channels up by name. All writes are atomic (temporary + rename).
+// No third-party type appears in this header (stb and OpenEXR live in image_io.cpp only).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "attention/runtime/status.h"
+
+namespace macro::gs {
+
+struct Image {
+  int width = 0, height = 0, channels = 0;  // W, H, C
+  std::vector<float> data;                  // [H,W,C]
+
+  Image() = default;
+  Image(int w, int h, int c) : width(w), height(h), channels(c), data(size_t(w) * h * c, 0.f) {}
+  size_t pixels() const { return size_t(width) * size_t(height); }
+  float& at(int i, int j, int c) { return data[(size_t(i) * width + j) * channels + c]; }
+  float at(int i, int j, int c) const { return data[(size_t(i) * width + j) * channels + c]; }
+};
+
+struct ImageLimits {
+  uint64_t max_pixels = 1ull << 27;      // 134 M pixels (a 16k x 8k panorama fits)
+  uint64_t max_file_bytes = 1ull << 32;  // 4 GiB
+};
+
+// PNG (or JPEG/BMP/TGA) -> float RGB [H,W,3] in [0, 1].
+Result<Image> read_image(const std::string& path, const ImageLimits& limits = {});
+// The same from bytes in memory; `name` is used in messages.
+Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string& name,
+                           const ImageLimits& limits = {});
+
+// 8-bit PNG from a float image with 1 (gray), 3 (RGB) or 4 (RGBA) channels; values clamped to
+// [0, 1] and rounded. Non-finite values are written as 0.
+Status write_png(const std::string& path, const Image& image);
+// The bytes write_png would write (for tests and for callers that bundle files).
+Result<std::vector<uint8_t>> encode_png(const Image& image);
+
+// One float plane [H,W] under a channel name.
+struct ExrChannel {
+  std::string name;
+  const float* data = nullptr;  // [H,W], must hold width * height values
+};
+// 32-bit float EXR, ZIP compressed, one scanline image with the given channels.
+Status write_exr(const std::string& path, int width, int height,
+                 const std::vector<ExrChannel>& channels);
+
+struct ExrImage {
+  int width = 0, height = 0;
+  std::vector<std::string> names;          // channel names as stored (sorted by OpenEXR)
+  std::vector<std::vector<float>> planes;  // [channel][H,W], same order as names
+  // The plane of a named channel, or nullptr.
+  const std::vector<float>* find(const std::string& name) const;
+};
+// Any scanline or tiled EXR; every channel (half, float or uint) is returned as float.
+Result<ExrImage> read_exr(const std::string& path, const ImageLimits& limits = {});
+
+// Colour map for viewing a scalar in [0, 1] (outside clamped) -> RGB: dark blue (0, far) through
+// purple and orange to pale yellow (1, near). Piecewise linear over five fixed colours.
+void colormap(float value, float rgb[3]);
+
+}  // namespace macro::gs
