@@ -1,0 +1,126 @@
+// conv2d (attention/runtime/conv.h): every kernel path against the double-precision loop nest
+// (conv2d_reference), on the networks' conv kinds at small odd sizes.
+// Bound: max |y - ref| <= 1e-5 * max |ref| (fp32 accumulation over K = Cin*KH*KW <= 1000).
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "attention/runtime/conv.h"
+#include "attention/runtime/cpu.h"
+#include "test_support.h"
+
+namespace macro {
+namespace {
+
+std::vector<Isa> supported_isas() {
+  std::vector<Isa> v;
+  for (Isa isa : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512, Isa::kAvx512Bf16, Isa::kAmx})
+    if (isa_supported(isa)) v.push_back(isa);
+  return v;
+}
+
+struct IsaGuard {
+  Isa saved = active_isa();
+  ~IsaGuard() { (void)set_isa(saved); }
+};
+
+std::vector<float> random_vec(size_t n, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> d(-1.0f, 1.0f);
+  std::vector<float> v(n);
+  for (float& x : v) x = d(rng);
+  return v;
+}
+
+double max_rel_err(const std::vector<float>& y, const std::vector<float>& ref) {
+  double mx = 0, mref = 1e-30;
+  for (size_t i = 0; i < y.size(); ++i) {
+    const double d = std::abs(double(y[i]) - double(ref[i]));
+    mx = std::isnan(d) ? INFINITY : std::max(mx, d);
+    mref = std::max(mref, std::abs(double(ref[i])));
+  }
+  return mx / mref;
+}
+
+Conv2dShape shape(int64_t n, int64_t ci, int64_t h, int64_t w, int64_t co, int k, int s, int pt,
+                  int pl, int pb, int pr) {
+  Conv2dShape c;
+  c.n = n, c.c_in = ci, c.h = h, c.w = w, c.c_out = co, c.kh = c.kw = k, c.stride = s;
+  c.pad_top = pt, c.pad_left = pl, c.pad_bottom = pb, c.pad_right = pr;
+  return c;
+}
+
+void check_conv(const Conv2dShape& s, bool bias, bool residual, ThreadPool* pool) {
+  auto x = random_vec(size_t(s.n * s.c_in * s.h * s.w), 1);
+  auto w = random_vec(size_t(s.c_out * s.c_in * s.kh * s.kw), 2);
+  auto b = random_vec(size_t(s.c_out), 3);
+  const size_t ny = size_t(s.n * s.c_out * s.out_h() * s.out_w());
+  auto r = random_vec(ny, 4);
+  std::vector<float> ref(ny), y(ny, NAN);
+  conv2d_reference(s, x.data(), w.data(), bias ? b.data() : nullptr,
+                   residual ? r.data() : nullptr, ref.data());
+  ConvWeights cw = ConvWeights::pack(w.data(), bias ? b.data() : nullptr, s.c_out, s.c_in, s.kh,
+                                     s.kw);
+  conv2d(s, x.data(), cw, residual ? r.data() : nullptr, y.data(), pool);
+  INFO(isa_name(active_isa()) << " N=" << s.n << " Cin=" << s.c_in << " " << s.h << "x" << s.w
+                              << " Cout=" << s.c_out << " k=" << s.kh << " s=" << s.stride
+                              << " pad=" << s.pad_top << "," << s.pad_left << "," << s.pad_bottom
+                              << "," << s.pad_right << " bias=" << bias << " res=" << residual);
+  REQUIRE(max_rel_err(y, ref) <= 1e-5);
+  if (residual) {
+    // In place: y aliases the residual.
+    auto yr = r;
+    conv2d(s, x.data(), cw, yr.data(), yr.data(), pool);
+    REQUIRE(max_rel_err(yr, ref) <= 1e-5);
+  }
+}
+
+}  // namespace
+
+TEST_CASE("conv2d: 3x3 stride 1 pad 1, every path", "[kernels][conv]") {
+  IsaGuard guard;
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    check_conv(shape(2, 3, 7, 9, 5, 3, 1, 1, 1, 1, 1), true, false, nullptr);
+    check_conv(shape(1, 40, 13, 35, 37, 3, 1, 1, 1, 1, 1), true, true, nullptr);  // K=360 > KC
+    check_conv(shape(1, 1, 1, 1, 1, 3, 1, 1, 1, 1, 1), false, false, nullptr);
+    check_conv(shape(1, 17, 5, 70, 29, 3, 1, 1, 1, 1, 1), false, true, nullptr);  // rows > NR
+  }
+}
+
+TEST_CASE("conv2d: stride 2, symmetric and right/bottom-only padding, every path",
+          "[kernels][conv]") {
+  IsaGuard guard;
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    check_conv(shape(1, 16, 13, 11, 19, 3, 2, 1, 1, 1, 1), true, false, nullptr);  // UNet ds
+    check_conv(shape(2, 9, 12, 16, 7, 3, 2, 0, 0, 1, 1), true, false, nullptr);    // VAE enc ds
+    check_conv(shape(1, 9, 11, 15, 7, 3, 2, 0, 0, 1, 1), true, false, nullptr);    // odd sizes
+  }
+}
+
+TEST_CASE("conv2d: 1x1 (shortcut, quant_conv), with residual, every path", "[kernels][conv]") {
+  IsaGuard guard;
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    check_conv(shape(1, 33, 9, 10, 65, 1, 1, 0, 0, 0, 0), true, true, nullptr);
+    check_conv(shape(2, 8, 3, 5, 8, 1, 1, 0, 0, 0, 0), true, false, nullptr);
+  }
+}
+
+TEST_CASE("conv2d: threaded result equals single-threaded bit for bit", "[kernels][conv]") {
+  ThreadPool pool(2);
+  const Conv2dShape s = shape(1, 24, 31, 45, 40, 3, 1, 1, 1, 1, 1);
+  auto x = random_vec(size_t(s.c_in * s.h * s.w), 5);
+  auto w = random_vec(size_t(s.c_out * s.c_in * 9), 6);
+  const size_t ny = size_t(s.c_out * s.out_h() * s.out_w());
+  std::vector<float> y1(ny), y2(ny);
+  conv2d(s, x.data(), w.data(), nullptr, nullptr, y1.data(), nullptr);
+  conv2d(s, x.data(), w.data(), nullptr, nullptr, y2.data(), &pool);
+  REQUIRE(y1 == y2);
+  check_conv(s, true, true, &pool);
+}
+
+}  // namespace macro

@@ -1,0 +1,297 @@
+// GEMM kernels (attention/runtime/gemm.h): every kernel path the machine supports, against a naive
+// double-precision loop and against the scalar twin, on odd shapes (1, primes, sizes that are not
+// multiples of the register tiles or of the K block).
+//
+// Error bounds:
+//   fp32      max |C - ref| <= 1e-5 * max |ref| (fp32 accumulation vs double; K <= 700)
+//   bf16      vs the bf16-rounded double reference: max err <= 1e-5 * max |ref| (only the fp32
+//             accumulation differs); vs the unrounded fp32 reference: rel L2 <= 1e-2 (bf16 operands)
+//   threads   bit-identical results with 1 and 2 threads (the split never cuts K).
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "attention/runtime/cpu.h"
+#include "attention/runtime/gemm.h"
+#include "attention/runtime/half.h"
+#include "test_support.h"
+
+namespace macro {
+namespace {
+
+struct Shape {
+  int64_t m, n, k;
+};
+const Shape kShapes[] = {{1, 1, 1},    {1, 17, 3},    {13, 1, 29},  {15, 33, 31},  {29, 65, 257},
+                         {97, 100, 600}, {200, 37, 513}, {31, 257, 7}, {3, 64, 700}, {43, 129, 64}};
+
+std::vector<Isa> supported_isas() {
+  std::vector<Isa> v;
+  for (Isa isa : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512, Isa::kAvx512Bf16, Isa::kAmx})
+    if (isa_supported(isa)) v.push_back(isa);
+  return v;
+}
+
+// Restores the process's path when a test section ends.
+struct IsaGuard {
+  Isa saved = active_isa();
+  ~IsaGuard() { (void)set_isa(saved); }
+};
+
+std::vector<float> random_vec(size_t n, uint32_t seed, float lo = -1.0f, float hi = 1.0f) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> d(lo, hi);
+  std::vector<float> v(n);
+  for (float& x : v) x = d(rng);
+  return v;
+}
+
+// ref[i, j] = alpha * sum_k A(i, k) B(k, j) + beta * C0 + bias_n[j] + bias_m[i] + res[i, j]
+struct RefArgs {
+  int64_t M, N, K;
+  const float* A;
+  int64_t lda;
+  bool trans_a;
+  const float* B;
+  int64_t ldb;
+  bool trans_b;
+  const float* C0;  // may be null
+  int64_t ldc;
+  GemmParams p;
+  bool round_bf16 = false;
+};
+
+std::vector<float> reference(const RefArgs& r) {
+  auto rd = [&](float v) { return r.round_bf16 ? bf16_to_f32(f32_to_bf16(v)) : v; };
+  std::vector<float> out(size_t(r.M * r.ldc), 0.0f);
+  for (int64_t i = 0; i < r.M; ++i)
+    for (int64_t j = 0; j < r.N; ++j) {
+      double acc = 0;
+      for (int64_t k = 0; k < r.K; ++k) {
+        const float a = r.trans_a ? r.A[k * r.lda + i] : r.A[i * r.lda + k];
+        const float b = r.trans_b ? r.B[j * r.ldb + k] : r.B[k * r.ldb + j];
+        acc += double(rd(a)) * double(rd(b));
+      }
+      double v = double(r.p.alpha) * acc;
+      if (r.p.beta != 0.0f) v += double(r.p.beta) * r.C0[i * r.ldc + j];
+      if (r.p.bias_n) v += r.p.bias_n[j];
+      if (r.p.bias_m) v += r.p.bias_m[i];
+      if (r.p.residual) v += r.p.residual[i * r.p.ldr + j];
+      out[size_t(i * r.ldc + j)] = float(v);
+    }
+  return out;
+}
+
+// max |c - ref| over the M x N block, relative to max |ref|.
+double max_rel_err(const std::vector<float>& c, const std::vector<float>& ref, int64_t M, int64_t N,
+                   int64_t ldc) {
+  double mx = 0, mref = 1e-30;
+  for (int64_t i = 0; i < M; ++i)
+    for (int64_t j = 0; j < N; ++j) {
+      const double d = std::abs(double(c[i * ldc + j]) - double(ref[i * ldc + j]));
+      mx = std::isnan(d) ? INFINITY : std::max(mx, d);
+      mref = std::max(mref, std::abs(double(ref[i * ldc + j])));
+    }
+  return mx / mref;
+}
+
+double rel_l2(const std::vector<float>& c, const std::vector<float>& ref) {
+  return test::compare(c, ref).rel_l2;
+}
+
+}  // namespace
+
+TEST_CASE("gemm_f32: every path vs a double reference on odd shapes", "[kernels][gemm]") {
+  IsaGuard guard;
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    for (const Shape& s : kShapes) {
+      for (int variant = 0; variant < 4; ++variant) {
+        const bool trans_a = variant & 1, trans_b = variant & 2;
+        const int64_t lda = (trans_a ? s.m : s.k) + 3, ldb = (trans_b ? s.k : s.n) + 5;
+        const int64_t ldc = s.n + 2;
+        auto A = random_vec(size_t((trans_a ? s.k : s.m) * lda), 1);
+        auto B = random_vec(size_t((trans_b ? s.n : s.k) * ldb), 2);
+        std::vector<float> C(size_t(s.m * ldc), NAN);  // beta = 0: C must not be read
+        GemmParams p;
+        p.trans_a = trans_a;
+        p.trans_b = trans_b;
+        gemm_f32(s.m, s.n, s.k, A.data(), lda, B.data(), ldb, C.data(), ldc, p);
+        auto ref = reference({s.m, s.n, s.k, A.data(), lda, trans_a, B.data(), ldb, trans_b,
+                              nullptr, ldc, p});
+        INFO(isa_name(isa) << " " << kernels().f32.name << " M=" << s.m << " N=" << s.n
+                           << " K=" << s.k << " trans_a=" << trans_a << " trans_b=" << trans_b);
+        REQUIRE(max_rel_err(C, ref, s.m, s.n, ldc) <= 1e-5);
+      }
+    }
+  }
+}
+
+TEST_CASE("gemm_f32: alpha, beta, biases and residual on every path", "[kernels][gemm]") {
+  IsaGuard guard;
+  const int64_t M = 37, N = 71, K = 300, ldc = 80, ldr = 75;
+  auto A = random_vec(size_t(M * K), 3);
+  auto B = random_vec(size_t(K * N), 4);
+  auto C0 = random_vec(size_t(M * ldc), 5);
+  auto bn = random_vec(size_t(N), 6);
+  auto bm = random_vec(size_t(M), 7);
+  auto res = random_vec(size_t(M * ldr), 8);
+  GemmParams p;
+  p.alpha = 0.37f;
+  p.beta = -1.5f;
+  p.bias_n = bn.data();
+  p.bias_m = bm.data();
+  p.residual = res.data();
+  p.ldr = ldr;
+  auto ref = reference({M, N, K, A.data(), K, false, B.data(), N, false, C0.data(), ldc, p});
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    INFO(isa_name(isa));
+    auto C = C0;
+    gemm_f32(M, N, K, A.data(), K, B.data(), N, C.data(), ldc, p);
+    REQUIRE(max_rel_err(C, ref, M, N, ldc) <= 1e-5);
+    // Columns past N are untouched.
+    for (int64_t i = 0; i < M; ++i)
+      for (int64_t j = N; j < ldc; ++j) REQUIRE(C[i * ldc + j] == C0[i * ldc + j]);
+  }
+}
+
+TEST_CASE("gemm_f32: residual aliasing C is C += A.B", "[kernels][gemm]") {
+  IsaGuard guard;
+  const int64_t M = 20, N = 45, K = 600;  // K spans several K blocks
+  auto A = random_vec(size_t(M * K), 9);
+  auto B = random_vec(size_t(K * N), 10);
+  auto C0 = random_vec(size_t(M * N), 11);
+  GemmParams pr;
+  pr.beta = 1.0f;
+  auto ref = reference({M, N, K, A.data(), K, false, B.data(), N, false, C0.data(), N, pr});
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    INFO(isa_name(isa));
+    auto C = C0;
+    GemmParams p;
+    p.residual = C.data();
+    p.ldr = N;
+    gemm_f32(M, N, K, A.data(), K, B.data(), N, C.data(), N, p);
+    REQUIRE(max_rel_err(C, ref, M, N, N) <= 1e-5);
+  }
+}
+
+TEST_CASE("gemm_packed: Linear y = x W^T + b, fp32 and bf16 weights, every path",
+          "[kernels][gemm]") {
+  IsaGuard guard;
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    for (const Shape& s : kShapes) {
+      auto x = random_vec(size_t(s.m * s.k), 12);
+      auto W = random_vec(size_t(s.n * s.k), 13);  // [out = N, in = K]
+      auto b = random_vec(size_t(s.n), 14);
+      GemmParams p;
+      p.bias_n = b.data();
+      RefArgs ra{s.m, s.n, s.k, x.data(), s.k, false, W.data(), s.k, true, nullptr, s.n, p};
+      auto ref = reference(ra);
+      INFO(isa_name(isa) << " M=" << s.m << " N=" << s.n << " K=" << s.k);
+      {
+        PackedWeights pw = PackedWeights::pack(W.data(), s.n, s.k, s.k, WeightType::kF32);
+        std::vector<float> y(size_t(s.m * s.n));
+        gemm_packed(s.m, x.data(), s.k, pw, y.data(), s.n, p);
+        REQUIRE(max_rel_err(y, ref, s.m, s.n, s.n) <= 1e-5);
+      }
+      {
+        PackedWeights pw = PackedWeights::pack(W.data(), s.n, s.k, s.k, WeightType::kBf16);
+        std::vector<float> y(size_t(s.m * s.n));
+        gemm_packed(s.m, x.data(), s.k, pw, y.data(), s.n, p);
+        ra.round_bf16 = true;
+        auto ref16 = reference(ra);
+        REQUIRE(max_rel_err(y, ref16, s.m, s.n, s.n) <= 1e-5);
+        if (s.k >= 29) REQUIRE(rel_l2(y, ref) <= 1e-2);
+      }
+    }
+  }
+}
+
+TEST_CASE("gemm_bf16: bf16 and fp32 A, both B orientations, every path vs the scalar twin",
+          "[kernels][gemm]") {
+  IsaGuard guard;
+  for (const Shape& s : kShapes) {
+    auto A = random_vec(size_t(s.m * s.k), 15);
+    auto B = random_vec(size_t(s.k * s.n), 16);
+    std::vector<uint16_t> A16(A.size()), B16(B.size());
+    for (size_t i = 0; i < A.size(); ++i) A16[i] = f32_to_bf16(A[i]);
+    for (size_t i = 0; i < B.size(); ++i) B16[i] = f32_to_bf16(B[i]);
+    for (bool trans_b : {false, true}) {
+      GemmParams p;
+      p.trans_b = trans_b;  // B16 read as [N, K] when transposed (same data, other shape)
+      const int64_t ldb = trans_b ? s.k : s.n;
+      RefArgs ra{s.m, s.n, s.k, A.data(), s.k, false, B.data(), ldb, trans_b, nullptr, s.n, p};
+      ra.round_bf16 = true;
+      auto ref16 = reference(ra);
+      std::vector<float> twin(size_t(s.m * s.n));
+      REQUIRE(set_isa(Isa::kScalar));
+      gemm_bf16(s.m, s.n, s.k, A16.data(), s.k, B16.data(), ldb, twin.data(), s.n, p);
+      for (Isa isa : supported_isas()) {
+        REQUIRE(set_isa(isa));
+        INFO(isa_name(isa) << " " << kernels().bf16.name << " M=" << s.m << " N=" << s.n
+                           << " K=" << s.k << " trans_b=" << trans_b);
+        std::vector<float> c1(size_t(s.m * s.n)), c2(size_t(s.m * s.n));
+        gemm_bf16(s.m, s.n, s.k, A16.data(), s.k, B16.data(), ldb, c1.data(), s.n, p);
+        gemm_bf16(s.m, s.n, s.k, A.data(), s.k, B16.data(), ldb, c2.data(), s.n, p);
+        REQUIRE(max_rel_err(c1, ref16, s.m, s.n, s.n) <= 1e-5);
+        REQUIRE(c1 == c2);  // fp32 A rounded while packing == A given in bf16
+        REQUIRE(max_rel_err(c1, twin, s.m, s.n, s.n) <= 1e-5);
+      }
+    }
+  }
+}
+
+TEST_CASE("gemm: two threads give bit-identical results to one", "[kernels][gemm]") {
+  IsaGuard guard;
+  ThreadPool pool(2);
+  const int64_t M = 301, N = 190, K = 520;
+  auto A = random_vec(size_t(M * K), 17);
+  auto W = random_vec(size_t(N * K), 18);
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    INFO(isa_name(isa));
+    for (WeightType t : {WeightType::kF32, WeightType::kBf16}) {
+      PackedWeights pw = PackedWeights::pack(W.data(), N, K, K, t);
+      std::vector<float> c1(size_t(M * N)), c2(size_t(M * N));
+      gemm_packed(M, A.data(), K, pw, c1.data(), N, {}, nullptr);
+      gemm_packed(M, A.data(), K, pw, c2.data(), N, {}, &pool);
+      REQUIRE(c1 == c2);
+    }
+    GemmParams p;
+    p.trans_b = true;
+    std::vector<float> c1(size_t(M * N)), c2(size_t(M * N));
+    gemm_f32(M, N, K, A.data(), K, W.data(), K, c1.data(), N, p, nullptr);
+    gemm_f32(M, N, K, A.data(), K, W.data(), K, c2.data(), N, p, &pool);
+    REQUIRE(c1 == c2);
+  }
+}
+
+TEST_CASE("gemm: K = 0 gives beta * C + bias", "[kernels][gemm]") {
+  std::vector<float> C = {1, 2, 3, 4};
+  const float bn[2] = {10, 20};
+  GemmParams p;
+  p.beta = 2.0f;
+  p.bias_n = bn;
+  gemm_f32(2, 2, 0, nullptr, 1, nullptr, 2, C.data(), 2, p);
+  REQUIRE(C == std::vector<float>{12, 24, 16, 28});
+}
+
+TEST_CASE("kernel table: one table per supported path, AMX only when present", "[kernels]") {
+  for (Isa isa : supported_isas()) {
+    const KernelTable& t = kernels_for(isa);
+    REQUIRE(t.isa == isa);
+    REQUIRE(t.f32.micro != nullptr);
+    REQUIRE(t.bf16.micro != nullptr);
+    REQUIRE(t.f32.kc % t.f32.k_align == 0);
+    REQUIRE(t.bf16.kc % t.bf16.k_align == 0);
+  }
+  REQUIRE(isa_supported(Isa::kAmx) == cpu_features().amx);
+  if (!cpu_features().amx) WARN("AMX kernel not exercised: this CPU has no AMX");
+}
+
+}  // namespace macro
