@@ -9,6 +9,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "attention/runtime/status.h"
@@ -31,11 +32,20 @@ struct RenderOptions {
   float near_plane = 0.01f;
   float far_plane = 1e10f;
   size_t max_tile_pairs = 1ull << 31;    // refuse (with an error) scenes needing more tile pairs
+  // Benchmark baseline / second reference: bounding-box tile lists and a plain scalar per-pixel
+  // loop over each tile's whole list (no ellipse culling, no row lists, no SIMD). Same output
+  // up to float rounding.
+  bool naive_baseline = false;
 };
 
 struct RenderStats {
   double ms_project = 0, ms_bin = 0, ms_blend = 0, ms_total = 0;
   size_t visible = 0;        // Gaussians that survived projection
+  size_t culled_depth = 0;      // mean outside (near, far)
+  size_t culled_invalid = 0;    // NaN/Inf inputs, degenerate or non-finite covariance (det <= 0)
+  size_t culled_faint = 0;      // opacity (after the AA/mip factor) below 1/255
+  size_t culled_offscreen = 0;  // 1/255 ellipse entirely outside the image
+  const char* kernel = "";      // blend path used: scalar, avx2, avx512, naive
   size_t tile_pairs = 0;     // (Gaussian, tile) pairs after culling
   double evals_per_pixel = 0;    // Gaussian-pixel evaluations per output pixel
   double blended_per_pixel = 0;  // evaluations that contributed
@@ -56,8 +66,27 @@ struct RenderResult {
   std::vector<float> normalized_inv_depth() const;
 };
 
+// One frame. Errors (never crashes): invalid camera (Camera::validate), empty scene, inconsistent
+// cloud arrays, SH cap out of range, more tile pairs than options.max_tile_pairs.
 Result<RenderResult> render(const GaussianCloud& cloud, const Camera& camera,
                             const RenderOptions& options = {},
                             ThreadPool& pool = ThreadPool::global());
+
+// The same, keeping its work buffers between frames (a viewer or a benchmark renders many frames;
+// a second frame with no more Gaussians and tile pairs allocates only the outputs).
+class Rasterizer {
+ public:
+  Rasterizer();
+  ~Rasterizer();
+  Rasterizer(Rasterizer&&) noexcept;
+  Rasterizer& operator=(Rasterizer&&) noexcept;
+  Result<RenderResult> render(const GaussianCloud& cloud, const Camera& camera,
+                              const RenderOptions& options = {},
+                              ThreadPool& pool = ThreadPool::global());
+
+ private:
+  struct Workspace;
+  std::unique_ptr<Workspace> ws_;
+};
 
 }  // namespace macro::gs

@@ -1,0 +1,233 @@
+// Blend stage: front-to-back compositing of each 16x16 tile, threads over tiles.
+//
+// Legend: a tile is kTile x kTile pixels; a row is kTile pixels (one AVX-512 vector, two AVX2).
+// Per tile the depth-sorted list is consumed in batches of kBlendBatch Gaussians:
+//   gather   the batch's TileSplat records into a tile-local array (one cache line each)
+//   rows     for every live row, the batch entries whose cutoff ellipse crosses the row's pixel
+//            centres inside the tile (exact: the ellipse's x-interval on that row)
+//   blend    the row kernel (raster_kernels.h) per live row
+// A row whose pixels all stopped (T <= 1e-4) leaves the live set; a tile with no live row stops.
+// Work per tile depends only on the tile, so results do not depend on the thread count.
+//
+// Also here: the scalar twin of the row kernel and the naive reference loop (per pixel, scalar,
+// over the whole tile list), which is the baseline the benchmark compares against.
+#include <atomic>
+#include <cmath>
+#include <cstring>
+#include <vector>
+
+#include "gs/raster_stages.h"
+
+namespace macro::gs::raster {
+
+void blend_row_scalar(const TileSplat* splats, const uint32_t* idx, int n, float px0, float py,
+                      RowAccum* acc, BlendCounters* counters) {
+  uint32_t active = acc->active;
+  uint64_t evals = 0, blended = 0;
+  for (int i = 0; i < n && active; ++i) {
+    const TileSplat& s = splats[idx[i]];
+    const float dy = s.y - py;
+    for (int lane = 0; lane < kTile; ++lane) {
+      if (!(active >> lane & 1u)) continue;
+      ++evals;
+      const float dx = s.x - (px0 + float(lane));
+      const float sigma = 0.5f * (s.a * dx * dx + s.c * dy * dy) + s.b * dx * dy;
+      if (!(sigma >= 0.f)) continue;
+      const float alpha = std::min(kMaxAlpha, s.opacity * std::exp(-sigma));
+      if (alpha < kMinAlpha) continue;
+      const float T = acc->T[lane];
+      const float next_t = T * (1.f - alpha);
+      if (next_t <= kTransmittanceStop) {
+        active &= ~(1u << lane);
+        continue;
+      }
+      const float w = alpha * T;
+      acc->r[lane] += s.r * w;
+      acc->g[lane] += s.g * w;
+      acc->b[lane] += s.bl * w;
+      acc->depth[lane] += s.z * w;
+      acc->inv_depth[lane] += s.inv_z * w;
+      acc->T[lane] = next_t;
+      ++blended;
+    }
+  }
+  acc->active = active;
+  counters->evals += evals;
+  counters->blended += blended;
+}
+
+const RasterKernels& raster_kernels_for(Isa isa) {
+  static const RasterKernels scalar{"scalar", blend_row_scalar};
+  static const RasterKernels avx2{"avx2", blend_row_avx2};
+  static const RasterKernels avx512{"avx512", blend_row_avx512};
+  switch (isa) {
+    case Isa::kScalar: return scalar;
+    case Isa::kAvx2: return avx2;
+    default: return avx512;  // AVX-512, AVX512-BF16, AMX machines all run the AVX-512 kernel
+  }
+}
+
+namespace {
+
+struct TileRect {
+  int x0, y0, w, h;  // w, h <= kTile (image edge)
+};
+
+TileRect tile_rect(const CameraF& cam, int t) {
+  TileRect r;
+  r.x0 = (t % cam.tiles_x) * kTile;
+  r.y0 = (t / cam.tiles_x) * kTile;
+  r.w = std::min(kTile, cam.width - r.x0);
+  r.h = std::min(kTile, cam.height - r.y0);
+  return r;
+}
+
+void write_tile(const TileRect& rect, const RowAccum* acc, const CameraF& cam,
+                const BlendOutputs& out) {
+  for (int r = 0; r < rect.h; ++r) {
+    const size_t row = size_t(rect.y0 + r) * size_t(cam.width) + size_t(rect.x0);
+    const RowAccum& a = acc[r];
+    for (int l = 0; l < rect.w; ++l) {
+      const size_t p = row + size_t(l);
+      const float T = a.T[l];
+      out.color[3 * p + 0] = a.r[l] + T * out.background[0];
+      out.color[3 * p + 1] = a.g[l] + T * out.background[1];
+      out.color[3 * p + 2] = a.b[l] + T * out.background[2];
+      out.alpha[p] = 1.f - T;
+      out.depth_sum[p] = a.depth[l];
+      out.inv_depth_sum[p] = a.inv_depth[l];
+    }
+  }
+}
+
+void init_rows(const TileRect& rect, RowAccum* acc) {
+  for (int r = 0; r < kTile; ++r) {
+    RowAccum& a = acc[r];
+    for (int l = 0; l < kTile; ++l) {
+      a.T[l] = 1.f;
+      a.r[l] = a.g[l] = a.b[l] = a.depth[l] = a.inv_depth[l] = 0.f;
+    }
+    a.active = r < rect.h ? (1u << rect.w) - 1u : 0u;  // w <= 16
+  }
+}
+
+// Scratch of one worker (~27 KB), reused tile after tile.
+struct TileScratch {
+  TileSplat batch[kBlendBatch];
+  uint32_t rows[kTile][kBlendBatch];
+  int counts[kTile];
+  RowAccum acc[kTile];
+};
+
+void blend_tile(const Projected& proj, const Binned& bins, const CameraF& cam,
+                const RasterKernels& kernels, int t, TileScratch& s, const BlendOutputs& out,
+                BlendCounters* counters) {
+  const TileRect rect = tile_rect(cam, t);
+  init_rows(rect, s.acc);
+  uint32_t live = 0;
+  for (int r = 0; r < rect.h; ++r) live |= 1u << r;
+  const uint32_t begin = bins.tile_start[t], end = bins.tile_start[t + 1];
+  const float tile_x_lo = float(rect.x0) + 0.5f, tile_x_hi = float(rect.x0 + rect.w) - 0.5f;
+  for (uint32_t b = begin; b < end && live; b += kBlendBatch) {
+    const int nb = int(std::min<uint32_t>(kBlendBatch, end - b));
+    std::memset(s.counts, 0, sizeof(s.counts));
+    for (int k = 0; k < nb; ++k) {
+      const TileSplat& sp = s.batch[k] = proj.splats[bins.pair_gid[b + uint32_t(k)]];
+      // Rows whose centre y lies within the ellipse's vertical extent.
+      const float ry0 = std::ceil(sp.y - sp.ext_y - float(rect.y0) - 0.5f);
+      const float ry1 = std::floor(sp.y + sp.ext_y - float(rect.y0) - 0.5f);
+      const int r0 = ry0 > 0.f ? int(ry0) : 0;
+      const int r1 = ry1 < float(rect.h - 1) ? int(ry1) : rect.h - 1;
+      // Entirely inside the tile horizontally: every row in [r0, r1] is crossed.
+      const bool inside_x = sp.x - sp.ext_x >= tile_x_lo && sp.x + sp.ext_x <= tile_x_hi;
+      const float det = sp.a * sp.c - sp.b * sp.b;
+      for (int r = r0; r <= r1; ++r) {
+        if (!(live >> r & 1u)) continue;
+        if (!inside_x) {
+          const float dy = float(rect.y0 + r) + 0.5f - sp.y;
+          const float disc = sp.a * sp.cutoff - det * dy * dy;
+          if (disc < 0.f) continue;
+          const float sq = std::sqrt(disc);
+          const float hi = sp.x + (-sp.b * dy + sq) / sp.a;
+          const float lo = sp.x + (-sp.b * dy - sq) / sp.a;
+          if (hi < tile_x_lo || lo > tile_x_hi) continue;
+        }
+        s.rows[r][s.counts[r]++] = uint32_t(k);
+      }
+    }
+    for (int r = 0; r < rect.h; ++r) {
+      if (!(live >> r & 1u) || s.counts[r] == 0) continue;
+      kernels.blend_row(s.batch, s.rows[r], s.counts[r], float(rect.x0) + 0.5f,
+                        float(rect.y0 + r) + 0.5f, &s.acc[r], counters);
+      if (s.acc[r].active == 0) live &= ~(1u << r);
+    }
+  }
+  write_tile(rect, s.acc, cam, out);
+}
+
+// The naive tiled loop: every pixel walks its tile's whole list with the scalar math.
+void blend_tile_reference(const Projected& proj, const Binned& bins, const CameraF& cam, int t,
+                          const BlendOutputs& out, BlendCounters* counters) {
+  const TileRect rect = tile_rect(cam, t);
+  const uint32_t begin = bins.tile_start[t], end = bins.tile_start[t + 1];
+  for (int i = rect.y0; i < rect.y0 + rect.h; ++i) {
+    for (int j = rect.x0; j < rect.x0 + rect.w; ++j) {
+      const float px = float(j) + 0.5f, py = float(i) + 0.5f;
+      float T = 1.f, cr = 0.f, cg = 0.f, cb = 0.f, d = 0.f, id = 0.f;
+      for (uint32_t k = begin; k < end; ++k) {
+        const TileSplat& s = proj.splats[bins.pair_gid[k]];
+        ++counters->evals;
+        const float dx = s.x - px, dy = s.y - py;
+        const float sigma = 0.5f * (s.a * dx * dx + s.c * dy * dy) + s.b * dx * dy;
+        if (!(sigma >= 0.f)) continue;
+        const float alpha = std::min(kMaxAlpha, s.opacity * std::exp(-sigma));
+        if (alpha < kMinAlpha) continue;
+        const float next_t = T * (1.f - alpha);
+        if (next_t <= kTransmittanceStop) break;
+        const float w = alpha * T;
+        cr += s.r * w;
+        cg += s.g * w;
+        cb += s.bl * w;
+        d += s.z * w;
+        id += s.inv_z * w;
+        T = next_t;
+        ++counters->blended;
+      }
+      const size_t p = size_t(i) * size_t(cam.width) + size_t(j);
+      out.color[3 * p + 0] = cr + T * out.background[0];
+      out.color[3 * p + 1] = cg + T * out.background[1];
+      out.color[3 * p + 2] = cb + T * out.background[2];
+      out.alpha[p] = 1.f - T;
+      out.depth_sum[p] = d;
+      out.inv_depth_sum[p] = id;
+    }
+  }
+}
+
+}  // namespace
+
+void blend_stage(const Projected& proj, const Binned& bins, const CameraF& cam,
+                 const RasterKernels& kernels, bool reference, const BlendOutputs& out,
+                 ThreadPool& pool, BlendTotals* totals) {
+  const int tiles = cam.tiles_x * cam.tiles_y;
+  std::atomic<uint64_t> evals{0}, blended{0};
+  std::vector<std::unique_ptr<TileScratch>> scratch(size_t(pool.size()));
+  if (!reference)
+    for (auto& s : scratch) s = std::make_unique<TileScratch>();
+  pool.parallel_for(size_t(tiles), [&](size_t begin, size_t end, int worker) {
+    BlendCounters counters;
+    if (reference) {
+      for (size_t t = begin; t < end; ++t)
+        blend_tile_reference(proj, bins, cam, int(t), out, &counters);
+    } else {
+      for (size_t t = begin; t < end; ++t)
+        blend_tile(proj, bins, cam, kernels, int(t), *scratch[size_t(worker)], out, &counters);
+    }
+    evals += counters.evals;
+    blended += counters.blended;
+  }, 2);
+  totals->evals = evals;
+  totals->blended = blended;
+}
+
+}  // namespace macro::gs::raster

@@ -1,0 +1,74 @@
+// Blend kernels of the splat rasterizer: one pixel row of a 16x16 tile against a list of Gaussians.
+//
+// The tile driver (raster_blend.cpp) gathers a batch of the tile's depth-sorted Gaussians into
+// TileSplat records, lists for every row the ones whose culling ellipse crosses that row, and calls
+// blend_row once per live row and batch. Kernels never allocate and keep no state beyond RowAccum.
+//
+// Per lane (pixel centre px = px0 + lane, py), in list order, exactly as gsplat:
+//   dx = x - px, dy = y - py;  power = -0.5 (a dx^2 + c dy^2) - b dx dy;  skip if power > 0
+//   alpha = min(kMaxAlpha, o exp(power));  skip if alpha < kMinAlpha
+//   T' = T (1 - alpha);  if T' <= kTransmittanceStop the lane stops (this one not blended)
+//   else: rgb += c alpha T, depth += z alpha T, inv_depth += alpha T / z, T = T'
+//
+// Paths: scalar (std::exp, the reference twin), AVX2 (2 x 8 lanes), AVX-512 (16 lanes), each with
+// a polynomial exp (relative error ~2e-7); the table is picked from active_isa().
+#pragma once
+
+#include <cstdint>
+
+#include "attention/runtime/cpu.h"
+#include "gs/constants.h"
+
+namespace macro::gs::raster {
+
+// One Gaussian as the blend loop reads it: one 64-byte record, so a tile's gather of a Gaussian
+// touches a single cache line.
+struct alignas(64) TileSplat {
+  float x, y;        // mean in pixels
+  float a, b, c;     // conic (inverse 2D covariance): power = -0.5(a dx^2 + c dy^2) - b dx dy
+  float opacity;     // after the AA / mip factor
+  float r, g, bl;    // colour (SH + 0.5, >= 0)
+  float z, inv_z;    // camera-space depth of the mean and its inverse
+  float cutoff;      // culling radius^2 (Mahalanobis), with margin
+  float ext_x, ext_y;  // half extents in pixels of the cutoff ellipse
+  float pad[2];
+};
+static_assert(sizeof(TileSplat) == 64, "TileSplat layout");
+
+// The running state of one 16-pixel row. Lanes whose bit is clear in `active` are finished (or
+// outside the image) and are never touched again.
+struct alignas(64) RowAccum {
+  float T[kTile];
+  float r[kTile], g[kTile], b[kTile];
+  float depth[kTile], inv_depth[kTile];
+  uint32_t active;  // lane bit mask
+};
+
+struct BlendCounters {
+  uint64_t evals = 0;    // Gaussian x live-pixel evaluations
+  uint64_t blended = 0;  // evaluations that contributed (alpha >= 1/255 and not stopped)
+};
+
+// Blend splats[idx[0..n)] into one row: pixel centres px0 + lane (lane 0..15), py.
+using BlendRowFn = void (*)(const TileSplat* splats, const uint32_t* idx, int n, float px0,
+                            float py, RowAccum* acc, BlendCounters* counters);
+
+struct RasterKernels {
+  const char* name;
+  BlendRowFn blend_row;
+};
+
+// The table for a path; unsupported paths fall back to the best lower one the build has.
+const RasterKernels& raster_kernels_for(Isa isa);
+// The table for active_isa() (read it per render so set_isa() in tests takes effect).
+inline const RasterKernels& raster_kernels() { return raster_kernels_for(active_isa()); }
+
+// The individual paths (defined in raster_blend.cpp, raster_blend_avx2.cpp, raster_blend_avx512.cpp).
+void blend_row_scalar(const TileSplat* splats, const uint32_t* idx, int n, float px0, float py,
+                      RowAccum* acc, BlendCounters* counters);
+void blend_row_avx2(const TileSplat* splats, const uint32_t* idx, int n, float px0, float py,
+                    RowAccum* acc, BlendCounters* counters);
+void blend_row_avx512(const TileSplat* splats, const uint32_t* idx, int n, float px0, float py,
+                      RowAccum* acc, BlendCounters* counters);
+
+}  // namespace macro::gs::raster

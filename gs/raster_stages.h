@@ -1,0 +1,179 @@
+// Internal stages of the tile rasterizer (gs/rasterizer.h is the public API).
+//
+// Legend: N Gaussians in the cloud, V visible after projection, P (Gaussian, tile) pairs,
+// TX x TY tiles of kTile x kTile pixels, H x W image.
+//
+//   project  cloud -> splats[N] (TileSplat), tiles[N]   (raster_project.cpp)
+//   bin      -> depth order of the V visible Gaussians, pairs grouped by tile in depth order,
+//               tile_start[TX*TY+1]                                       (raster_bin.cpp)
+//   blend    -> color/alpha/depth_sum/inv_depth_sum                       (raster_blend.cpp)
+//
+// Buffers are carved from grow-only arenas held by the Rasterizer, so a second frame of the same
+// size allocates nothing.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+
+#include "attention/runtime/thread_pool.h"
+#include "gs/camera.h"
+#include "gs/constants.h"
+#include "gs/gaussians.h"
+#include "gs/raster_kernels.h"
+#include "gs/rasterizer.h"
+
+namespace macro::gs::raster {
+
+// A grow-only byte buffer from which typed arrays are carved, 64-byte aligned.
+class Arena {
+ public:
+  // Start carving; make room for `bytes` (call with the sum of carve sizes, see carve_size()).
+  void reset(size_t bytes) {
+    if (bytes > capacity_) {
+      buffer_.reset(new std::byte[bytes + 64]);
+      capacity_ = bytes;
+    }
+    used_ = 0;
+  }
+  template <typename T>
+  static size_t carve_size(size_t n) { return (n * sizeof(T) + 63) & ~size_t(63); }
+  template <typename T>
+  T* carve(size_t n) {
+    auto base = reinterpret_cast<uintptr_t>(buffer_.get());
+    uintptr_t aligned = (base + 63) & ~uintptr_t(63);
+    T* p = reinterpret_cast<T*>(aligned + used_);
+    used_ += carve_size<T>(n);
+    MACRO_CHECK(used_ <= capacity_);
+    return p;
+  }
+  size_t capacity() const { return capacity_; }
+
+ private:
+  std::unique_ptr<std::byte[]> buffer_;
+  size_t capacity_ = 0, used_ = 0;
+};
+
+// The camera in float, as the stages use it.
+struct CameraF {
+  float R[9];  // world -> camera rotation, row-major
+  float t[3];
+  float center[3];  // camera position in world space (for SH directions)
+  float fx, fy, cx, cy;
+  int width, height;
+  int tiles_x, tiles_y;
+};
+CameraF make_camera_f(const Camera& camera);
+
+// Tile coverage rule.
+enum class TileRule {
+  kEllipse,  // exact ellipse (at the 1/255 cutoff) against each tile
+  kBox,      // the ellipse's bounding box, as the naive tiled baseline does
+};
+
+struct ProjectParams {
+  RasterMode mode = RasterMode::kClassic;
+  int sh_degree = 0;  // degree evaluated (<= the cloud's)
+  float near_plane = kNearPlane, far_plane = kFarPlane;
+  TileRule rule = TileRule::kEllipse;
+};
+
+// Per-Gaussian outputs of project. tiles[g] == 0 means culled.
+struct Projected {
+  size_t n = 0;
+  TileSplat* splats = nullptr;  // [N]
+  uint32_t* tiles = nullptr;    // [N] tiles touched
+};
+
+struct ProjectCounts {
+  size_t visible = 0;
+  size_t culled_depth = 0;      // outside (near, far)
+  size_t culled_invalid = 0;    // NaN/Inf inputs, non-finite or degenerate covariance (det <= 0)
+  size_t culled_faint = 0;      // opacity (after AA/mip factor) below 1/255
+  size_t culled_offscreen = 0;  // cutoff ellipse misses the image
+  uint64_t pairs = 0;           // sum of tiles[]
+};
+
+void project_stage(const GaussianCloud& cloud, const CameraF& cam, const ProjectParams& params,
+                   const Projected& out, ThreadPool& pool, ProjectCounts* counts);
+
+// Outputs of bin.
+struct Binned {
+  uint32_t* pair_gid = nullptr;    // [P] Gaussian ids grouped by tile, front to back in a tile
+  uint32_t* tile_start = nullptr;  // [TX*TY+1] tile t owns pair_gid[tile_start[t], tile_start[t+1])
+};
+
+// Scratch the bin stage needs, in bytes, for V visible Gaussians and P pairs.
+size_t bin_scratch_bytes(size_t n, size_t pairs, int tiles);
+// Sorts the visible Gaussians by depth (LSD radix on the float bits, stable, ties by id) and
+// groups the pairs by tile with a stable counting pass: the result equals a stable sort of the
+// 64-bit keys (tile << 32 | depth bits) with ties broken by Gaussian id.
+void bin_stage(const Projected& proj, const CameraF& cam, TileRule rule, uint64_t pairs,
+               Arena& scratch, Binned* out, ThreadPool& pool);
+
+struct BlendOutputs {
+  float* color;          // [H,W,3]
+  float* alpha;          // [H,W]
+  float* depth_sum;      // [H,W]
+  float* inv_depth_sum;  // [H,W]
+  float background[3];
+};
+struct BlendTotals {
+  uint64_t evals = 0, blended = 0;
+};
+// reference = true: the naive per-pixel scalar loop over the whole tile list (the baseline).
+void blend_stage(const Projected& proj, const Binned& bins, const CameraF& cam,
+                 const RasterKernels& kernels, bool reference, const BlendOutputs& out,
+                 ThreadPool& pool, BlendTotals* totals);
+
+// ---- Tile coverage, shared by project (counting) and bin (emitting) so both agree exactly. ----
+
+// For a row band of pixel-centre offsets dy in [d0, d1] (relative to the mean, inside
+// [-ext_y, ext_y]), the range [lo, hi] of dx offsets the cutoff ellipse covers.
+inline void ellipse_band_x(float a, float b, float c, float cutoff, float ext_x, float d0,
+                           float d1, float* lo, float* hi) {
+  const float det = a * c - b * b;
+  const float dy_r = -b / c * ext_x;  // dy of the rightmost point (leftmost at -dy_r)
+  auto x_at = [&](float dy, float sign) {
+    float disc = std::max(0.f, a * cutoff - det * dy * dy);
+    return (-b * dy + sign * std::sqrt(disc)) / a;
+  };
+  *hi = (dy_r >= d0 && dy_r <= d1) ? ext_x : x_at(std::clamp(dy_r, d0, d1), 1.f);
+  *lo = (-dy_r >= d0 && -dy_r <= d1) ? -ext_x : x_at(std::clamp(-dy_r, d0, d1), -1.f);
+}
+
+// Index of the first tile / pixel whose centre range could hold coordinate v, clamped to
+// [0, count-1]; works for any finite or huge v without integer overflow.
+inline int tile_of(float v, int count) {
+  float f = std::floor((v - 0.5f) / float(kTile));
+  if (!(f >= 0.f)) return 0;  // also NaN
+  if (f >= float(count - 1)) return count - 1;
+  return int(f);
+}
+
+// Calls fn(tx, ty) for every tile the Gaussian covers, rows of tiles top to bottom.
+template <typename Fn>
+inline void for_each_tile(const TileSplat& s, const CameraF& cam, TileRule rule, Fn&& fn) {
+  const float ext_x = s.ext_x, ext_y = s.ext_y;
+  const int ty0 = tile_of(s.y - ext_y, cam.tiles_y), ty1 = tile_of(s.y + ext_y, cam.tiles_y);
+  if (rule == TileRule::kBox) {
+    const int tx0 = tile_of(s.x - ext_x, cam.tiles_x), tx1 = tile_of(s.x + ext_x, cam.tiles_x);
+    for (int ty = ty0; ty <= ty1; ++ty)
+      for (int tx = tx0; tx <= tx1; ++tx) fn(tx, ty);
+    return;
+  }
+  for (int ty = ty0; ty <= ty1; ++ty) {
+    float d0 = std::max(-ext_y, float(ty * kTile) + 0.5f - s.y);
+    float d1 = std::min(ext_y, float(ty * kTile + kTile - 1) + 0.5f - s.y);
+    if (d0 > d1) continue;
+    float lo, hi;
+    ellipse_band_x(s.a, s.b, s.c, s.cutoff, ext_x, d0, d1, &lo, &hi);
+    if (s.x + hi < 0.5f || s.x + lo > float(cam.width) - 0.5f) continue;  // band misses the image
+    const int tx0 = tile_of(s.x + lo, cam.tiles_x), tx1 = tile_of(s.x + hi, cam.tiles_x);
+    for (int tx = tx0; tx <= tx1; ++tx) fn(tx, ty);
+  }
+}
+
+}  // namespace macro::gs::raster
