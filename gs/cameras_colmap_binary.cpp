@@ -29,9 +29,8 @@ class ByteReader {
 
   Status need(uint64_t bytes, const std::string& what) const {
     if (bytes <= left()) return Status::ok();
-    return Status::error(path_ + ": truncated at byte " + std::to_string(pos_) + ": " + what +
-                         " needs " + std::to_string(bytes) + " bytes, " + std::to_string(left()) +
-                         " left");
+    return Status::error(what + ": file truncated at byte " + std::to_string(pos_) + ": needs " +
+                         std::to_string(bytes) + " bytes, " + std::to_string(left()) + " left");
   }
   template <typename T>
   Result<T> read(const std::string& what) {
@@ -49,8 +48,8 @@ class ByteReader {
   Result<std::string> read_cstring(const std::string& what) {
     const void* end = std::memchr(data_.data() + pos_, 0, left());
     if (!end) {
-      return Status::error(path_ + ": truncated at byte " + std::to_string(pos_) + ": " + what +
-                           " has no terminating NUL before the end of the file");
+      return Status::error(what + ": file truncated at byte " + std::to_string(pos_) +
+                           ": no terminating NUL before the end of the file");
     }
     const size_t n = static_cast<const uint8_t*>(end) - (data_.data() + pos_);
     std::string s(reinterpret_cast<const char*>(data_.data() + pos_), n);
@@ -64,10 +63,11 @@ class ByteReader {
   uint64_t pos_ = 0;
 };
 
-// Checks a count against the file: `count` records of at least `min_bytes` each must fit.
+// Checks a count against the file: `count` records of at least `min_bytes` each must fit. `what`
+// starts with the file name.
 Status check_count(const ByteReader& r, uint64_t count, uint64_t min_bytes, const std::string& what) {
   if (count <= r.left() / min_bytes) return Status::ok();
-  return Status::error(r.path() + ": " + what + " count " + std::to_string(count) + " at byte " +
+  return Status::error(what + " count " + std::to_string(count) + " at byte " +
                        std::to_string(r.offset()) + " needs at least " + std::to_string(min_bytes) +
                        " bytes each, only " + std::to_string(r.left()) +
                        " bytes left (truncated or not a COLMAP file)");
@@ -76,13 +76,13 @@ Status check_count(const ByteReader& r, uint64_t count, uint64_t min_bytes, cons
 Result<std::vector<ColmapCameraRecord>> parse_cameras_bin(const std::string& path) {
   MACRO_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, read_file(path));
   ByteReader r(bytes, path);
-  MACRO_ASSIGN_OR_RETURN(uint64_t count, r.read<uint64_t>("camera count"));
-  MACRO_TRY(check_count(r, count, 24, "camera"));
+  MACRO_ASSIGN_OR_RETURN(uint64_t count, r.read<uint64_t>(path + ": camera count"));
+  MACRO_TRY(check_count(r, count, 24, path + ": camera"));
   std::vector<ColmapCameraRecord> cams;
   cams.reserve(count);
   for (uint64_t i = 0; i < count; ++i) {
     ColmapCameraRecord c;
-    c.where = path + " camera #" + std::to_string(i) + " (byte " + std::to_string(r.offset()) + ")";
+    c.where = path + ": camera #" + std::to_string(i) + " (byte " + std::to_string(r.offset()) + ")";
     MACRO_ASSIGN_OR_RETURN(uint32_t id, r.read<uint32_t>(c.where + " camera_id"));
     MACRO_ASSIGN_OR_RETURN(int32_t model_id, r.read<int32_t>(c.where + " model_id"));
     MACRO_ASSIGN_OR_RETURN(uint64_t w, r.read<uint64_t>(c.where + " width"));
@@ -118,13 +118,13 @@ Result<std::vector<ColmapCameraRecord>> parse_cameras_bin(const std::string& pat
 Result<std::vector<ColmapImageRecord>> parse_images_bin(const std::string& path) {
   MACRO_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, read_file(path));
   ByteReader r(bytes, path);
-  MACRO_ASSIGN_OR_RETURN(uint64_t count, r.read<uint64_t>("image count"));
-  MACRO_TRY(check_count(r, count, 64 + 1 + 8, "image"));
+  MACRO_ASSIGN_OR_RETURN(uint64_t count, r.read<uint64_t>(path + ": image count"));
+  MACRO_TRY(check_count(r, count, 64 + 1 + 8, path + ": image"));
   std::vector<ColmapImageRecord> images;
   images.reserve(count);
   for (uint64_t i = 0; i < count; ++i) {
     ColmapImageRecord im;
-    im.where = path + " image #" + std::to_string(i) + " (byte " + std::to_string(r.offset()) + ")";
+    im.where = path + ": image #" + std::to_string(i) + " (byte " + std::to_string(r.offset()) + ")";
     MACRO_ASSIGN_OR_RETURN(uint32_t id, r.read<uint32_t>(im.where + " image_id"));
     im.id = id;
     for (int k = 0; k < 4; ++k) {

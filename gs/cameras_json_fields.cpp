@@ -2,6 +2,7 @@
 #include "gs/cameras_json_fields.h"
 
 #include <cmath>
+#include <cstdio>
 #include <limits>
 
 #include "attention/runtime/file_io.h"
@@ -131,9 +132,9 @@ Result<Eigen::Matrix4d> matrix_value(const Json& value, const std::string& what,
   if (rows == 4) {
     const Eigen::RowVector4d last = m.row(3);
     if (!((last - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() <= 1e-6)) {
-      return Status::error(what + ": last row is [" + Json(last(0)).dump() + ", " +
-                           Json(last(1)).dump() + ", " + Json(last(2)).dump() + ", " +
-                           Json(last(3)).dump() + "], expected [0, 0, 0, 1]");
+      char buf[128];
+      std::snprintf(buf, sizeof buf, "[%.9g, %.9g, %.9g, %.9g]", last(0), last(1), last(2), last(3));
+      return Status::error(what + ": last row is " + buf + ", expected [0, 0, 0, 1]");
     }
   }
   return m;
