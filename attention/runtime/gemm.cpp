@@ -99,6 +99,15 @@ thread_local Scratch t_scratch_a, t_scratch_b;
 
 // ---- packing -----------------------------------------------------------------------------------
 
+// f32_to_bf16 (half.h) without branches, so the packing loops vectorise: nearest-even, NaN quiet.
+inline uint16_t round_bf16(float f) {
+  uint32_t u;
+  std::memcpy(&u, &f, 4);
+  const uint32_t r = (u + 0x7fffu + ((u >> 16) & 1u)) >> 16;
+  const uint32_t q = (u >> 16) | 0x40u;
+  return uint16_t((u & 0x7fffffffu) > 0x7f800000u ? q : r);
+}
+
 inline int64_t packed_index(PackLayout l, int64_t k, int64_t r, int w) {
   switch (l) {
     case PackLayout::kF32: return k * w + r;
@@ -147,6 +156,28 @@ void pack_generic(const Src* src, int64_t ld, bool transposed, int64_t R, int64_
       }
       continue;
     }
+    if constexpr (sizeof(Dst) == 2) {
+      if (l == PackLayout::kBf16Pairs && !transposed) {
+        // Row-major source into k pairs: each (k, k+1) of a row is one 32-bit word of the panel.
+        uint32_t* d32 = reinterpret_cast<uint32_t*>(d);
+        const int64_t pairs = kcp / 2;
+        for (int r = 0; r < w; ++r) {
+          if (r >= valid_r) {
+            for (int64_t q = 0; q < pairs; ++q) d32[q * w + r] = 0;
+            continue;
+          }
+          const Src* s = src + (pr0 + r) * ld + k0;
+          const int64_t full = valid_k / 2;
+          for (int64_t q = 0; q < full; ++q)
+            d32[q * w + r] = uint32_t(conv(s[2 * q])) | (uint32_t(conv(s[2 * q + 1])) << 16);
+          for (int64_t q = full; q < pairs; ++q) {
+            const int64_t k = 2 * q;
+            d32[q * w + r] = k < valid_k ? uint32_t(conv(s[k])) : 0u;
+          }
+        }
+        continue;
+      }
+    }
     for (int r = 0; r < w; ++r) {
       for (int64_t k = 0; k < kcp; ++k) {
         Dst v = Dst(0);
@@ -185,6 +216,21 @@ const Tables& tables() {
   return t;
 }
 
+// Block-size overrides for tuning experiments (MACRO_GEMM_KC / _MC / _NC; 0 = the defaults).
+struct Tuning {
+  int64_t kc = 0, mc = 0, nc = 0;
+};
+const Tuning& tuning() {
+  static const Tuning t = [] {
+    Tuning r;
+    if (const char* v = std::getenv("MACRO_GEMM_KC")) r.kc = std::atoll(v);
+    if (const char* v = std::getenv("MACRO_GEMM_MC")) r.mc = std::atoll(v);
+    if (const char* v = std::getenv("MACRO_GEMM_NC")) r.nc = std::atoll(v);
+    return r;
+  }();
+  return t;
+}
+
 }  // namespace
 
 namespace detail {
@@ -205,7 +251,7 @@ void pack_panels_f32(const float* src, int64_t ld, bool transposed, int64_t R, i
                  static_cast<float*>(dst), [](float v) { return v; });
   } else {
     pack_generic(src, ld, transposed, R, K, layout, w, r0, rows, k0, kc, kcp,
-                 static_cast<uint16_t*>(dst), [](float v) { return f32_to_bf16(v); });
+                 static_cast<uint16_t*>(dst), [](float v) { return round_bf16(v); });
   }
 }
 
@@ -233,10 +279,12 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
   }
   const int mr = kern.mr, nr = kern.nr;
   const int64_t esz = packed_elem_bytes(kern.layout);
-  const int64_t KC = kern.kc;
+  const Tuning& tun = tuning();
+  const int64_t KC = tun.kc > 0 ? round_up(tun.kc, kern.k_align) : kern.kc;
   const int64_t threads = pool ? pool->size() : 1;
-  const int64_t mc = s.mc > 0 ? s.mc : int64_t(mr) * std::max<int64_t>(1, 192 / mr);
-  const int64_t nc = s.nc > 0 ? s.nc : int64_t(nr) * std::max<int64_t>(1, 512 / nr);
+  const int64_t mc_target = tun.mc > 0 ? tun.mc : 192, nc_target = tun.nc > 0 ? tun.nc : 512;
+  const int64_t mc = s.mc > 0 ? s.mc : int64_t(mr) * std::max<int64_t>(1, mc_target / mr);
+  const int64_t nc = s.nc > 0 ? s.nc : int64_t(nr) * std::max<int64_t>(1, nc_target / nr);
   const int64_t m_tasks = (M + mc - 1) / mc;
   // Split N across tasks only as far as needed to give every thread a few tasks.
   int64_t n_tasks = std::clamp<int64_t>((4 * threads + m_tasks - 1) / m_tasks, 1, (N + nr - 1) / nr);

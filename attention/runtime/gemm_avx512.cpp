@@ -1,4 +1,4 @@
-// AVX-512 GEMM micro-kernels: fp32 14x32 (28 zmm accumulators, A broadcast from memory) and a
+// AVX-512 GEMM micro-kernels: fp32 12x32 (24 zmm accumulators, A broadcast from memory) and a
 // bf16 12x32 kernel that widens bf16 pairs with shifts (for CPUs with AVX-512 but no AVX512-BF16).
 // Packed layouts and the MicroTile contract: kernels.h.
 // GCC 12's AVX-512 headers trip -W(maybe-)uninitialized on their own _mm512_undefined_*() idiom.
@@ -56,7 +56,7 @@ inline void store_tile(const MicroTile& t, const __m512* c0, const __m512* c1) {
   }
 }
 
-constexpr int kMrF32 = 14;
+constexpr int kMrF32 = 12;
 
 void micro_f32(const MicroTile& t) {
   __m512 c0[kMrF32], c1[kMrF32];
@@ -132,7 +132,7 @@ double probe_fma(int64_t iters) {
 
 namespace detail {
 void fill_avx512_kernels(KernelTable& t) {
-  t.f32 = GemmKernel{kMrF32, kNr, 1, 256, PackLayout::kF32, micro_f32, "avx512 f32 14x32"};
+  t.f32 = GemmKernel{kMrF32, kNr, 1, 256, PackLayout::kF32, micro_f32, "avx512 f32 12x32"};
   t.bf16 = GemmKernel{kMrBf16, kNr, 2, 256, PackLayout::kBf16Pairs, micro_bf16_emulated,
                       "avx512 bf16 12x32 (shift-widened)"};
   t.probe_fma = probe_fma;

@@ -1,0 +1,276 @@
+// bench kernels: GEMM (fp32, bf16) at U-Net Linear shapes and conv2d 3x3 at VAE shapes, as GFLOP/s
+// and as a fraction of the machine's own peak measured in the same run (an FMA loop, a bf16
+// dot-product loop, an AMX loop when present), plus the scalar twin on one shape for the ratio.
+//
+//   bench kernels [--threads N] [--reps R] [--quick] [--no-conv] [--no-gemm]
+// --quick crops the conv inputs (the full 512x512 / 536x960 layers take seconds each).
+#include <time.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "attention/runtime/conv.h"
+#include "attention/runtime/cpu.h"
+#include "attention/runtime/gemm.h"
+#include "attention/runtime/kernels.h"
+#include "bench_registry.h"
+
+namespace macro::bench {
+namespace {
+
+std::vector<float> random_vec(size_t n, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> d(-1.0f, 1.0f);
+  std::vector<float> v(n);
+  for (float& x : v) x = d(rng);
+  return v;
+}
+
+// The machine is shared with builds, so every measurement records both the wall time and the
+// process CPU time (all threads); rates per CPU-second show the kernels' efficiency on the cores
+// they actually got, rates per wall-second what a user would see. Both are medians.
+struct Timing {
+  double wall = 0, cpu = 0;
+};
+double cpu_seconds() {
+  timespec ts;
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+Timing measure(int reps, const std::function<void()>& fn) {
+  fn();  // warm-up
+  std::vector<double> w, c;
+  for (int i = 0; i < reps; ++i) {
+    const double w0 = now_seconds(), c0 = cpu_seconds();
+    fn();
+    c.push_back(cpu_seconds() - c0);
+    w.push_back(now_seconds() - w0);
+  }
+  std::sort(w.begin(), w.end());
+  std::sort(c.begin(), c.end());
+  return {w[w.size() / 2], c[c.size() / 2]};
+}
+
+// GFLOP/s of a probe loop run on every thread of `pool` at once (nullptr: the calling thread).
+struct Rate {
+  double wall = 0, cpu = 0;  // GFLOP per wall-second, and per CPU-second of one thread
+};
+Rate probe_peak(double (*probe)(int64_t), ThreadPool* pool, int reps) {
+  const int64_t iters = 2000000;
+  const int threads = pool ? pool->size() : 1;
+  const Timing t = measure(reps, [&] {
+    if (!pool) {
+      probe(iters);
+      return;
+    }
+    pool->parallel_for(size_t(threads), [&](size_t b, size_t e, int) {
+      for (size_t i = b; i < e; ++i) probe(iters);
+    }, 1);
+  });
+  const double flop = probe(1) * double(iters) * threads;  // probe(n) returns its flop count
+  return {flop / t.wall * 1e-9, flop / t.cpu * 1e-9};
+}
+
+struct Peaks {
+  Rate fma, bf16, amx;
+};
+
+// Runs fn `reps` times between two short runs of the matching peak probe (so the ratio compares
+// against the machine as it was at that moment: it is shared with builds) and prints
+// wall: GFLOP/s and % of the wall peak of the same thread count; cpu: GFLOP per CPU-second and %
+// of the per-CPU-second peak.
+void row(const char* what, const std::string& shape, double flop, int reps,
+         const std::function<void()>& fn, double (*probe)(int64_t), ThreadPool* pool) {
+  const Rate p0 = probe_peak(probe, pool, 3);
+  const Timing t = measure(reps, fn);
+  const Rate p1 = probe_peak(probe, pool, 3);
+  const Rate peak{0.5 * (p0.wall + p1.wall), 0.5 * (p0.cpu + p1.cpu)};
+  const int threads = pool ? pool->size() : 1;
+  const double gw = flop / t.wall * 1e-9, gc = flop / t.cpu * 1e-9;
+  std::printf("  %-34s %-17s thr %d %9.2f ms %7.1f GFLOP/s %5.1f%% | cpu %7.1f GFLOP/cpu-s %5.1f%%"
+              " | peak %6.1f\n",
+              what, shape.c_str(), threads, t.wall * 1e3, gw, 100.0 * gw / peak.wall, gc,
+              100.0 * gc / peak.cpu, peak.wall);
+}
+
+int run(int argc, char** argv) {
+  int threads = ThreadPool::global().size();
+  int reps = 7;
+  bool quick = false, do_conv = true, do_gemm = true;
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threads = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--reps") && i + 1 < argc) reps = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--quick")) quick = true;
+    else if (!std::strcmp(argv[i], "--no-conv")) do_conv = false;
+    else if (!std::strcmp(argv[i], "--no-gemm")) do_gemm = false;
+    else {
+      std::fprintf(stderr, "bench kernels: unknown flag '%s'\n", argv[i]);
+      return 2;
+    }
+  }
+  ThreadPool::set_global_threads(threads);
+  ThreadPool* pool = threads > 1 ? &ThreadPool::global() : nullptr;
+  const KernelTable& kt = kernels();
+  std::printf("kernels: f32 %s, bf16 %s; threads %d; medians of %d runs\n", kt.f32.name,
+              kt.bf16.name, threads, reps);
+
+  // ---- peaks, same run ----
+  Peaks peak1, peakN;
+  peak1.fma = probe_peak(kt.probe_fma, nullptr, 5);
+  peakN.fma = probe_peak(kt.probe_fma, pool, 5);
+  peak1.bf16 = probe_peak(kt.probe_bf16, nullptr, 5);
+  peakN.bf16 = probe_peak(kt.probe_bf16, pool, 5);
+  std::printf("peak fp32 FMA loop: %.1f GFLOP/s (1 thread), %.1f GFLOP/s (%d threads); "
+              "%.1f GFLOP/cpu-s\n", peak1.fma.wall, peakN.fma.wall, threads, peakN.fma.cpu);
+  std::printf("peak bf16 dot loop: %.1f GFLOP/s (1 thread), %.1f GFLOP/s (%d threads); "
+              "%.1f GFLOP/cpu-s%s\n", peak1.bf16.wall, peakN.bf16.wall, threads, peakN.bf16.cpu,
+              isa_supported(Isa::kAvx512Bf16) ? "" : " (no native bf16: FMA loop)");
+  if (isa_supported(Isa::kAmx)) {
+    peakN.amx = probe_peak(kernels_for(Isa::kAmx).probe_bf16, pool, 5);
+    std::printf("peak AMX loop: %.1f GFLOP/s (%d threads)\n", peakN.amx.wall, threads);
+  } else {
+    std::printf("peak AMX loop: not available (no AMX on this CPU)\n");
+  }
+  double (*bf16_probe)(int64_t) = kt.bf16.layout == PackLayout::kBf16Amx
+                                      ? kernels_for(Isa::kAmx).probe_bf16
+                                      : kt.probe_bf16;
+
+  {
+    // The micro-kernels alone on cache-resident panels (one thread): the ceiling for everything
+    // below. 64 calls over K = 256 per timing.
+    std::printf("\nmicro-kernels, panels in L1/L2, 1 thread:\n");
+    for (const GemmKernel* gk : {&kt.f32, &kt.bf16}) {
+      const int64_t kc = 256;
+      std::vector<float> a(size_t(gk->mr * kc), 0.5f), b(size_t(gk->nr * kc), 0.25f);
+      std::vector<float> c(size_t(gk->mr * gk->nr));
+      if (gk->layout != PackLayout::kF32) {
+        std::fill(a.begin(), a.end(), 0.0f);
+        std::fill(b.begin(), b.end(), 0.0f);
+      }
+      MicroTile t;
+      t.kc = kc;
+      t.a = a.data();
+      t.b = b.data();
+      t.c = c.data();
+      t.ldc = gk->nr;
+      t.m = gk->mr;
+      t.n = gk->nr;
+      const double flop = 2.0 * gk->mr * gk->nr * kc * 1000;
+      row(gk->name, "1000 calls K256", flop, reps, [&] {
+        for (int i = 0; i < 1000; ++i) gk->micro(t);
+      }, gk == &kt.f32 ? kt.probe_fma : bf16_probe, nullptr);
+    }
+  }
+
+  if (do_gemm) {
+    // U-Net Linear shapes [M tokens, K in, N out] (difix-spec 4.3/4.4; 512x512 -> L0 4096 tokens,
+    // 536x960 -> 8040).
+    struct G {
+      int64_t m, k, n;
+      const char* what;
+    };
+    const G shapes[] = {
+        {4096, 320, 320, "L0 q/k/v/o, proj (C=320)"},  {4096, 320, 2560, "L0 ff.net.0 (GEGLU 8C)"},
+        {4096, 1280, 320, "L0 ff.net.2 (4C->C)"},      {1024, 640, 640, "L1 q/k/v/o (C=640)"},
+        {1024, 640, 5120, "L1 ff.net.0"},              {1024, 2560, 640, "L1 ff.net.2"},
+        {256, 1280, 1280, "L2 q/k/v/o (C=1280)"},      {8040, 320, 320, "L0 q/k/v/o at 536x960"},
+        {8040, 320, 2560, "L0 ff.net.0 at 536x960"},   {2040, 640, 5120, "L1 ff.net.0 at 536x960"},
+    };
+    std::printf("\nGEMM, packed weights (Linear y = x W^T + b):\n");
+    for (const G& g : shapes) {
+      auto x = random_vec(size_t(g.m * g.k), 1);
+      auto w = random_vec(size_t(g.n * g.k), 2);
+      auto b = random_vec(size_t(g.n), 3);
+      std::vector<float> y(size_t(g.m * g.n));
+      GemmParams p;
+      p.bias_n = b.data();
+      const double flop = 2.0 * double(g.m) * g.n * g.k;
+      char shape[64];
+      std::snprintf(shape, sizeof shape, "M%ld K%ld N%ld", long(g.m), long(g.k), long(g.n));
+      PackedWeights w32 = PackedWeights::pack(w.data(), g.n, g.k, g.k, WeightType::kF32);
+      row((std::string("f32  ") + g.what).c_str(), shape, flop, reps,
+          [&] { gemm_packed(g.m, x.data(), g.k, w32, y.data(), g.n, p, pool); }, kt.probe_fma, pool);
+      PackedWeights w16 = PackedWeights::pack(w.data(), g.n, g.k, g.k, WeightType::kBf16);
+      row((std::string("bf16 ") + g.what).c_str(), shape, flop, reps,
+          [&] { gemm_packed(g.m, x.data(), g.k, w16, y.data(), g.n, p, pool); }, bf16_probe, pool);
+    }
+    {
+      // Unpacked B (both operands packed per call), and the scalar twin for the ratio.
+      const int64_t m = 1024, k = 640, n = 640;
+      auto a = random_vec(size_t(m * k), 4);
+      auto bm = random_vec(size_t(n * k), 5);
+      std::vector<float> c(size_t(m * n));
+      GemmParams p;
+      p.trans_b = true;
+      const double flop = 2.0 * double(m) * n * k;
+      std::printf("\nGEMM, unpacked operands, and the scalar twin (baseline):\n");
+      auto call = [&] { gemm_f32(m, n, k, a.data(), k, bm.data(), k, c.data(), n, p, pool); };
+      const Timing t = measure(reps, call);
+      row("f32 gemm_f32 trans_b", "M1024 K640 N640", flop, reps, call, kt.probe_fma, pool);
+      const Isa saved = active_isa();
+      (void)set_isa(Isa::kScalar);
+      const Timing ts = measure(3, call);
+      row("f32 gemm_f32 trans_b, SCALAR twin", "M1024 K640 N640", flop, 3, call, kt.probe_fma,
+          pool);
+      (void)set_isa(saved);
+      std::printf("  speed-up of %s over the scalar twin: %.1fx (wall), %.1fx (cpu)\n",
+                  isa_name(saved), ts.wall / t.wall, ts.cpu / t.cpu);
+    }
+  }
+
+  if (do_conv) {
+    // VAE conv 3x3 layers [Cin=Cout, H x W]; --quick crops the spatial size.
+    struct C {
+      int64_t c, h, w;
+      int stride, pt, pl, pb, pr;
+      int k;
+      const char* what;
+    };
+    std::vector<C> convs = {
+        {128, 512, 512, 1, 1, 1, 1, 1, 3, "VAE 128ch 3x3 @512x512"},
+        {256, 256, 256, 1, 1, 1, 1, 1, 3, "VAE 256ch 3x3 @256x256"},
+        {512, 128, 128, 1, 1, 1, 1, 1, 3, "VAE 512ch 3x3 @128x128"},
+        {512, 64, 64, 1, 1, 1, 1, 1, 3, "VAE 512ch 3x3 @64x64"},
+        {128, 536, 960, 1, 1, 1, 1, 1, 3, "VAE 128ch 3x3 @536x960"},
+        {512, 134, 240, 1, 1, 1, 1, 1, 3, "VAE 512ch 3x3 @134x240"},
+        {256, 256, 256, 2, 0, 0, 1, 1, 3, "VAE enc downsample 256ch s2"},
+        {512, 128, 128, 1, 0, 0, 0, 0, 1, "1x1 512ch @128x128"},
+    };
+    std::printf("\nconv2d (NCHW, implicit GEMM, fp32)%s:\n",
+                quick ? " [--quick: spatial sizes cropped by 4x per side]" : "");
+    for (C cv : convs) {
+      if (quick) {
+        cv.h = std::max<int64_t>(16, cv.h / 4);
+        cv.w = std::max<int64_t>(16, cv.w / 4);
+      }
+      Conv2dShape s;
+      s.n = 1, s.c_in = cv.c, s.h = cv.h, s.w = cv.w, s.c_out = cv.c, s.kh = s.kw = cv.k;
+      s.stride = cv.stride;
+      s.pad_top = cv.pt, s.pad_left = cv.pl, s.pad_bottom = cv.pb, s.pad_right = cv.pr;
+      auto x = random_vec(size_t(s.c_in * s.h * s.w), 6);
+      auto w = random_vec(size_t(s.c_out * s.c_in * s.kh * s.kw), 7);
+      auto b = random_vec(size_t(s.c_out), 8);
+      std::vector<float> y(size_t(s.c_out * s.out_h() * s.out_w()));
+      ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, s.kh, s.kw);
+      const double flop = 2.0 * double(s.out_h()) * s.out_w() * s.c_in * s.c_out * s.kh * s.kw;
+      const int r = flop > 5e10 ? std::max(3, reps / 2) : reps;
+      char shape[64];
+      std::snprintf(shape, sizeof shape, "C%ld %ldx%ld s%d", long(cv.c), long(cv.h), long(cv.w),
+                    cv.stride);
+      row(cv.what, shape, flop, r, [&] { conv2d(s, x.data(), cw, nullptr, y.data(), pool); },
+          kt.probe_fma, pool);
+    }
+  }
+  return 0;
+}
+
+const bool registered = register_benchmark(
+    {"kernels", "GEMM fp32/bf16 and conv2d vs the measured FMA/bf16 peak and the scalar twin", run});
+
+}  // namespace
+}  // namespace macro::bench
