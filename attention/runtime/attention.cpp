@@ -1,0 +1,326 @@
+// Fused attention: argument checks, work split, per-thread scratch and the scalar twin of the
+// block kernel (see attention.h). The SIMD block kernels live in attention_avx2.cpp and
+// attention_avx512.cpp (shared template in attention_simd.h).
+//
+// Algorithm of one (head h, query block) item, all paths:
+//   m = -inf, l = 0, O = 0                                  // per row, base-2 logits
+//   for each listed key block (ascending):
+//     S = (Q K^T) * scale * log2(e), -inf where masked or beyond Nk     // [BQ, BK]
+//     m' = max(m, rowmax S); alpha = 2^(m - m'); P = 2^(S - m')         // rows with m' = -inf: P = 0
+//     l = alpha l + rowsum P;  O = alpha O + P V;  m = m'
+//   out = O / l, or 0 where l == 0 (a row that may attend to nothing).
+#include "attention/runtime/attention.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace macro {
+namespace attention_detail {
+namespace {
+
+constexpr int kBQ = kAttnBlockQ;
+constexpr int kBK = kAttnBlockK;
+constexpr float kLog2e = 1.4426950408889634f;
+
+// ---- scalar twin ------------------------------------------------------------------------------
+
+void block_scalar(const BlockJob& job, const BlockScratch& sc) {
+  const int d = job.d;
+  const float neg_inf = -std::numeric_limits<float>::infinity();
+  for (int r = 0; r < job.rows; ++r) {
+    sc.m[r] = neg_inf;
+    sc.l[r] = 0;
+    std::fill(sc.o + size_t(r) * d, sc.o + size_t(r + 1) * d, 0.0f);
+  }
+  const float* k_rows[kBK];
+  for (int e = 0; e < job.entries; ++e) {
+    const int kb = job.key_blocks[e];
+    const int cols = std::min(kBK, job.nk - kb * kBK);
+    const uint8_t* tile = job.tiles[e];
+    for (int c = 0; c < cols; ++c) {
+      const int col = kb * kBK + c;
+      const size_t j = job.key_index ? size_t(job.key_index[col]) : size_t(col);
+      k_rows[c] = job.k + j * job.k_stride;
+      sc.v_rows[c] = job.v + j * job.v_stride;
+    }
+    for (int r = 0; r < job.rows; ++r) {
+      float* s = sc.s + size_t(r) * kBK;
+      const float* q = job.q_rows[r];
+      for (int c = 0; c < cols; ++c) {
+        float acc = 0;
+        for (int i = 0; i < d; ++i) acc += q[i] * k_rows[c][i];
+        s[c] = (tile && !tile[r * kBK + c]) ? neg_inf : acc * job.scale_log2e;
+      }
+      float mx = neg_inf;
+      for (int c = 0; c < cols; ++c) mx = std::max(mx, s[c]);
+      const float m_new = std::max(sc.m[r], mx);
+      float alpha = 1;
+      if (m_new == neg_inf) {
+        std::fill(s, s + cols, 0.0f);
+      } else {
+        alpha = std::exp2(sc.m[r] - m_new);
+        float sum = 0;
+        for (int c = 0; c < cols; ++c) {
+          s[c] = std::exp2(s[c] - m_new);
+          sum += s[c];
+        }
+        sc.l[r] = sc.l[r] * alpha + sum;
+        sc.m[r] = m_new;
+      }
+      float* o = sc.o + size_t(r) * d;
+      for (int i = 0; i < d; ++i) o[i] *= alpha;
+      for (int c = 0; c < cols; ++c) {
+        const float p = s[c];
+        const float* vr = sc.v_rows[c];
+        for (int i = 0; i < d; ++i) o[i] += p * vr[i];
+      }
+    }
+  }
+  for (int r = 0; r < job.rows; ++r) {
+    const float inv = sc.l[r] > 0 ? 1.0f / sc.l[r] : 0.0f;
+    const float* o = sc.o + size_t(r) * d;
+    for (int i = 0; i < d; ++i) job.out_rows[r][i] = o[i] * inv;
+  }
+}
+
+void score_tile_scalar(const float* const* q_rows, int rows, const float* kt, int d, float* s) {
+  for (int r = 0; r < rows; ++r) {
+    float* sr = s + size_t(r) * kBK;
+    std::fill(sr, sr + kBK, 0.0f);
+    for (int i = 0; i < d; ++i) {
+      const float q = q_rows[r][i];
+      const float* k = kt + size_t(i) * kBK;
+      for (int c = 0; c < kBK; ++c) sr[c] += q * k[c];
+    }
+  }
+}
+
+double fma_peak_scalar(int64_t iterations) {
+  float a[8] = {1, 1, 1, 1, 1, 1, 1, 1};
+  const float x = 0.999999f, y = 1e-7f;
+  for (int64_t it = 0; it < iterations; ++it)
+    for (float& v : a) v = v * x + y;
+  volatile float sink = a[0] + a[1] + a[2] + a[3] + a[4] + a[5] + a[6] + a[7];
+  (void)sink;
+  return 2.0 * 8 * double(iterations);
+}
+
+// ---- driver ------------------------------------------------------------------------------------
+
+size_t align_up(size_t n) { return (n + 15) & ~size_t(15); }  // floats, to 64 bytes
+
+struct ScratchLayout {
+  size_t kt, s, o, m, l, alpha, total;  // offsets in floats
+  explicit ScratchLayout(int d) {
+    kt = 0;
+    s = kt + align_up(size_t(d) * kBK);
+    o = s + align_up(size_t(kBQ) * kBK);
+    m = o + align_up(size_t(kBQ) * d);
+    l = m + align_up(kBQ);
+    alpha = l + align_up(kBQ);
+    total = alpha + align_up(kBQ);
+  }
+};
+
+Status check_args(const AttentionArgs& a) {
+  auto fail = [](const std::string& what) { return Status::error("attention: " + what); };
+  if (a.nq < 0 || a.nk < 0)
+    return fail("negative token count (nq " + std::to_string(a.nq) + ", nk " +
+                std::to_string(a.nk) + ")");
+  if (a.heads <= 0) return fail("heads must be positive, found " + std::to_string(a.heads));
+  if (a.head_dim <= 0 || a.head_dim > kMaxHeadDim)
+    return fail("head_dim must be in [1, " + std::to_string(kMaxHeadDim) + "], found " +
+                std::to_string(a.head_dim));
+  const size_t c = size_t(a.heads) * size_t(a.head_dim);
+  auto check_stride = [&](size_t s, const char* name) -> Status {
+    if (s != 0 && s < c)
+      return fail(std::string(name) + " row stride " + std::to_string(s) +
+                  " is smaller than heads * head_dim = " + std::to_string(c));
+    return Status::ok();
+  };
+  MACRO_TRY(check_stride(a.q_stride, "q"));
+  MACRO_TRY(check_stride(a.k_stride, "k"));
+  MACRO_TRY(check_stride(a.v_stride, "v"));
+  MACRO_TRY(check_stride(a.out_stride, "out"));
+  if (a.nq > 0 && (!a.q || !a.out)) return fail("null q or out");
+  if (a.nq > 0 && a.nk > 0 && (!a.k || !a.v)) return fail("null k or v");
+  if (!(a.scale >= 0) || !std::isfinite(a.scale))
+    return fail("scale must be finite and >= 0 (0 = 1/sqrt(head_dim)), found " +
+                std::to_string(a.scale));
+  if (a.mask) {
+    const BlockSparseMask& m = *a.mask;
+    if (m.nq != a.nq || m.nk != a.nk)
+      return fail("mask is " + std::to_string(m.nq) + " x " + std::to_string(m.nk) +
+                  ", expected nq x nk = " + std::to_string(a.nq) + " x " + std::to_string(a.nk));
+    MACRO_TRY(m.validate().with_context("attention"));
+    if (a.causal && (!m.query_index.empty() || !m.key_index.empty()))
+      return fail("causal attention cannot combine with a mask that reorders tokens");
+  }
+  return Status::ok();
+}
+
+const AttentionKernels& pick_kernels(Isa isa, int d) {
+  // Fall back to narrower paths when the head dim does not fit the vector width.
+  const AttentionKernels* k = &kernels_for(isa);
+  if (d % k->d_multiple && k->isa >= Isa::kAvx512) k = &avx2_kernels();
+  if (d % k->d_multiple) k = &scalar_kernels();
+  return *k;
+}
+
+Status run(const AttentionArgs& in, const AttentionKernels& kern, ThreadPool& pool) {
+  MACRO_TRY(check_args(in));
+  AttentionArgs a = in;
+  const int d = a.head_dim;
+  const size_t c = size_t(a.heads) * size_t(d);
+  if (!a.q_stride) a.q_stride = c;
+  if (!a.k_stride) a.k_stride = c;
+  if (!a.v_stride) a.v_stride = c;
+  if (!a.out_stride) a.out_stride = c;
+  if (a.scale == 0) a.scale = 1.0f / std::sqrt(float(d));
+  if (a.nq == 0) return Status::ok();
+
+  const BlockSparseMask* mask = a.mask;
+  const int nqb = (a.nq + kBQ - 1) / kBQ, nkb = (a.nk + kBK - 1) / kBK;
+  const int max_entries = nkb;
+  const ScratchLayout layout(d);
+  // Per worker: floats (layout), then entry lists, row pointers and one combined causal tile.
+  struct WorkerBufs {
+    std::vector<int32_t> key_blocks;
+    std::vector<const uint8_t*> tiles;
+    std::vector<uint8_t> causal_tile;
+  };
+  const int workers = pool.size();
+  std::unique_ptr<float[]> floats(new float[layout.total * size_t(workers) + 16]);
+  float* base = reinterpret_cast<float*>((reinterpret_cast<uintptr_t>(floats.get()) + 63) &
+                                         ~uintptr_t(63));
+  std::vector<WorkerBufs> bufs(static_cast<size_t>(workers));
+  for (auto& b : bufs) {
+    b.key_blocks.resize(size_t(std::max(max_entries, 1)));
+    b.tiles.resize(size_t(std::max(max_entries, 1)));
+    if (a.causal) b.causal_tile.resize(size_t(kBQ) * kBK);
+  }
+
+  const size_t items = size_t(nqb) * size_t(a.heads);
+  pool.parallel_for(
+      items,
+      [&](size_t begin, size_t end, int worker) {
+        float* w = base + layout.total * size_t(worker);
+        WorkerBufs& wb = bufs[size_t(worker)];
+        const float* v_rows[kBK];
+        BlockScratch sc{w + layout.kt, w + layout.s,     w + layout.o, w + layout.m,
+                        w + layout.l,  w + layout.alpha, v_rows};
+        const float* q_rows[kBQ];
+        float* out_rows[kBQ];
+        for (size_t item = begin; item < end; ++item) {
+          const int h = int(item % size_t(a.heads));
+          const int qb = int(item / size_t(a.heads));
+          const int rows = std::min(kBQ, a.nq - qb * kBQ);
+          for (int r = 0; r < rows; ++r) {
+            const int mr = qb * kBQ + r;
+            const size_t i =
+                mask && !mask->query_index.empty() ? size_t(mask->query_index[size_t(mr)]) : mr;
+            q_rows[r] = a.q + i * a.q_stride + size_t(h) * d;
+            out_rows[r] = a.out + i * a.out_stride + size_t(h) * d;
+          }
+          // Key blocks this query block visits.
+          int entries = 0;
+          if (mask) {
+            for (int e = mask->block_begin[size_t(qb)]; e < mask->block_begin[size_t(qb) + 1];
+                 ++e) {
+              wb.key_blocks[size_t(entries)] = mask->key_block[size_t(e)];
+              wb.tiles[size_t(entries)] = mask->tile_data(mask->tile[size_t(e)]);
+              ++entries;
+            }
+          } else {
+            for (int kb = 0; kb < nkb; ++kb) {
+              wb.key_blocks[size_t(kb)] = kb;
+              wb.tiles[size_t(kb)] = nullptr;
+            }
+            entries = nkb;
+          }
+          if (a.causal) {  // keep key blocks that start at or before the last row of the block
+            const int last_row = qb * kBQ + rows - 1;
+            int kept = 0;
+            for (int e = 0; e < entries; ++e) {
+              const int kb = wb.key_blocks[size_t(e)];
+              if (kb * kBK > last_row) continue;
+              const uint8_t* t = wb.tiles[size_t(e)];
+              if (kb * kBK + kBK - 1 > qb * kBQ) {  // crosses the diagonal: combine tiles
+                uint8_t* ct = wb.causal_tile.data();
+                for (int r = 0; r < kBQ; ++r)
+                  for (int cc = 0; cc < kBK; ++cc)
+                    ct[r * kBK + cc] = (kb * kBK + cc <= qb * kBQ + r) && (!t || t[r * kBK + cc]);
+                t = ct;  // only one block per query block can cross (BQ == BK)
+              }
+              wb.key_blocks[size_t(kept)] = kb;
+              wb.tiles[size_t(kept)] = t;
+              ++kept;
+            }
+            entries = kept;
+          }
+          BlockJob job;
+          job.rows = rows;
+          job.d = d;
+          job.scale_log2e = a.scale * kLog2e;
+          job.q_rows = q_rows;
+          job.out_rows = out_rows;
+          job.entries = entries;
+          job.key_blocks = wb.key_blocks.data();
+          job.tiles = wb.tiles.data();
+          job.k = a.k ? a.k + size_t(h) * d : nullptr;
+          job.v = a.v ? a.v + size_t(h) * d : nullptr;
+          job.k_stride = a.k_stride;
+          job.v_stride = a.v_stride;
+          job.key_index = mask && !mask->key_index.empty() ? mask->key_index.data() : nullptr;
+          job.nk = a.nk;
+          kern.block(job, sc);
+        }
+      },
+      1);
+  return Status::ok();
+}
+
+}  // namespace
+
+static_assert(kAttnBlockQ == kAttnBlockK, "the causal split assumes square tiles");
+
+const AttentionKernels& scalar_kernels() {
+  static const AttentionKernels k{Isa::kScalar, 1, block_scalar, score_tile_scalar,
+                                  fma_peak_scalar};
+  return k;
+}
+
+const AttentionKernels& kernels_for(Isa isa) {
+  switch (isa) {
+    case Isa::kAmx:
+    case Isa::kAvx512Bf16:
+    case Isa::kAvx512:
+      return avx512_kernels();
+    case Isa::kAvx2:
+      return avx2_kernels();
+    case Isa::kScalar:
+      break;
+  }
+  return scalar_kernels();
+}
+
+}  // namespace attention_detail
+
+Status attention(const AttentionArgs& args, ThreadPool& pool) {
+  return attention_detail::run(args, attention_detail::pick_kernels(active_isa(), args.head_dim),
+                               pool);
+}
+
+Status attention_with_isa(const AttentionArgs& args, Isa isa, ThreadPool& pool) {
+  if (!isa_supported(isa))
+    return Status::error(std::string("attention: path ") + isa_name(isa) +
+                         " is not supported on this machine");
+  return attention_detail::run(args, attention_detail::pick_kernels(isa, args.head_dim), pool);
+}
+
+}  // namespace macro

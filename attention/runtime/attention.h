@@ -1,0 +1,113 @@
+// Fused multi-head attention with online softmax (flash style) and optional block-sparse masks.
+//
+//   out = softmax(scale * Q K^T [masked]) V, per head, never materialising an Nq x Nk matrix.
+//
+// Legend: Nq query tokens, Nk key tokens, H heads, D head dim (channels per head), C = H * D.
+// Heads are contiguous D-channel slices of each token row (diffusers layout): head h of token i is
+// q[i * q_stride + h * D .. + D). Rows may be wider than C (row strides), so q, k and v can be
+// slices of one fused [N, 3C] qkv buffer.
+//
+// Work is split over (head, 64-query block) items on the ThreadPool; every item is computed by one
+// thread in a fixed order, so the result is bit-identical for any thread count. Per-thread scratch
+// (packed K^T tile, score tile, output accumulator: about (128 + 8 D) KiB... see attention.cpp) is
+// allocated once per call.
+//
+// Masking: a BlockSparseMask (attention_mask.h) lists, per 64-query block, the 64-key blocks it may
+// see; unlisted tiles cost nothing. `causal` allows key j for query i iff j <= i (CLIP text
+// encoder); it combines with a mask that has no token permutation.
+// A query row that may attend to no key at all gets an output of zeros (never NaN).
+//
+// Paths: scalar twin (any D), AVX2 (D % 8 == 0), AVX-512 (D % 16 == 0), chosen from active_isa()
+// at each call (a head dim the path cannot take falls back to the next narrower path). All paths
+// run the same algorithm; they differ only in rounding (exp2 polynomial, summation order).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "attention/runtime/attention_mask.h"
+#include "attention/runtime/cpu.h"
+#include "attention/runtime/status.h"
+#include "attention/runtime/thread_pool.h"
+
+namespace macro {
+
+struct AttentionArgs {
+  const float* q = nullptr;  // [nq, q_stride], head h at columns h*D .. h*D+D
+  const float* k = nullptr;  // [nk, k_stride]
+  const float* v = nullptr;  // [nk, v_stride]
+  float* out = nullptr;      // [nq, out_stride] (must not overlap q, k, v)
+  size_t q_stride = 0, k_stride = 0, v_stride = 0, out_stride = 0;  // elements; 0 = H * D
+  int nq = 0, nk = 0;
+  int heads = 1;
+  int head_dim = 0;  // D, 1..512
+  float scale = 0;   // 0 = 1 / sqrt(D)
+  bool causal = false;
+  const BlockSparseMask* mask = nullptr;  // nq x nk, or null for full attention
+};
+
+// Checks shapes (errors name the argument), then computes out. Empty problems (nq == 0) succeed.
+Status attention(const AttentionArgs& args, ThreadPool& pool = ThreadPool::global());
+
+// Same, forcing one instruction-set path (tests; must be supported by the machine).
+Status attention_with_isa(const AttentionArgs& args, Isa isa,
+                          ThreadPool& pool = ThreadPool::global());
+
+// ---------------------------------------------------------------------------------------------
+// Kernel table (internal; exposed for the ISA files, the tests and the benchmark).
+namespace attention_detail {
+
+inline constexpr int kMaxHeadDim = 512;
+
+// One (head, query block) work item, already resolved to row pointers in token order.
+struct BlockJob {
+  int rows = 0;  // valid query rows, 1..kAttnBlockQ
+  int d = 0;     // head dim
+  float scale_log2e = 0;              // scale * log2(e): scores are kept in base 2
+  const float* const* q_rows = nullptr;  // [rows] -> D floats of this head
+  float* const* out_rows = nullptr;      // [rows] -> D floats of this head
+  int entries = 0;                        // key blocks to visit
+  const int32_t* key_blocks = nullptr;    // [entries]
+  const uint8_t* const* tiles = nullptr;  // [entries] [BQ, BK] element tile, or null = full
+  const float* k = nullptr;  // head slice of row 0; key token j at k + j * k_stride
+  const float* v = nullptr;
+  size_t k_stride = 0, v_stride = 0;
+  const int32_t* key_index = nullptr;  // mask column -> key token, or null = identity
+  int nk = 0;
+};
+
+// Per-thread scratch, 64-byte aligned.
+struct BlockScratch {
+  float* kt = nullptr;     // [D, BK]  packed K^T of the current key block
+  float* s = nullptr;      // [BQ, BK] scores, then probabilities
+  float* o = nullptr;      // [BQ, D]  unnormalised output accumulator
+  float* m = nullptr;      // [BQ] running max (base-2 units)
+  float* l = nullptr;      // [BQ] running sum of probabilities
+  float* alpha = nullptr;  // [BQ] rescale factor of the current key block
+  const float** v_rows = nullptr;  // [BK]
+};
+
+using BlockFn = void (*)(const BlockJob& job, const BlockScratch& scratch);
+// s[r * BK + c] = sum_d q_rows[r][d] * kt[d * BK + c], for r < rows, all BK columns (the QK^T
+// micro-GEMM of the block kernel, exposed so the benchmark can measure its rate in isolation).
+using ScoreTileFn = void (*)(const float* const* q_rows, int rows, const float* kt, int d,
+                             float* s);
+// A register-only FMA loop: returns the flops it did (for the machine-peak measurement).
+using FmaPeakFn = double (*)(int64_t iterations);
+
+struct AttentionKernels {
+  Isa isa = Isa::kScalar;
+  int d_multiple = 1;  // the block kernel needs D % d_multiple == 0
+  BlockFn block = nullptr;
+  ScoreTileFn score_tile = nullptr;
+  FmaPeakFn fma_peak = nullptr;
+};
+
+// The table for a path (the scalar table for paths without their own kernels).
+const AttentionKernels& kernels_for(Isa isa);
+const AttentionKernels& scalar_kernels();
+const AttentionKernels& avx2_kernels();
+const AttentionKernels& avx512_kernels();
+
+}  // namespace attention_detail
+}  // namespace macro
