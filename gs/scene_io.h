@@ -1,9 +1,19 @@
 // Splat scene files: Inria/gsplat .ply (binary LE/BE, ascii), SuperSplat compressed .ply, .splat,
 // .spz (v2, v3). The format is detected from the content (PLY header, gzip magic) and the extension.
 // All loaders return an activated GaussianCloud (gs/gaussians.h) in the RDF frame of .ply files.
+//
+// Bad input never crashes, hangs or allocates from a lying size: counts are checked against the
+// file size and LoadLimits before allocating, and messages name the file and the field. Values that
+// cannot be used are handled by one policy for every format (docs/formats.md):
+//   - a Gaussian with any NaN/Inf value (raw or after activation) is dropped   -> dropped_nonfinite
+//   - a zero quaternion becomes the identity; others are normalised          -> fixed_quaternions
+//   - a zero/negative linear scale becomes |s|, at least kMinScale             -> clamped_scales
+// A one-line note goes to stderr (macro::log_info, silenced by --quiet / MACRO_QUIET=1).
 #pragma once
 
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include "attention/runtime/status.h"
 #include "gs/gaussians.h"
@@ -11,19 +21,41 @@
 namespace macro::gs {
 
 enum class SceneFormat { kPly, kCompressedPly, kSplat, kSpz };
+const char* scene_format_name(SceneFormat format);  // "ply", "compressed.ply", "splat", "spz"
 
 struct LoadLimits {
   size_t max_gaussians = 50'000'000;  // checked before allocating (raise with --max-gaussians)
+  uint64_t max_file_bytes = 1ull << 36;  // 64 GiB: files larger than this are refused unread
 };
 
 struct LoadReport {
   size_t dropped_nonfinite = 0;   // Gaussians with NaN/Inf fields, dropped
   size_t fixed_quaternions = 0;   // zero quaternions replaced by identity
-  size_t clamped_scales = 0;      // zero/negative linear scales (.splat) clamped to a tiny positive value
+  size_t clamped_scales = 0;      // zero/negative linear scales replaced by max(|s|, kMinScale)
+  SceneFormat format = SceneFormat::kPly;  // what the file was read as
+  size_t ignored_sh_coeffs = 0;   // rest coefficients per channel beyond degree 3 (or a ragged
+                                  // f_rest count) that were not loaded
 };
+
+// Smallest linear scale a loader keeps (see LoadReport::clamped_scales).
+inline constexpr float kMinScale = 1e-7f;
 
 Result<GaussianCloud> load_scene(const std::string& path, const LoadLimits& limits = {},
                                  LoadReport* report = nullptr);
-Status save_scene(const GaussianCloud& cloud, const std::string& path);  // by extension: .ply, .splat
+// The same from bytes already in memory; `name` is used for format detection (its extension) and
+// in messages.
+Result<GaussianCloud> load_scene_from_memory(const uint8_t* data, size_t size,
+                                             const std::string& name,
+                                             const LoadLimits& limits = {},
+                                             LoadReport* report = nullptr);
+// Format from the content first (PLY header, gzip magic), then the extension (.splat).
+Result<SceneFormat> detect_scene_format(const uint8_t* data, size_t size, const std::string& name);
+
+// By extension: .ply (Inria binary little-endian layout), .splat, .spz (version 3). Atomic write.
+// Compressed .ply is read-only.
+Status save_scene(const GaussianCloud& cloud, const std::string& path);
+// The bytes save_scene would write.
+Result<std::vector<uint8_t>> encode_scene(const GaussianCloud& cloud, SceneFormat format,
+                                          const std::string& name);
 
 }  // namespace macro::gs
