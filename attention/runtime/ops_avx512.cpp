@@ -1,0 +1,263 @@
+// AVX-512 vector primitives for ops.h (16 fp32 lanes, masked tails). Scalar twins in ops.cpp.
+//
+// exp: Cephes-style range reduction x = n ln2 + r, |r| <= ln2/2, degree-6 polynomial, 2^n via
+// vscalefps (handles underflow to subnormal/zero). ~1-2 ulp.
+// GELU: Phi(x) from erfc(|x|/sqrt2) = t exp(-z^2 + P(t)), t = 1/(1 + z/2) (Numerical Recipes
+// erfcc, relative error < 1.2e-7 over all z), so GELU has a small RELATIVE error also for x << 0.
+// tanh: odd polynomial for |x| < 0.625 (Cephes tanhf), 1 - 2/(e^{2|x|} + 1) above.
+// GCC 12 reports the intrinsics' internal _mm512_undefined_ps() as uninitialised once inlined
+// (a known false positive of the header); nothing in this file reads undefined lanes.
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#include <immintrin.h>
+
+#include <cmath>
+
+#include "attention/runtime/ops.h"
+
+namespace macro::detail {
+namespace {
+
+inline __mmask16 tail_mask(int64_t rem) {
+  return rem >= 16 ? __mmask16(0xffff) : __mmask16((1u << rem) - 1u);
+}
+
+inline __m512 exp16(__m512 x) {
+  const __m512 lo = _mm512_set1_ps(-104.0f), hi = _mm512_set1_ps(88.7228391f);
+  x = _mm512_min_ps(hi, _mm512_max_ps(lo, x));  // constant first: NaN passes through
+  const __m512 n = _mm512_roundscale_ps(_mm512_mul_ps(x, _mm512_set1_ps(1.44269504088896341f)),
+                                        _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+  __m512 r = _mm512_fnmadd_ps(n, _mm512_set1_ps(0.693359375f), x);
+  r = _mm512_fnmadd_ps(n, _mm512_set1_ps(-2.12194440e-4f), r);
+  __m512 p = _mm512_set1_ps(1.9875691500e-4f);
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.3981999507e-3f));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(8.3334519073e-3f));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(4.1665795894e-2f));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.6666665459e-1f));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(5.0000001201e-1f));
+  const __m512 r2 = _mm512_mul_ps(r, r);
+  __m512 y = _mm512_fmadd_ps(p, r2, _mm512_add_ps(r, _mm512_set1_ps(1.0f)));
+  return _mm512_scalef_ps(y, n);
+}
+
+inline __m512 silu16(__m512 x) {
+  const __m512 one = _mm512_set1_ps(1.0f);
+  return _mm512_div_ps(x, _mm512_add_ps(one, exp16(_mm512_sub_ps(_mm512_setzero_ps(), x))));
+}
+
+// Phi(x) * x, via erfc.
+inline __m512 gelu16(__m512 x) {
+  const __m512 one = _mm512_set1_ps(1.0f), half = _mm512_set1_ps(0.5f);
+  const __m512 ax = _mm512_abs_ps(x);
+  const __m512 z = _mm512_mul_ps(ax, _mm512_set1_ps(0.70710678118654752f));
+  const __m512 t = _mm512_div_ps(one, _mm512_fmadd_ps(half, z, one));
+  __m512 p = _mm512_set1_ps(0.17087277f);
+  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(-0.82215223f));
+  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(1.48851587f));
+  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(-1.13520398f));
+  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(0.27886807f));
+  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(-0.18628806f));
+  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(0.09678418f));
+  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(0.37409196f));
+  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(1.00002368f));
+  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(-1.26551223f));
+  const __m512 e = _mm512_fnmadd_ps(z, z, p);  // -z^2 + P(t)
+  const __m512 half_erfc = _mm512_mul_ps(_mm512_mul_ps(half, t), exp16(e));
+  // x >= 0: Phi = 1 - erfc/2; x < 0: Phi = erfc/2
+  const __mmask16 neg = _mm512_cmp_ps_mask(x, _mm512_setzero_ps(), _CMP_LT_OQ);
+  const __m512 phi = _mm512_mask_blend_ps(neg, _mm512_sub_ps(one, half_erfc), half_erfc);
+  return _mm512_mul_ps(x, phi);
+}
+
+inline __m512 tanh16(__m512 x) {
+  const __m512 ax = _mm512_abs_ps(x);
+  // small: x + x^3 P(x^2)
+  const __m512 z = _mm512_mul_ps(x, x);
+  __m512 p = _mm512_set1_ps(-5.70498872745e-3f);
+  p = _mm512_fmadd_ps(p, z, _mm512_set1_ps(2.06390887954e-2f));
+  p = _mm512_fmadd_ps(p, z, _mm512_set1_ps(-5.37397155531e-2f));
+  p = _mm512_fmadd_ps(p, z, _mm512_set1_ps(1.33314422036e-1f));
+  p = _mm512_fmadd_ps(p, z, _mm512_set1_ps(-3.33332819422e-1f));
+  const __m512 small = _mm512_fmadd_ps(_mm512_mul_ps(p, z), x, x);
+  // large: sign(x) * (1 - 2 / (exp(2|x|) + 1))
+  const __m512 one = _mm512_set1_ps(1.0f);
+  const __m512 e = exp16(_mm512_add_ps(ax, ax));
+  __m512 big = _mm512_sub_ps(one, _mm512_div_ps(_mm512_set1_ps(2.0f), _mm512_add_ps(e, one)));
+  // copy the sign of x
+  const __m512i sign = _mm512_and_si512(_mm512_castps_si512(x), _mm512_set1_epi32(int(0x80000000u)));
+  big = _mm512_castsi512_ps(_mm512_or_si512(_mm512_castps_si512(big), sign));
+  const __mmask16 is_small = _mm512_cmp_ps_mask(ax, _mm512_set1_ps(0.625f), _CMP_LT_OQ);
+  return _mm512_mask_blend_ps(is_small, big, small);
+}
+
+inline __m512 apply_act(__m512 v, Act act) {
+  switch (act) {
+    case Act::kNone: return v;
+    case Act::kSilu: return silu16(v);
+    case Act::kRelu: return _mm512_max_ps(v, _mm512_setzero_ps());
+    case Act::kGelu: return gelu16(v);
+    case Act::kTanh: return tanh16(v);
+  }
+  return v;
+}
+
+template <Act A>
+void act_loop(float* dst, const float* src, int64_t n) {
+  for (int64_t i = 0; i < n; i += 16) {
+    const __mmask16 m = tail_mask(n - i);
+    _mm512_mask_storeu_ps(dst + i, m, apply_act(_mm512_maskz_loadu_ps(m, src + i), A));
+  }
+}
+
+void act512(float* dst, const float* src, int64_t n, Act act) {
+  switch (act) {
+    case Act::kNone: act_loop<Act::kNone>(dst, src, n); break;
+    case Act::kSilu: act_loop<Act::kSilu>(dst, src, n); break;
+    case Act::kRelu: act_loop<Act::kRelu>(dst, src, n); break;
+    case Act::kGelu: act_loop<Act::kGelu>(dst, src, n); break;
+    case Act::kTanh: act_loop<Act::kTanh>(dst, src, n); break;
+  }
+}
+
+template <Act A>
+void affine_loop(float* dst, const float* src, int64_t n, double mean, float a, float b) {
+  const float hi = float(mean), lo = float(mean - double(hi));
+  const __m512 vh = _mm512_set1_ps(hi), vl = _mm512_set1_ps(lo);
+  const __m512 va = _mm512_set1_ps(a), vb = _mm512_set1_ps(b);
+  for (int64_t i = 0; i < n; i += 16) {
+    const __mmask16 m = tail_mask(n - i);
+    const __m512 d = _mm512_sub_ps(_mm512_sub_ps(_mm512_maskz_loadu_ps(m, src + i), vh), vl);
+    _mm512_mask_storeu_ps(dst + i, m, apply_act(_mm512_fmadd_ps(d, va, vb), A));
+  }
+}
+
+void affine_act512(float* dst, const float* src, int64_t n, double mean, float a, float b,
+                   Act act) {
+  switch (act) {
+    case Act::kNone: affine_loop<Act::kNone>(dst, src, n, mean, a, b); break;
+    case Act::kSilu: affine_loop<Act::kSilu>(dst, src, n, mean, a, b); break;
+    case Act::kRelu: affine_loop<Act::kRelu>(dst, src, n, mean, a, b); break;
+    case Act::kGelu: affine_loop<Act::kGelu>(dst, src, n, mean, a, b); break;
+    case Act::kTanh: affine_loop<Act::kTanh>(dst, src, n, mean, a, b); break;
+  }
+}
+
+void norm_row512(float* dst, const float* src, int64_t n, double mean, float rstd,
+                 const float* gamma, const float* beta) {
+  const float hi = float(mean), lo = float(mean - double(hi));
+  const __m512 vh = _mm512_set1_ps(hi), vl = _mm512_set1_ps(lo), vr = _mm512_set1_ps(rstd);
+  for (int64_t i = 0; i < n; i += 16) {
+    const __mmask16 m = tail_mask(n - i);
+    const __m512 d = _mm512_sub_ps(_mm512_sub_ps(_mm512_maskz_loadu_ps(m, src + i), vh), vl);
+    __m512 y = _mm512_mul_ps(d, vr);
+    if (gamma) y = _mm512_mul_ps(y, _mm512_maskz_loadu_ps(m, gamma + i));
+    if (beta) y = _mm512_add_ps(y, _mm512_maskz_loadu_ps(m, beta + i));
+    _mm512_mask_storeu_ps(dst + i, m, y);
+  }
+}
+
+// fp32 lane accumulators over blocks of 1024 values, each block flushed to double. Values are
+// summed relative to x[0] so a large common offset (|mean| >> std) costs no accuracy.
+double sum512(const float* x, int64_t n) {
+  if (n <= 0) return 0.0;
+  const __m512 shift = _mm512_set1_ps(x[0]);
+  double total = 0;
+  for (int64_t b = 0; b < n; b += 1024) {
+    const int64_t e = std::min<int64_t>(n, b + 1024);
+    __m512 acc0 = _mm512_setzero_ps(), acc1 = _mm512_setzero_ps();
+    int64_t i = b;
+    for (; i + 32 <= e; i += 32) {
+      acc0 = _mm512_add_ps(acc0, _mm512_sub_ps(_mm512_loadu_ps(x + i), shift));
+      acc1 = _mm512_add_ps(acc1, _mm512_sub_ps(_mm512_loadu_ps(x + i + 16), shift));
+    }
+    for (; i < e; i += 16) {
+      const __mmask16 m = tail_mask(e - i);
+      acc0 = _mm512_add_ps(acc0, _mm512_maskz_sub_ps(m, _mm512_maskz_loadu_ps(m, x + i), shift));
+    }
+    const __m512 acc = _mm512_add_ps(acc0, acc1);
+    const __m512d lo = _mm512_cvtps_pd(_mm512_castps512_ps256(acc));
+    const __m512d hi = _mm512_cvtps_pd(_mm256_castpd_ps(_mm512_extractf64x4_pd(_mm512_castps_pd(acc), 1)));
+    total += _mm512_reduce_add_pd(_mm512_add_pd(lo, hi));
+  }
+  return total + double(n) * double(x[0]);
+}
+
+double sum_sq_dev512(const float* x, int64_t n, double mean) {
+  double total = 0;
+  const __m512 vm = _mm512_set1_ps(float(mean));
+  // The float mean's rounding error d = float(mean) - mean adds n*d^2 - 2 d sum(x - fmean)... we
+  // keep it exact enough by centring on the float mean and correcting with the block sums.
+  double block_sum = 0;  // sum of (x - fmean)
+  for (int64_t b = 0; b < n; b += 1024) {
+    const int64_t e = std::min<int64_t>(n, b + 1024);
+    __m512 acc = _mm512_setzero_ps(), acc_d = _mm512_setzero_ps();
+    for (int64_t i = b; i < e; i += 16) {
+      const __mmask16 m = tail_mask(e - i);
+      const __m512 d = _mm512_maskz_sub_ps(m, _mm512_maskz_loadu_ps(m, x + i), vm);
+      acc = _mm512_fmadd_ps(d, d, acc);
+      acc_d = _mm512_add_ps(acc_d, d);
+    }
+    total += double(_mm512_reduce_add_ps(acc));
+    block_sum += double(_mm512_reduce_add_ps(acc_d));
+  }
+  // sum (x - mean)^2 = sum (x - fm)^2 + 2 (fm - mean) sum (x - fm) + n (fm - mean)^2
+  const double dm = double(float(mean)) - mean;
+  return total + 2.0 * dm * block_sum + double(n) * dm * dm;
+}
+
+void softmax512(float* dst, const float* src, int64_t n, float scale) {
+  if (n == 0) return;
+  const __m512 vs = _mm512_set1_ps(scale);
+  __m512 vmax = _mm512_set1_ps(-INFINITY);
+  for (int64_t i = 0; i < n; i += 16) {
+    const __mmask16 m = tail_mask(n - i);
+    vmax = _mm512_mask_max_ps(vmax, m, vmax, _mm512_mul_ps(_mm512_maskz_loadu_ps(m, src + i), vs));
+  }
+  const __m512 mx = _mm512_set1_ps(_mm512_reduce_max_ps(vmax));
+  __m512 vsum = _mm512_setzero_ps();
+  for (int64_t i = 0; i < n; i += 16) {
+    const __mmask16 m = tail_mask(n - i);
+    const __m512 e = exp16(_mm512_sub_ps(_mm512_mul_ps(_mm512_maskz_loadu_ps(m, src + i), vs), mx));
+    _mm512_mask_storeu_ps(dst + i, m, e);
+    vsum = _mm512_mask_add_ps(vsum, m, vsum, e);
+  }
+  const __m512 inv = _mm512_set1_ps(float(1.0 / double(_mm512_reduce_add_ps(vsum))));
+  for (int64_t i = 0; i < n; i += 16) {
+    const __mmask16 m = tail_mask(n - i);
+    _mm512_mask_storeu_ps(dst + i, m, _mm512_mul_ps(_mm512_maskz_loadu_ps(m, dst + i), inv));
+  }
+}
+
+void geglu512(float* dst, const float* v, const float* g, int64_t n) {
+  for (int64_t i = 0; i < n; i += 16) {
+    const __mmask16 m = tail_mask(n - i);
+    const __m512 y = _mm512_mul_ps(_mm512_maskz_loadu_ps(m, v + i), gelu16(_mm512_maskz_loadu_ps(m, g + i)));
+    _mm512_mask_storeu_ps(dst + i, m, y);
+  }
+}
+
+void axpby512(float* dst, float a, const float* x, float b, const float* y, int64_t n) {
+  const __m512 va = _mm512_set1_ps(a), vb = _mm512_set1_ps(b);
+  for (int64_t i = 0; i < n; i += 16) {
+    const __mmask16 m = tail_mask(n - i);
+    const __m512 r = _mm512_add_ps(_mm512_mul_ps(va, _mm512_maskz_loadu_ps(m, x + i)),
+                                   _mm512_mul_ps(vb, _mm512_maskz_loadu_ps(m, y + i)));
+    _mm512_mask_storeu_ps(dst + i, m, r);
+  }
+}
+
+}  // namespace
+
+void fill_ops_avx512(OpsKernels& t) {
+  t.name = "avx512";
+  t.act = act512;
+  t.affine_act = affine_act512;
+  t.norm_row = norm_row512;
+  t.sum = sum512;
+  t.sum_sq_dev = sum_sq_dev512;
+  t.softmax = softmax512;
+  t.geglu = geglu512;
+  t.axpby = axpby512;
+}
+
+}  // namespace macro::detail
