@@ -1,0 +1,224 @@
+#include "attention/nets/weights.h"
+
+#include <algorithm>
+#include <cstring>
+
+#include "attention/runtime/half.h"
+
+namespace macro::nets {
+namespace {
+
+bool ends_with(const std::string& s, const std::string& suffix) {
+  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+// Copy any supported dtype to fp32.
+Status to_f32(const TensorEntry& e, float* out) {
+  const int64_t n = e.numel();
+  switch (e.dtype) {
+    case DType::kF32: std::memcpy(out, e.data, size_t(n) * 4); return Status::ok();
+    case DType::kBF16:
+      for (int64_t i = 0; i < n; ++i) {
+        uint16_t h;
+        std::memcpy(&h, e.data + 2 * i, 2);
+        out[i] = bf16_to_f32(h);
+      }
+      return Status::ok();
+    case DType::kF16:
+      for (int64_t i = 0; i < n; ++i) {
+        uint16_t h;
+        std::memcpy(&h, e.data + 2 * i, 2);
+        out[i] = f16_to_f32(h);
+      }
+      return Status::ok();
+    case DType::kF64:
+      for (int64_t i = 0; i < n; ++i) {
+        double d;
+        std::memcpy(&d, e.data + 8 * i, 8);
+        out[i] = float(d);
+      }
+      return Status::ok();
+    default:
+      return Status::error("tensor '" + e.name + "': expected a floating-point dtype, found " +
+                           dtype_name(e.dtype));
+  }
+}
+
+// Legacy VAE attention names -> current ones.
+std::string modern_name(const std::string& name, bool* renamed) {
+  static const std::pair<const char*, const char*> kRenames[] = {
+      {".query.", ".to_q."}, {".key.", ".to_k."}, {".value.", ".to_v."}, {".proj_attn.", ".to_out.0."}};
+  for (const auto& [from, to] : kRenames) {
+    size_t p = name.find(from);
+    if (p != std::string::npos && name.find("attentions.") != std::string::npos) {
+      *renamed = true;
+      return name.substr(0, p) + to + name.substr(p + std::string(from).size());
+    }
+  }
+  *renamed = false;
+  return name;
+}
+
+}  // namespace
+
+std::string shape_string(const std::vector<int64_t>& s) {
+  std::string t = "[";
+  for (size_t i = 0; i < s.size(); ++i) t += (i ? "," : "") + std::to_string(s[i]);
+  return t + "]";
+}
+
+Result<std::unique_ptr<WeightStore>> WeightStore::open(const std::string& path,
+                                                       const WeightStoreOptions& options) {
+  std::unique_ptr<WeightStore> store(new WeightStore());
+  MACRO_ASSIGN_OR_RETURN(store->file_, SafeTensors::open_checkpoint(path));
+  MACRO_TRY(store->prepare(options));
+  return store;
+}
+
+Status WeightStore::prepare(const WeightStoreOptions& options) {
+  lora_scale_ = options.lora_scale;
+  const std::string& path = file_.path();
+  // LoRA triples first: group by module.
+  std::map<std::string, Source> lora_modules;
+  for (const std::string& name : file_.names()) {
+    if (options.ignored.count(name) || name == "text_model.embeddings.position_ids") continue;
+    const TensorEntry* e = file_.find(name);
+    size_t base_at = name.find(".base_layer.");
+    size_t a_at = name.find(".lora_A.");
+    size_t b_at = name.find(".lora_B.");
+    if (base_at != std::string::npos) {
+      std::string module = name.substr(0, base_at);
+      std::string leaf = name.substr(base_at + std::string(".base_layer.").size());  // weight|bias
+      Source& s = sources_[module + "." + leaf];
+      s.entry = e;
+      s.shape = e->shape;
+      s.file_names.push_back(name);
+      if (leaf == "weight") lora_modules[module].entry = e;
+      continue;
+    }
+    if (a_at != std::string::npos || b_at != std::string::npos) {
+      std::string module = name.substr(0, a_at != std::string::npos ? a_at : b_at);
+      if (!ends_with(name, ".weight"))
+        return Status::error(path + ": tensor '" + name + "': expected a LoRA '.weight', found another leaf");
+      Source& m = lora_modules[module];
+      (a_at != std::string::npos ? m.lora_a : m.lora_b) = e;
+      m.file_names.push_back(name);
+      continue;
+    }
+    bool renamed = false;
+    std::string canonical = modern_name(name, &renamed);
+    if (sources_.count(canonical))
+      return Status::error(path + ": tensor '" + name + "': a second tensor maps to '" + canonical + "'");
+    Source& s = sources_[canonical];
+    s.entry = e;
+    s.shape = e->shape;
+    s.file_names.push_back(name);
+    if (renamed && e->shape.size() == 4 && e->shape[2] == 1 && e->shape[3] == 1 &&
+        ends_with(canonical, ".weight")) {
+      s.shape = {e->shape[0], e->shape[1]};
+      s.legacy_squeeze = true;
+    }
+  }
+  for (auto& [module, m] : lora_modules) {
+    const std::string wname = module + ".weight";
+    if (!m.entry)
+      return Status::error(path + ": LoRA module '" + module + "': expected '" + module +
+                           ".base_layer.weight', found only the adapter");
+    if (!m.lora_a || !m.lora_b)
+      return Status::error(path + ": LoRA module '" + module + "': expected both lora_A and lora_B, found " +
+                           (m.lora_a ? "only lora_A" : "only lora_B"));
+    if (lora_scale_ <= 0)
+      return Status::error(path + ": tensor '" + m.lora_a->name +
+                           "': unmerged LoRA found but no LoRA scale is configured (lora_rank in config.json)");
+    const auto& W = m.entry->shape;
+    const auto& A = m.lora_a->shape;
+    const auto& B = m.lora_b->shape;
+    // A: [r, in, kh, kw] or [r, in]; B: [out, r, 1, 1] or [out, r]; W: [out, in, kh, kw] or [out, in].
+    bool ok = A.size() == W.size() && B.size() == W.size() && A.size() >= 2 && B[0] == W[0] &&
+              A[0] == B[1] && A[1] == W[1];
+    for (size_t i = 2; ok && i < W.size(); ++i) ok = A[i] == W[i] && B[i] == 1;
+    if (!ok)
+      return Status::error(path + ": LoRA module '" + module + "': shapes do not compose: base " +
+                           shape_string(W) + ", lora_A " + shape_string(A) + ", lora_B " + shape_string(B));
+    Source& s = sources_[wname];
+    s.lora_a = m.lora_a;
+    s.lora_b = m.lora_b;
+    s.file_names.insert(s.file_names.end(), m.file_names.begin(), m.file_names.end());
+  }
+  return Status::ok();
+}
+
+Result<const float*> WeightStore::materialise(const std::string& name, const Source& src) {
+  const TensorEntry& e = *src.entry;
+  if (e.dtype == DType::kF32 && !src.lora_a && reinterpret_cast<uintptr_t>(e.data) % 4 == 0)
+    return reinterpret_cast<const float*>(e.data);
+  auto buf = std::make_unique<std::vector<float>>(size_t(e.numel()));
+  MACRO_TRY(to_f32(e, buf->data()).with_context(file_.path()));
+  if (src.lora_a) {
+    // W[o, rest] += scale * sum_r B[o, r] * A[r, rest]
+    const int64_t out = e.shape[0], r = src.lora_a->shape[0];
+    const int64_t rest = e.numel() / out;
+    std::vector<float> A(size_t(src.lora_a->numel())), B(size_t(src.lora_b->numel()));
+    MACRO_TRY(to_f32(*src.lora_a, A.data()).with_context(file_.path()));
+    MACRO_TRY(to_f32(*src.lora_b, B.data()).with_context(file_.path()));
+    float* W = buf->data();
+    for (int64_t o = 0; o < out; ++o) {
+      for (int64_t j = 0; j < rest; ++j) {
+        double acc = 0;
+        for (int64_t q = 0; q < r; ++q) acc += double(B[size_t(o * r + q)]) * double(A[size_t(q * rest + j)]);
+        W[o * rest + j] = float(double(W[o * rest + j]) + lora_scale_ * acc);
+      }
+    }
+    ++lora_merged_;
+  }
+  owned_.push_back(std::move(buf));
+  return owned_.back()->data();
+}
+
+void WeightStore::param(const std::string& name, Param& p, const std::vector<int64_t>& shape) {
+  auto it = sources_.find(name);
+  if (it == sources_.end()) {
+    missing_.push_back(name + " " + shape_string(shape));
+    return;
+  }
+  used_.insert(name);
+  if (it->second.shape != shape) {
+    misshaped_.push_back(name + ": expected " + shape_string(shape) + ", found " +
+                         shape_string(it->second.shape));
+    return;
+  }
+  auto data = materialise(name, it->second);
+  if (!data) {
+    misshaped_.push_back(name + ": " + data.status().message());
+    return;
+  }
+  p.data = *data;
+  p.shape = shape;
+}
+
+Status WeightStore::finish() const {
+  std::vector<std::string> unused;
+  for (const auto& [name, src] : sources_)
+    if (!used_.count(name)) unused.push_back(src.file_names.empty() ? name : src.file_names.front());
+  if (missing_.empty() && misshaped_.empty() && unused.empty()) return Status::ok();
+  std::string msg = file_.path() + ": checkpoint does not match the model config:";
+  auto list = [&](const char* what, const std::vector<std::string>& items) {
+    if (items.empty()) return;
+    msg += std::string(" ") + std::to_string(items.size()) + " " + what + " (";
+    for (size_t i = 0; i < items.size() && i < 5; ++i) msg += (i ? "; " : "") + items[i];
+    if (items.size() > 5) msg += "; ...";
+    msg += ")";
+  };
+  list("missing", missing_);
+  list("mis-shaped", misshaped_);
+  list("unused", unused);
+  return Status::error(msg);
+}
+
+std::vector<std::string> WeightStore::names() const {
+  std::vector<std::string> out;
+  for (const auto& kv : sources_) out.push_back(kv.first);
+  return out;
+}
+
+}  // namespace macro::nets
