@@ -17,11 +17,13 @@
 // ---- stb, instantiated once ---------------------------------------------------------------------
 namespace {
 // stb_image_write's deflate replaced by zlib (smaller files, the same bytes everywhere).
+constexpr int kPngZlibLevel = 6;  // zlib default; stb asks for 8, several times slower on renders
+constexpr int kExrZipLevel = 1;   // float renders barely compress; level 1 is ~as small, far faster
 unsigned char* zlib_compress_for_stb(unsigned char* data, int data_len, int* out_len, int quality) {
   uLongf cap = compressBound(static_cast<uLong>(data_len));
   auto* out = static_cast<unsigned char*>(std::malloc(cap));
   if (!out) return nullptr;
-  if (compress2(out, &cap, data, static_cast<uLong>(data_len), std::clamp(quality, 1, 9)) != Z_OK) {
+  if (compress2(out, &cap, data, static_cast<uLong>(data_len), kPngZlibLevel) != Z_OK) {
     std::free(out);
     return nullptr;
   }
@@ -220,6 +222,7 @@ Status write_exr(const std::string& path, int width, int height,
   try {
     Imf::Header header(width, height);
     header.compression() = Imf::ZIP_COMPRESSION;
+    header.zipCompressionLevel() = kExrZipLevel;
     Imf::FrameBuffer fb;
     for (const ExrChannel& ch : channels) {
       header.channels().insert(ch.name, Imf::Channel(Imf::FLOAT));
