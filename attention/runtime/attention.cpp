@@ -54,7 +54,7 @@ void block_scalar(const BlockJob& job, const BlockScratch& sc) {
       for (int c = 0; c < cols; ++c) {
         float acc = 0;
         for (int i = 0; i < d; ++i) acc += q[i] * k_rows[c][i];
-        s[c] = (tile && !tile[r * kBK + c]) ? neg_inf : acc * job.scale_log2e;
+        s[c] = (tile && !tile[tile_offset(r, c)]) ? neg_inf : acc * job.scale_log2e;
       }
       float mx = neg_inf;
       for (int c = 0; c < cols; ++c) mx = std::max(mx, s[c]);
@@ -88,14 +88,14 @@ void block_scalar(const BlockJob& job, const BlockScratch& sc) {
   }
 }
 
-void score_tile_scalar(const float* const* q_rows, int rows, const float* kt, int d, float* s) {
-  for (int r = 0; r < rows; ++r) {
-    float* sr = s + size_t(r) * kBK;
-    std::fill(sr, sr + kBK, 0.0f);
+void score_tile_scalar(const float* const* k_rows, int keys, const float* qt, int d, float* s) {
+  for (int c = 0; c < keys; ++c) {
+    float* sc = s + size_t(c) * kBQ;
+    std::fill(sc, sc + kBQ, 0.0f);
     for (int i = 0; i < d; ++i) {
-      const float q = q_rows[r][i];
-      const float* k = kt + size_t(i) * kBK;
-      for (int c = 0; c < kBK; ++c) sr[c] += q * k[c];
+      const float k = k_rows[c][i];
+      const float* q = qt + size_t(i) * kBQ;
+      for (int r = 0; r < kBQ; ++r) sc[r] += k * q[r];
     }
   }
 }
@@ -115,10 +115,10 @@ double fma_peak_scalar(int64_t iterations) {
 size_t align_up(size_t n) { return (n + 15) & ~size_t(15); }  // floats, to 64 bytes
 
 struct ScratchLayout {
-  size_t kt, s, o, m, l, alpha, total;  // offsets in floats
+  size_t qt, s, o, m, l, alpha, total;  // offsets in floats
   explicit ScratchLayout(int d) {
-    kt = 0;
-    s = kt + align_up(size_t(d) * kBK);
+    qt = 0;
+    s = qt + align_up(size_t(d) * kBQ);
     o = s + align_up(size_t(kBQ) * kBK);
     m = o + align_up(size_t(kBQ) * d);
     l = m + align_up(kBQ);
@@ -212,7 +212,7 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, ThreadPool& po
         float* w = base + layout.total * size_t(worker);
         WorkerBufs& wb = bufs[size_t(worker)];
         const float* v_rows[kBK];
-        BlockScratch sc{w + layout.kt, w + layout.s,     w + layout.o, w + layout.m,
+        BlockScratch sc{w + layout.qt, w + layout.s,     w + layout.o, w + layout.m,
                         w + layout.l,  w + layout.alpha, v_rows};
         const float* q_rows[kBQ];
         float* out_rows[kBQ];
@@ -254,7 +254,8 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, ThreadPool& po
                 uint8_t* ct = wb.causal_tile.data();
                 for (int r = 0; r < kBQ; ++r)
                   for (int cc = 0; cc < kBK; ++cc)
-                    ct[r * kBK + cc] = (kb * kBK + cc <= qb * kBQ + r) && (!t || t[r * kBK + cc]);
+                    ct[tile_offset(r, cc)] =
+                        (kb * kBK + cc <= qb * kBQ + r) && (!t || t[tile_offset(r, cc)]);
                 t = ct;  // only one block per query block can cross (BQ == BK)
               }
               wb.key_blocks[size_t(kept)] = kb;

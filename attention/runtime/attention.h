@@ -68,7 +68,7 @@ struct BlockJob {
   float* const* out_rows = nullptr;      // [rows] -> D floats of this head
   int entries = 0;                        // key blocks to visit
   const int32_t* key_blocks = nullptr;    // [entries]
-  const uint8_t* const* tiles = nullptr;  // [entries] [BQ, BK] element tile, or null = full
+  const uint8_t* const* tiles = nullptr;  // [entries] [BK, BQ] element tile, or null = full
   const float* k = nullptr;  // head slice of row 0; key token j at k + j * k_stride
   const float* v = nullptr;
   size_t k_stride = 0, v_stride = 0;
@@ -78,8 +78,8 @@ struct BlockJob {
 
 // Per-thread scratch, 64-byte aligned.
 struct BlockScratch {
-  float* kt = nullptr;     // [D, BK]  packed K^T of the current key block
-  float* s = nullptr;      // [BQ, BK] scores, then probabilities
+  float* qt = nullptr;     // [D, BQ]  packed, pre-scaled Q^T of the query block
+  float* s = nullptr;      // [BK, BQ] scores S^T, then probabilities (SIMD; scalar: [BQ, BK])
   float* o = nullptr;      // [BQ, D]  unnormalised output accumulator
   float* m = nullptr;      // [BQ] running max (base-2 units)
   float* l = nullptr;      // [BQ] running sum of probabilities
@@ -88,9 +88,9 @@ struct BlockScratch {
 };
 
 using BlockFn = void (*)(const BlockJob& job, const BlockScratch& scratch);
-// s[r * BK + c] = sum_d q_rows[r][d] * kt[d * BK + c], for r < rows, all BK columns (the QK^T
-// micro-GEMM of the block kernel, exposed so the benchmark can measure its rate in isolation).
-using ScoreTileFn = void (*)(const float* const* q_rows, int rows, const float* kt, int d,
+// s[c * BQ + r] = sum_d k_rows[c][d] * qt[d * BQ + r], for c < keys, all BQ query lanes: the
+// S^T = K Q^T micro-GEMM of the block kernel, exposed so the benchmark can measure its rate alone.
+using ScoreTileFn = void (*)(const float* const* k_rows, int keys, const float* qt, int d,
                              float* s);
 // A register-only FMA loop: returns the flops it did (for the machine-peak measurement).
 using FmaPeakFn = double (*)(int64_t iterations);

@@ -66,8 +66,6 @@ double fma_peak_avx2(int64_t iterations) {
   const __m256 x = _mm256_set1_ps(0.999999f), y = _mm256_set1_ps(1e-7f);
   for (int64_t it = 0; it < iterations; ++it) {
     for (int i = 0; i < 10; ++i) a[i] = _mm256_fmadd_ps(a[i], x, y);
-    __asm__ volatile("" : "+x"(a[0]), "+x"(a[1]), "+x"(a[2]), "+x"(a[3]), "+x"(a[4]),
-                     "+x"(a[5]), "+x"(a[6]), "+x"(a[7]), "+x"(a[8]), "+x"(a[9]));
   }
   __m256 s = a[0];
   for (int i = 1; i < 10; ++i) s = _mm256_add_ps(s, a[i]);

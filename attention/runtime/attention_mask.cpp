@@ -99,7 +99,7 @@ int64_t BlockSparseMask::allowed_pairs() const {
         continue;
       }
       for (int r = 0; r < rows; ++r)
-        for (int c = 0; c < cols; ++c) total += t[r * kBK + c] != 0;
+        for (int c = 0; c < cols; ++c) total += t[tile_offset(r, c)] != 0;
     }
   }
   return total;
@@ -129,7 +129,7 @@ std::vector<uint8_t> BlockSparseMask::to_dense() const {
         for (int c = 0; c < cols; ++c) {
           const int mc = kb * kBK + c;
           const size_t j = key_index.empty() ? size_t(mc) : size_t(key_index[size_t(mc)]);
-          dense[i * size_t(nk) + j] = t ? (t[r * kBK + c] != 0) : 1;
+          dense[i * size_t(nk) + j] = t ? (t[tile_offset(r, c)] != 0) : 1;
         }
       }
     }
@@ -224,7 +224,7 @@ Result<BlockSparseMask> mask_from_dense(const uint8_t* dense, int nq, int nk, si
       [&](int qb, int kb, uint8_t* t) {
         const int r1 = std::min(nq, (qb + 1) * kBQ), c1 = std::min(nk, (kb + 1) * kBK);
         for (int r = qb * kBQ; r < r1; ++r)
-          for (int c = kb * kBK; c < c1; ++c) t[(r - qb * kBQ) * kBK + (c - kb * kBK)] = at(r, c);
+          for (int c = kb * kBK; c < c1; ++c) t[tile_offset(r - qb * kBQ, c - kb * kBK)] = at(r, c);
       });
   return m;
 }
@@ -286,7 +286,7 @@ Result<BlockSparseMask> mask_from_groups(const std::vector<int32_t>& query_group
             int c = 0;
             for (const Run& b : kruns[size_t(kb)]) {
               const uint8_t y = ok(a.group, b.group);
-              for (int j = 0; j < b.count; ++j, ++c) t[r * kBK + c] = y;
+              for (int j = 0; j < b.count; ++j, ++c) t[tile_offset(r, c)] = y;
             }
           }
         }
@@ -361,7 +361,7 @@ BlockSparseMask causal_mask(int nq, int nk) {
       [&](int qb, int kb, uint8_t* t) {
         for (int r = 0; r < kBQ && qb * kBQ + r < m.nq; ++r)
           for (int c = 0; c < kBK && kb * kBK + c < m.nk; ++c)
-            t[r * kBK + c] = kb * kBK + c <= qb * kBQ + r;
+            t[tile_offset(r, c)] = kb * kBK + c <= qb * kBQ + r;
       });
   return m;
 }

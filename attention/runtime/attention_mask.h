@@ -14,6 +14,8 @@
 // For each query block the mask lists the key blocks it may see, each either full (every pair in
 // the tile allowed, up to the Nq/Nk edges) or partial (a BQ x BK uint8 element tile, 1 = may
 // attend, consulted only for that tile). Key blocks not listed are skipped entirely.
+// Element tiles are stored key-major (byte of query r, key c at tile_offset(r, c) = c * BQ + r),
+// because the SIMD kernels hold scores transposed: one vector = one key, 16 queries.
 //
 // Builders:
 //  - from_dense(): a dense uint8 [Nq, Nk] mask (as the goldens store `mask.levelL`), in token
@@ -36,6 +38,9 @@ namespace macro {
 inline constexpr int kAttnBlockQ = 64;
 inline constexpr int kAttnBlockK = 64;
 
+// Position of (query r, key c) inside an element tile (key-major).
+inline constexpr int tile_offset(int r, int c) { return c * kAttnBlockQ + r; }
+
 struct BlockSparseMask {
   int nq = 0;  // query tokens (mask rows)
   int nk = 0;  // key tokens (mask columns)
@@ -44,7 +49,7 @@ struct BlockSparseMask {
   std::vector<int32_t> block_begin;  // [nqb + 1] query block b lists entries block_begin[b]..[b+1]
   std::vector<int32_t> key_block;    // [entries] key block seen by the query block (ascending)
   std::vector<int32_t> tile;         // [entries] -1 = full, else index of its element tile
-  std::vector<uint8_t> tiles;        // [partial, BQ, BK] element tiles, 1 = may attend (0 beyond edges)
+  std::vector<uint8_t> tiles;        // [partial, BK, BQ] element tiles, 1 = may attend (0 beyond edges)
 
   int query_blocks() const { return static_cast<int>(block_begin.size()) - 1; }
   size_t entries() const { return key_block.size(); }

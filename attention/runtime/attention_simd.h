@@ -4,10 +4,9 @@
 // anonymous namespace so each ISA file gets its own private copy.
 //
 // Traits T provide: using V; W (lanes); load/store (unaligned), set1, zero, fma(a, b, c) = a*b + c,
-// mul, sub, max, hmax, hsum, exp2 (flushes to 0 below 2^-126, exact 0 for -inf), mask_tile(s, t)
-// (lanes whose uint8 in t is 0 become -inf), mask_tail(s, n) (lanes >= n become -inf).
-// Tiling constants of T: kScoreRows x kScoreVecs accumulators for S = Q K^T, kPvRows x kPvVecs
-// accumulators for O += P V.
+// mul, add, sub, max, exp2 (flushes to 0 below 2^-126, exact 0 for -inf), mask_tile(s, t) (lanes
+// whose uint8 in t is 0 become -inf). Tiling constants of T: kScoreRows keys x kScoreVecs vectors of
+// queries for S^T = K Q^T, kPvRows query rows x kPvVecs vectors of channels for O += P V.
 //
 // Legend: BQ = BK = 64 (tile), D head dim, R register rows.
 #pragma once
@@ -24,61 +23,60 @@ namespace {
 constexpr int kTileQ = kAttnBlockQ;
 constexpr int kTileK = kAttnBlockK;
 
-// S[r][c0 .. c0 + CV*W) for R rows: sum over d of q[r][d] * kt[d][c].
+// Scores are held transposed, S^T [BK, BQ]: one row per key, one lane per query. Then the
+// online softmax is vertical (elementwise max/sum over key rows, no horizontal reductions), K rows
+// are read in place (broadcasts), and only Q is packed, once per query block: Qt [D, BQ].
+
+// S^T[c][r0 .. r0 + CV*W) for R keys: sum over d of k[c][d] * qt[d][r].
 template <typename T, int R, int CV>
-inline void score_rows(const float* const* q_rows, const float* kt, int d, float* s, int c0,
-                       float scale) {
+inline void score_rows(const float* const* k_rows, const float* qt, int d, float* s, int r0) {
   using V = typename T::V;
   V acc[R][CV];
   for (int i = 0; i < R; ++i)
     for (int v = 0; v < CV; ++v) acc[i][v] = T::zero();
-  const float* q[R];
-  for (int i = 0; i < R; ++i) q[i] = q_rows[i];
-  for (int k = 0; k < d; ++k) {
-    V kv[CV];
-    for (int v = 0; v < CV; ++v) kv[v] = T::load(kt + size_t(k) * kTileK + c0 + v * T::W);
+  const float* k[R];
+  for (int i = 0; i < R; ++i) k[i] = k_rows[i];
+  for (int e = 0; e < d; ++e) {
+    V qv[CV];
+    for (int v = 0; v < CV; ++v) qv[v] = T::load(qt + size_t(e) * kTileQ + r0 + v * T::W);
     for (int i = 0; i < R; ++i) {
-      const V b = T::set1(q[i][k]);
-      for (int v = 0; v < CV; ++v) acc[i][v] = T::fma(b, kv[v], acc[i][v]);
+      const V b = T::set1(k[i][e]);
+      for (int v = 0; v < CV; ++v) acc[i][v] = T::fma(b, qv[v], acc[i][v]);
     }
   }
-  const V sv = T::set1(scale);
   for (int i = 0; i < R; ++i)
-    for (int v = 0; v < CV; ++v)
-      T::store(s + size_t(i) * kTileK + c0 + v * T::W, T::mul(acc[i][v], sv));
+    for (int v = 0; v < CV; ++v) T::store(s + size_t(i) * kTileQ + r0 + v * T::W, acc[i][v]);
 }
 
-// Row remainder dispatch: R = rows in 1..kMax.
+// Key remainder dispatch: R = keys in 1..kMax.
 template <typename T, int CV, int R>
-inline void score_rows_tail(int rows, const float* const* q_rows, const float* kt, int d,
-                            float* s, int c0, float scale) {
+inline void score_rows_tail(int keys, const float* const* k_rows, const float* qt, int d, float* s,
+                            int r0) {
   if constexpr (R >= 1) {
-    if (rows == R) {
-      score_rows<T, R, CV>(q_rows, kt, d, s, c0, scale);
+    if (keys == R) {
+      score_rows<T, R, CV>(k_rows, qt, d, s, r0);
       return;
     }
-    score_rows_tail<T, CV, R - 1>(rows, q_rows, kt, d, s, c0, scale);
+    score_rows_tail<T, CV, R - 1>(keys, k_rows, qt, d, s, r0);
   }
 }
 
-// S = scale * Q K^T for all 64 columns of the tile, `rows` rows.
+// S^T = K Qt for `keys` key rows and all BQ query lanes.
 template <typename T>
-inline void score_tile(const float* const* q_rows, int rows, const float* kt, int d, float* s,
-                       float scale) {
+inline void score_tile(const float* const* k_rows, int keys, const float* qt, int d, float* s) {
   constexpr int R = T::kScoreRows, CV = T::kScoreVecs;
-  for (int c0 = 0; c0 < kTileK; c0 += CV * T::W) {
-    int r = 0;
-    for (; r + R <= rows; r += R)
-      score_rows<T, R, CV>(q_rows + r, kt, d, s + size_t(r) * kTileK, c0, scale);
-    if (r < rows)
-      score_rows_tail<T, CV, R - 1>(rows - r, q_rows + r, kt, d, s + size_t(r) * kTileK, c0,
-                                    scale);
+  for (int r0 = 0; r0 < kTileQ; r0 += CV * T::W) {
+    int c = 0;
+    for (; c + R <= keys; c += R)
+      score_rows<T, R, CV>(k_rows + c, qt, d, s + size_t(c) * kTileQ, r0);
+    if (c < keys)
+      score_rows_tail<T, CV, R - 1>(keys - c, k_rows + c, qt, d, s + size_t(c) * kTileQ, r0);
   }
 }
 
-// O[r][d0 .. d0 + DV*W) = alpha[r] * O[r][..] + sum_c P[r][c] V[c][..], R rows.
+// O[r][d0 .. d0 + DV*W) = alpha[r] * O[r][..] + sum_c P^T[c][r] V[c][..], R query rows.
 template <typename T, int R, int DV>
-inline void pv_rows(const float* p, int cols, const float* const* v_rows, int d0, float* o, int d,
+inline void pv_rows(const float* pt, int cols, const float* const* v_rows, int d0, float* o, int d,
                     const float* alpha) {
   using V = typename T::V;
   V acc[R][DV];
@@ -90,8 +88,9 @@ inline void pv_rows(const float* p, int cols, const float* const* v_rows, int d0
     V vv[DV];
     const float* vr = v_rows[c] + d0;
     for (int v = 0; v < DV; ++v) vv[v] = T::load(vr + v * T::W);
+    const float* pc = pt + size_t(c) * kTileQ;
     for (int i = 0; i < R; ++i) {
-      const V b = T::set1(p[size_t(i) * kTileK + c]);
+      const V b = T::set1(pc[i]);
       for (int v = 0; v < DV; ++v) acc[i][v] = T::fma(b, vv[v], acc[i][v]);
     }
   }
@@ -100,115 +99,111 @@ inline void pv_rows(const float* p, int cols, const float* const* v_rows, int d0
 }
 
 template <typename T, int DV, int R>
-inline void pv_rows_tail(int rows, const float* p, int cols, const float* const* v_rows, int d0,
+inline void pv_rows_tail(int rows, const float* pt, int cols, const float* const* v_rows, int d0,
                          float* o, int d, const float* alpha) {
   if constexpr (R >= 1) {
     if (rows == R) {
-      pv_rows<T, R, DV>(p, cols, v_rows, d0, o, d, alpha);
+      pv_rows<T, R, DV>(pt, cols, v_rows, d0, o, d, alpha);
       return;
     }
-    pv_rows_tail<T, DV, R - 1>(rows, p, cols, v_rows, d0, o, d, alpha);
+    pv_rows_tail<T, DV, R - 1>(rows, pt, cols, v_rows, d0, o, d, alpha);
   }
 }
 
 template <typename T, int DV>
-inline void pv_chunk(int rows, const float* p, int cols, const float* const* v_rows, int d0,
+inline void pv_chunk(int rows, const float* pt, int cols, const float* const* v_rows, int d0,
                      float* o, int d, const float* alpha) {
   constexpr int R = T::kPvRows;
   int r = 0;
   for (; r + R <= rows; r += R)
-    pv_rows<T, R, DV>(p + size_t(r) * kTileK, cols, v_rows, d0, o + size_t(r) * d, d, alpha + r);
+    pv_rows<T, R, DV>(pt + r, cols, v_rows, d0, o + size_t(r) * d, d, alpha + r);
   if (r < rows)
-    pv_rows_tail<T, DV, R - 1>(rows - r, p + size_t(r) * kTileK, cols, v_rows, d0,
-                               o + size_t(r) * d, d, alpha + r);
+    pv_rows_tail<T, DV, R - 1>(rows - r, pt + r, cols, v_rows, d0, o + size_t(r) * d, d,
+                               alpha + r);
 }
 
 // O = alpha O + P V over all D columns.
 template <typename T>
-inline void pv_tile(int rows, const float* p, int cols, const float* const* v_rows, float* o,
+inline void pv_tile(int rows, const float* pt, int cols, const float* const* v_rows, float* o,
                     int d, const float* alpha) {
   constexpr int DV = T::kPvVecs;
   int d0 = 0;
   for (; d0 + DV * T::W <= d; d0 += DV * T::W)
-    pv_chunk<T, DV>(rows, p, cols, v_rows, d0, o, d, alpha);
-  for (; d0 < d; d0 += T::W) pv_chunk<T, 1>(rows, p, cols, v_rows, d0, o, d, alpha);
+    pv_chunk<T, DV>(rows, pt, cols, v_rows, d0, o, d, alpha);
+  for (; d0 < d; d0 += T::W) pv_chunk<T, 1>(rows, pt, cols, v_rows, d0, o, d, alpha);
 }
 
-// Online-softmax update of one score row (BK values, base 2): P in place, returns alpha.
+// Online-softmax update over one key block, vertical: for each query lane, m' = max(m, max_c S),
+// P = 2^(S - m'), alpha = 2^(m - m'), l = alpha l + sum_c P. m' is kept >= the lowest finite
+// float, so a lane with nothing allowed yet gets P = 0 and alpha = 1 instead of inf - inf.
 template <typename T>
-inline float softmax_row(float* s, float* m, float* l) {
+inline void softmax_tile(float* s, int cols, float* m, float* l, float* alpha) {
   using V = typename T::V;
-  constexpr int NV = kTileK / T::W;
-  V x[NV];
-  V mx = T::load(s);
-  x[0] = mx;
-  for (int v = 1; v < NV; ++v) {
-    x[v] = T::load(s + v * T::W);
-    mx = T::max(mx, x[v]);
-  }
-  const float m_new = std::max(*m, T::hmax(mx));
-  if (m_new == -std::numeric_limits<float>::infinity()) {  // nothing allowed yet in this row
-    for (int v = 0; v < NV; ++v) T::store(s + v * T::W, T::zero());
-    return 1.0f;
-  }
-  const V mv = T::set1(m_new);
-  V sum = T::zero();
+  constexpr int NV = kTileQ / T::W;
   for (int v = 0; v < NV; ++v) {
-    const V p = T::exp2(T::sub(x[v], mv));
-    T::store(s + v * T::W, p);
-    sum = T::add(sum, p);
+    const int r0 = v * T::W;
+    V mx = T::set1(-std::numeric_limits<float>::infinity());
+    for (int c = 0; c < cols; ++c) mx = T::max(mx, T::load(s + size_t(c) * kTileQ + r0));
+    const V m_old = T::load(m + r0);
+    const V m_new = T::max(T::max(m_old, mx), T::set1(std::numeric_limits<float>::lowest()));
+    const V a = T::exp2(T::sub(m_old, m_new));
+    V sum = T::zero();
+    for (int c = 0; c < cols; ++c) {
+      float* sc = s + size_t(c) * kTileQ + r0;
+      const V p = T::exp2(T::sub(T::load(sc), m_new));
+      T::store(sc, p);
+      sum = T::add(sum, p);
+    }
+    T::store(l + r0, T::fma(T::load(l + r0), a, sum));
+    T::store(m + r0, m_new);
+    T::store(alpha + r0, a);
   }
-  float alpha_buf[T::W];
-  T::store(alpha_buf, T::exp2(T::set1(*m - m_new)));  // m = -inf gives 0
-  const float alpha = alpha_buf[0];
-  *l = *l * alpha + T::hsum(sum);
-  *m = m_new;
-  return alpha;
 }
 
-// Pack K^T of one key block: kt[d][c] = K[token(c)][d], zero for c >= cols.
-inline void pack_kt(const BlockJob& job, int kb, int cols, float* kt, const float** v_rows) {
+// Pack this query block's Q transposed and pre-scaled: qt[d][r] = scale * Q[r][d], 0 for r >= rows.
+inline void pack_qt(const BlockJob& job, float* qt) {
   const int d = job.d;
-  for (int c = 0; c < cols; ++c) {
-    const int col = kb * kTileK + c;
-    const size_t j = job.key_index ? size_t(job.key_index[col]) : size_t(col);
-    const float* kr = job.k + j * job.k_stride;
-    v_rows[c] = job.v + j * job.v_stride;
-    for (int i = 0; i < d; ++i) kt[size_t(i) * kTileK + c] = kr[i];
+  for (int r = 0; r < job.rows; ++r) {
+    const float* q = job.q_rows[r];
+    for (int i = 0; i < d; ++i) qt[size_t(i) * kTileQ + r] = q[i] * job.scale_log2e;
   }
-  if (cols < kTileK)
+  if (job.rows < kTileQ)
     for (int i = 0; i < d; ++i)
-      std::fill(kt + size_t(i) * kTileK + cols, kt + size_t(i + 1) * kTileK, 0.0f);
+      std::fill(qt + size_t(i) * kTileQ + job.rows, qt + size_t(i + 1) * kTileQ, 0.0f);
 }
 
 template <typename T>
 void block_simd(const BlockJob& job, const BlockScratch& sc) {
   using V = typename T::V;
-  constexpr int NV = kTileK / T::W;
+  constexpr int NV = kTileQ / T::W;
   const int d = job.d, rows = job.rows;
-  for (int r = 0; r < rows; ++r) {
-    sc.m[r] = -std::numeric_limits<float>::infinity();
-    sc.l[r] = 0;
-    for (int i = 0; i < d; i += T::W) T::store(sc.o + size_t(r) * d + i, T::zero());
+  for (int r = 0; r < kTileQ; r += T::W) {
+    T::store(sc.m + r, T::set1(-std::numeric_limits<float>::infinity()));
+    T::store(sc.l + r, T::zero());
   }
+  for (int r = 0; r < rows; ++r)
+    for (int i = 0; i < d; i += T::W) T::store(sc.o + size_t(r) * d + i, T::zero());
+  pack_qt(job, sc.qt);
+  const float* k_rows[kTileK];
   for (int e = 0; e < job.entries; ++e) {
     const int kb = job.key_blocks[e];
     const int cols = std::min(kTileK, job.nk - kb * kTileK);
     const uint8_t* tile = job.tiles[e];
-    pack_kt(job, kb, cols, sc.kt, sc.v_rows);
-    score_tile<T>(job.q_rows, rows, sc.kt, d, sc.s, job.scale_log2e);
-    for (int r = 0; r < rows; ++r) {
-      float* s = sc.s + size_t(r) * kTileK;
-      if (tile || cols < kTileK) {
-        for (int v = 0; v < NV; ++v) {
-          V x = T::load(s + v * T::W);
-          if (tile) x = T::mask_tile(x, tile + size_t(r) * kTileK + v * T::W);
-          if (cols < kTileK) x = T::mask_tail(x, cols - v * T::W);
-          T::store(s + v * T::W, x);
-        }
-      }
-      sc.alpha[r] = softmax_row<T>(s, sc.m + r, sc.l + r);
+    for (int c = 0; c < cols; ++c) {
+      const int col = kb * kTileK + c;
+      const size_t j = job.key_index ? size_t(job.key_index[col]) : size_t(col);
+      k_rows[c] = job.k + j * job.k_stride;
+      sc.v_rows[c] = job.v + j * job.v_stride;
     }
+    score_tile<T>(k_rows, cols, sc.qt, d, sc.s);
+    if (tile) {
+      for (int c = 0; c < cols; ++c)
+        for (int v = 0; v < NV; ++v) {
+          float* p = sc.s + size_t(c) * kTileQ + v * T::W;
+          T::store(p, T::mask_tile(T::load(p), tile + size_t(c) * kTileQ + v * T::W));
+        }
+    }
+    softmax_tile<T>(sc.s, cols, sc.m, sc.l, sc.alpha);
     pv_tile<T>(rows, sc.s, cols, sc.v_rows, sc.o, d, sc.alpha);
   }
   for (int r = 0; r < rows; ++r) {
@@ -218,10 +213,10 @@ void block_simd(const BlockJob& job, const BlockScratch& sc) {
   }
 }
 
-// Exposed score micro-GEMM (no scaling) for the benchmark.
+// Exposed score micro-GEMM for the benchmark: s[c][r] = sum_d rows[c][d] * packed[d][r].
 template <typename T>
-void score_tile_simd(const float* const* q_rows, int rows, const float* kt, int d, float* s) {
-  score_tile<T>(q_rows, rows, kt, d, s, 1.0f);
+void score_tile_simd(const float* const* rows, int n, const float* packed, int d, float* s) {
+  score_tile<T>(rows, n, packed, d, s);
 }
 
 // 2^x by 2^round(x) * poly(x - round(x)); poly = Taylor series of e^(f ln 2) to degree 7 on
