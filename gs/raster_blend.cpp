@@ -119,9 +119,8 @@ struct TileScratch {
   RowAccum acc[kTile];
 };
 
-void blend_tile(const Projected& proj, const Binned& bins, const CameraF& cam,
-                const RasterKernels& kernels, int t, TileScratch& s, const BlendOutputs& out,
-                BlendCounters* counters) {
+void blend_tile(const Binned& bins, const CameraF& cam, const RasterKernels& kernels, int t,
+                TileScratch& s, const BlendOutputs& out, BlendCounters* counters) {
   const TileRect rect = tile_rect(cam, t);
   init_rows(rect, s.acc);
   uint32_t live = 0;
@@ -130,27 +129,28 @@ void blend_tile(const Projected& proj, const Binned& bins, const CameraF& cam,
   const float tile_x_lo = float(rect.x0) + 0.5f, tile_x_hi = float(rect.x0 + rect.w) - 0.5f;
   for (uint32_t b = begin; b < end && live; b += kBlendBatch) {
     const int nb = int(std::min<uint32_t>(kBlendBatch, end - b));
+    // Gather first: independent loads, so the misses overlap.
+    for (int k = 0; k < nb; ++k) s.batch[k] = bins.splats[bins.pair[b + uint32_t(k)]];
     std::memset(s.counts, 0, sizeof(s.counts));
     for (int k = 0; k < nb; ++k) {
-      const TileSplat& sp = s.batch[k] = proj.splats[bins.pair_gid[b + uint32_t(k)]];
+      const TileSplat& sp = s.batch[k];
       // Rows whose centre y lies within the ellipse's vertical extent.
-      const float ry0 = std::ceil(sp.y - sp.ext_y - float(rect.y0) - 0.5f);
-      const float ry1 = std::floor(sp.y + sp.ext_y - float(rect.y0) - 0.5f);
-      const int r0 = ry0 > 0.f ? int(ry0) : 0;
-      const int r1 = ry1 < float(rect.h - 1) ? int(ry1) : rect.h - 1;
+      int r0, r1;
+      row_range(sp.y - sp.ext_y - float(rect.y0), sp.y + sp.ext_y - float(rect.y0), rect.h, &r0,
+                &r1);
       // Entirely inside the tile horizontally: every row in [r0, r1] is crossed.
       const bool inside_x = sp.x - sp.ext_x >= tile_x_lo && sp.x + sp.ext_x <= tile_x_hi;
-      const float det = sp.a * sp.c - sp.b * sp.b;
       for (int r = r0; r <= r1; ++r) {
         if (!(live >> r & 1u)) continue;
         if (!inside_x) {
+          // The row's span is centre +- half, half^2 = row_a0 - row_a1 dy^2; compare squares.
           const float dy = float(rect.y0 + r) + 0.5f - sp.y;
-          const float disc = sp.a * sp.cutoff - det * dy * dy;
-          if (disc < 0.f) continue;
-          const float sq = std::sqrt(disc);
-          const float hi = sp.x + (-sp.b * dy + sq) / sp.a;
-          const float lo = sp.x + (-sp.b * dy - sq) / sp.a;
-          if (hi < tile_x_lo || lo > tile_x_hi) continue;
+          const float half2 = sp.row_a0 - sp.row_a1 * dy * dy;
+          const float centre = sp.x + sp.row_k * dy;
+          const float gap_lo = tile_x_lo - centre, gap_hi = centre - tile_x_hi;
+          if (half2 < 0.f || (gap_lo > 0.f && gap_lo * gap_lo > half2) ||
+              (gap_hi > 0.f && gap_hi * gap_hi > half2))
+            continue;
         }
         s.rows[r][s.counts[r]++] = uint32_t(k);
       }
@@ -166,7 +166,7 @@ void blend_tile(const Projected& proj, const Binned& bins, const CameraF& cam,
 }
 
 // The naive tiled loop: every pixel walks its tile's whole list with the scalar math.
-void blend_tile_reference(const Projected& proj, const Binned& bins, const CameraF& cam, int t,
+void blend_tile_reference(const Binned& bins, const CameraF& cam, int t,
                           const BlendOutputs& out, BlendCounters* counters) {
   const TileRect rect = tile_rect(cam, t);
   const uint32_t begin = bins.tile_start[t], end = bins.tile_start[t + 1];
@@ -175,7 +175,7 @@ void blend_tile_reference(const Projected& proj, const Binned& bins, const Camer
       const float px = float(j) + 0.5f, py = float(i) + 0.5f;
       float T = 1.f, cr = 0.f, cg = 0.f, cb = 0.f, d = 0.f, id = 0.f;
       for (uint32_t k = begin; k < end; ++k) {
-        const TileSplat& s = proj.splats[bins.pair_gid[k]];
+        const TileSplat& s = bins.splats[bins.pair[k]];
         ++counters->evals;
         const float dx = s.x - px, dy = s.y - py;
         const float sigma = 0.5f * (s.a * dx * dx + s.c * dy * dy) + s.b * dx * dy;
@@ -206,7 +206,7 @@ void blend_tile_reference(const Projected& proj, const Binned& bins, const Camer
 
 }  // namespace
 
-void blend_stage(const Projected& proj, const Binned& bins, const CameraF& cam,
+void blend_stage(const Binned& bins, const CameraF& cam,
                  const RasterKernels& kernels, bool reference, const BlendOutputs& out,
                  ThreadPool& pool, BlendTotals* totals) {
   const int tiles = cam.tiles_x * cam.tiles_y;
@@ -218,10 +218,10 @@ void blend_stage(const Projected& proj, const Binned& bins, const CameraF& cam,
     BlendCounters counters;
     if (reference) {
       for (size_t t = begin; t < end; ++t)
-        blend_tile_reference(proj, bins, cam, int(t), out, &counters);
+        blend_tile_reference(bins, cam, int(t), out, &counters);
     } else {
       for (size_t t = begin; t < end; ++t)
-        blend_tile(proj, bins, cam, kernels, int(t), *scratch[size_t(worker)], out, &counters);
+        blend_tile(bins, cam, kernels, int(t), *scratch[size_t(worker)], out, &counters);
     }
     evals += counters.evals;
     blended += counters.blended;

@@ -29,9 +29,11 @@ struct alignas(64) TileSplat {
   float opacity;     // after the AA / mip factor
   float r, g, bl;    // colour (SH + 0.5, >= 0)
   float z, inv_z;    // camera-space depth of the mean and its inverse
-  float cutoff;      // culling radius^2 (Mahalanobis), with margin
-  float ext_x, ext_y;  // half extents in pixels of the cutoff ellipse
-  float pad[2];
+  // The cutoff ellipse (Mahalanobis radius^2 2 ln(255 o), with margin) where alpha can reach 1/255:
+  float ext_x, ext_y;  // half extents in pixels
+  // On the row at offset dy from the mean it spans dx in row_k dy +- sqrt(row_a0 - row_a1 dy^2)
+  // (row_k = -b/a, row_a0 = cutoff/a, row_a1 = det/a^2).
+  float row_k, row_a0, row_a1;
 };
 static_assert(sizeof(TileSplat) == 64, "TileSplat layout");
 

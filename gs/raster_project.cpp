@@ -10,6 +10,7 @@
 //   rgb = max(0, SH(dir) + 0.5), dir = normalise(p - camera centre)
 #include <atomic>
 #include <cmath>
+#include <cstring>
 
 #include "gs/raster_stages.h"
 
@@ -90,21 +91,16 @@ Fate project_one(const GaussianCloud& cloud, size_t g, const CameraF& cam,
   // Rotation of the Gaussian (normalised quaternion w, x, y, z) times its scales: M = R_q S.
   const float qn = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
   if (!(qn > 0.f) || !std::isfinite(qn)) return Fate::kInvalid;
-  const float w = q[0] / qn, x = q[1] / qn, y = q[2] / qn, z = q[3] / qn;
+  const float iq = 1.f / qn;
+  const float w = q[0] * iq, x = q[1] * iq, y = q[2] * iq, z = q[3] * iq;
   const float Rq[9] = {1.f - 2.f * (y * y + z * z), 2.f * (x * y - w * z), 2.f * (x * z + w * y),
                        2.f * (x * y + w * z), 1.f - 2.f * (x * x + z * z), 2.f * (y * z - w * x),
                        2.f * (x * z - w * y), 2.f * (y * z + w * x), 1.f - 2.f * (x * x + y * y)};
 
   // Jacobian of the perspective projection at the clamped position (gsplat persp_proj).
-  const float tan_fovx = 0.5f * float(cam.width) / cam.fx;
-  const float tan_fovy = 0.5f * float(cam.height) / cam.fy;
-  const float lim_x_pos = (float(cam.width) - cam.cx) / cam.fx + kJacobianFovMargin * tan_fovx;
-  const float lim_x_neg = cam.cx / cam.fx + kJacobianFovMargin * tan_fovx;
-  const float lim_y_pos = (float(cam.height) - cam.cy) / cam.fy + kJacobianFovMargin * tan_fovy;
-  const float lim_y_neg = cam.cy / cam.fy + kJacobianFovMargin * tan_fovy;
   const float rz = 1.f / tz, rz2 = rz * rz;
-  const float txc = tz * std::min(lim_x_pos, std::max(-lim_x_neg, tx * rz));
-  const float tyc = tz * std::min(lim_y_pos, std::max(-lim_y_neg, ty * rz));
+  const float txc = tz * std::min(cam.lim_x_pos, std::max(-cam.lim_x_neg, tx * rz));
+  const float tyc = tz * std::min(cam.lim_y_pos, std::max(-cam.lim_y_neg, ty * rz));
   const float j00 = cam.fx * rz, j02 = -cam.fx * txc * rz2;
   const float j11 = cam.fy * rz, j12 = -cam.fy * tyc * rz2;
   // JW [2,3] = J R_cam.
@@ -143,15 +139,21 @@ Fate project_one(const GaussianCloud& cloud, size_t g, const CameraF& cam,
 
   s->x = cam.fx * tx * rz + cam.cx;
   s->y = cam.fy * ty * rz + cam.cy;
-  s->a = syy / det;
-  s->b = -sxy / det;
-  s->c = sxx / det;
+  const float inv_det = 1.f / det;
+  s->a = syy * inv_det;
+  s->b = -sxy * inv_det;
+  s->c = sxx * inv_det;
   s->opacity = opacity;
   s->z = tz;
   s->inv_z = rz;
-  s->cutoff = cutoff;
   s->ext_x = std::sqrt(cutoff * sxx);
   s->ext_y = std::sqrt(cutoff * syy);
+  // Row spans in terms of the covariance: -b/a = sxy/syy, cutoff/a = cutoff det/syy,
+  // det(conic)/a^2 = det/syy^2.
+  const float inv_syy = 1.f / syy;
+  s->row_k = sxy * inv_syy;
+  s->row_a0 = cutoff * det * inv_syy;
+  s->row_a1 = det * inv_syy * inv_syy;
   if (!std::isfinite(s->x) || !std::isfinite(s->y) || !std::isfinite(s->a) ||
       !std::isfinite(s->b) || !std::isfinite(s->c) || !std::isfinite(s->ext_x) ||
       !std::isfinite(s->ext_y))
@@ -190,6 +192,11 @@ CameraF make_camera_f(const Camera& camera) {
   c.cy = float(camera.cy);
   c.width = camera.width;
   c.height = camera.height;
+  const float tan_fovx = 0.5f * float(c.width) / c.fx, tan_fovy = 0.5f * float(c.height) / c.fy;
+  c.lim_x_pos = (float(c.width) - c.cx) / c.fx + kJacobianFovMargin * tan_fovx;
+  c.lim_x_neg = c.cx / c.fx + kJacobianFovMargin * tan_fovx;
+  c.lim_y_pos = (float(c.height) - c.cy) / c.fy + kJacobianFovMargin * tan_fovy;
+  c.lim_y_neg = c.cy / c.fy + kJacobianFovMargin * tan_fovy;
   c.tiles_x = (camera.width + kTile - 1) / kTile;
   c.tiles_y = (camera.height + kTile - 1) / kTile;
   return c;
@@ -210,6 +217,7 @@ void project_stage(const GaussianCloud& cloud, const CameraF& cam, const Project
         if (tiles == 0) fate = Fate::kOffscreen;
       }
       out.tiles[g] = tiles;
+      if (tiles) std::memcpy(&out.depth_key[g], &s.z, 4);
       c_pairs += tiles;
       switch (fate) {
         case Fate::kVisible: ++c_vis; break;

@@ -4,7 +4,7 @@
 // TX x TY tiles of kTile x kTile pixels, H x W image.
 //
 //   project  cloud -> splats[N] (TileSplat), tiles[N]   (raster_project.cpp)
-//   bin      -> depth order of the V visible Gaussians, pairs grouped by tile in depth order,
+//   bin      -> the V visible records in depth order, pairs grouped by tile in depth order,
 //               tile_start[TX*TY+1]                                       (raster_bin.cpp)
 //   blend    -> color/alpha/depth_sum/inv_depth_sum                       (raster_blend.cpp)
 //
@@ -64,6 +64,8 @@ struct CameraF {
   float fx, fy, cx, cy;
   int width, height;
   int tiles_x, tiles_y;
+  // gsplat's Jacobian clamp: tx/tz in [-lim_x_neg, lim_x_pos], ty/tz likewise.
+  float lim_x_pos, lim_x_neg, lim_y_pos, lim_y_neg;
 };
 CameraF make_camera_f(const Camera& camera);
 
@@ -83,8 +85,9 @@ struct ProjectParams {
 // Per-Gaussian outputs of project. tiles[g] == 0 means culled.
 struct Projected {
   size_t n = 0;
-  TileSplat* splats = nullptr;  // [N]
-  uint32_t* tiles = nullptr;    // [N] tiles touched
+  TileSplat* splats = nullptr;    // [N]
+  uint32_t* tiles = nullptr;      // [N] tiles touched
+  uint32_t* depth_key = nullptr;  // [N] float bits of the depth (> 0, so they sort as the floats)
 };
 
 struct ProjectCounts {
@@ -101,8 +104,9 @@ void project_stage(const GaussianCloud& cloud, const CameraF& cam, const Project
 
 // Outputs of bin.
 struct Binned {
-  uint32_t* pair_gid = nullptr;    // [P] Gaussian ids grouped by tile, front to back in a tile
-  uint32_t* tile_start = nullptr;  // [TX*TY+1] tile t owns pair_gid[tile_start[t], tile_start[t+1])
+  TileSplat* splats = nullptr;     // [V] the visible Gaussians' records, front to back
+  uint32_t* pair = nullptr;        // [P] indices into splats, grouped by tile, increasing in a tile
+  uint32_t* tile_start = nullptr;  // [TX*TY+1] tile t owns pair[tile_start[t], tile_start[t+1])
 };
 
 // Scratch the bin stage needs, in bytes, for V visible Gaussians and P pairs.
@@ -124,7 +128,7 @@ struct BlendTotals {
   uint64_t evals = 0, blended = 0;
 };
 // reference = true: the naive per-pixel scalar loop over the whole tile list (the baseline).
-void blend_stage(const Projected& proj, const Binned& bins, const CameraF& cam,
+void blend_stage(const Binned& bins, const CameraF& cam,
                  const RasterKernels& kernels, bool reference, const BlendOutputs& out,
                  ThreadPool& pool, BlendTotals* totals);
 
@@ -132,44 +136,58 @@ void blend_stage(const Projected& proj, const Binned& bins, const CameraF& cam,
 
 // For a row band of pixel-centre offsets dy in [d0, d1] (relative to the mean, inside
 // [-ext_y, ext_y]), the range [lo, hi] of dx offsets the cutoff ellipse covers.
-inline void ellipse_band_x(float a, float b, float c, float cutoff, float ext_x, float d0,
-                           float d1, float* lo, float* hi) {
-  const float det = a * c - b * b;
-  const float dy_r = -b / c * ext_x;  // dy of the rightmost point (leftmost at -dy_r)
+// dy_r = -b/c ext_x is the dy of the ellipse's rightmost point (the leftmost is at -dy_r).
+inline void ellipse_band_x(const TileSplat& s, float dy_r, float d0, float d1, float* lo,
+                           float* hi) {
   auto x_at = [&](float dy, float sign) {
-    float disc = std::max(0.f, a * cutoff - det * dy * dy);
-    return (-b * dy + sign * std::sqrt(disc)) / a;
+    return s.row_k * dy + sign * std::sqrt(std::max(0.f, s.row_a0 - s.row_a1 * dy * dy));
   };
-  *hi = (dy_r >= d0 && dy_r <= d1) ? ext_x : x_at(std::clamp(dy_r, d0, d1), 1.f);
-  *lo = (-dy_r >= d0 && -dy_r <= d1) ? -ext_x : x_at(std::clamp(-dy_r, d0, d1), -1.f);
+  *hi = (dy_r >= d0 && dy_r <= d1) ? s.ext_x : x_at(std::clamp(dy_r, d0, d1), 1.f);
+  *lo = (-dy_r >= d0 && -dy_r <= d1) ? -s.ext_x : x_at(std::clamp(-dy_r, d0, d1), -1.f);
 }
 
 // Index of the first tile / pixel whose centre range could hold coordinate v, clamped to
 // [0, count-1]; works for any finite or huge v without integer overflow.
 inline int tile_of(float v, int count) {
-  float f = std::floor((v - 0.5f) / float(kTile));
+  const float f = (v - 0.5f) * (1.f / float(kTile));
   if (!(f >= 0.f)) return 0;  // also NaN
   if (f >= float(count - 1)) return count - 1;
-  return int(f);
+  return int(f);  // f >= 0: truncation is floor (no SSE4.1 round at baseline)
+}
+
+// Row index range [first, last] of pixel centres (row + 0.5) within [lo, hi] (tile-relative),
+// clamped to [0, rows-1]; first > last when empty.
+inline void row_range(float lo, float hi, int rows, int* first, int* last) {
+  const float a = lo - 0.5f, b = hi - 0.5f;  // ceil(a) .. floor(b)
+  if (!(a > 0.f)) *first = 0;
+  else if (a > float(rows)) *first = rows;
+  else *first = int(a) + (float(int(a)) < a);
+  if (!(b < float(rows - 1))) *last = rows - 1;
+  else if (b < 0.f) *last = -1;
+  else *last = int(b);
 }
 
 // Calls fn(tx, ty) for every tile the Gaussian covers, rows of tiles top to bottom.
+// A box one tile row high (or one column wide) is exact for the ellipse too: the band then holds
+// the whole ellipse, whose x-range is the box's. Only boxes spanning 2+ rows and 2+ columns need
+// the per-band ellipse test.
 template <typename Fn>
 inline void for_each_tile(const TileSplat& s, const CameraF& cam, TileRule rule, Fn&& fn) {
   const float ext_x = s.ext_x, ext_y = s.ext_y;
   const int ty0 = tile_of(s.y - ext_y, cam.tiles_y), ty1 = tile_of(s.y + ext_y, cam.tiles_y);
-  if (rule == TileRule::kBox) {
-    const int tx0 = tile_of(s.x - ext_x, cam.tiles_x), tx1 = tile_of(s.x + ext_x, cam.tiles_x);
+  const int bx0 = tile_of(s.x - ext_x, cam.tiles_x), bx1 = tile_of(s.x + ext_x, cam.tiles_x);
+  if (rule == TileRule::kBox || ty0 == ty1 || bx0 == bx1) {
     for (int ty = ty0; ty <= ty1; ++ty)
-      for (int tx = tx0; tx <= tx1; ++tx) fn(tx, ty);
+      for (int tx = bx0; tx <= bx1; ++tx) fn(tx, ty);
     return;
   }
+  const float dy_r = -s.b / s.c * ext_x;
   for (int ty = ty0; ty <= ty1; ++ty) {
     float d0 = std::max(-ext_y, float(ty * kTile) + 0.5f - s.y);
     float d1 = std::min(ext_y, float(ty * kTile + kTile - 1) + 0.5f - s.y);
     if (d0 > d1) continue;
     float lo, hi;
-    ellipse_band_x(s.a, s.b, s.c, s.cutoff, ext_x, d0, d1, &lo, &hi);
+    ellipse_band_x(s, dy_r, d0, d1, &lo, &hi);
     if (s.x + hi < 0.5f || s.x + lo > float(cam.width) - 0.5f) continue;  // band misses the image
     const int tx0 = tile_of(s.x + lo, cam.tiles_x), tx1 = tile_of(s.x + hi, cam.tiles_x);
     for (int tx = tx0; tx <= tx1; ++tx) fn(tx, ty);

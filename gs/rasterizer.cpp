@@ -70,6 +70,17 @@ Status check_inputs(const GaussianCloud& cloud, const Camera& camera, const Rend
 
 Result<RenderResult> Rasterizer::render(const GaussianCloud& cloud, const Camera& camera,
                                         const RenderOptions& options, ThreadPool& pool) {
+  RenderResult result;
+  MACRO_TRY(render_into(cloud, camera, options, &result, pool));
+  return result;
+}
+
+Status Rasterizer::render_into(const GaussianCloud& cloud, const Camera& camera,
+                               const RenderOptions& options, RenderResult* out_result,
+                               ThreadPool& pool) {
+  MACRO_CHECK(out_result != nullptr);
+  RenderResult& result = *out_result;
+  result.stats = RenderStats{};
   MACRO_TRY(check_inputs(cloud, camera, options));
   const auto t_start = std::chrono::steady_clock::now();
   const CameraF cam = make_camera_f(camera);
@@ -84,12 +95,12 @@ Result<RenderResult> Rasterizer::render(const GaussianCloud& cloud, const Camera
   // Project.
   Projected proj;
   proj.n = n;
-  ws_->project.reset(Arena::carve_size<TileSplat>(n) + Arena::carve_size<uint32_t>(n));
+  ws_->project.reset(Arena::carve_size<TileSplat>(n) + 2 * Arena::carve_size<uint32_t>(n));
   proj.splats = ws_->project.carve<TileSplat>(n);
   proj.tiles = ws_->project.carve<uint32_t>(n);
+  proj.depth_key = ws_->project.carve<uint32_t>(n);
   ProjectCounts counts;
   project_stage(cloud, cam, params, proj, pool, &counts);
-  RenderResult result;
   result.stats.ms_project = ms_since(t_start);
   result.stats.visible = counts.visible;
   result.stats.culled_depth = counts.culled_depth;
@@ -124,13 +135,13 @@ Result<RenderResult> Rasterizer::render(const GaussianCloud& cloud, const Camera
                    {options.background[0], options.background[1], options.background[2]}};
   const RasterKernels& kernels = raster_kernels();
   BlendTotals totals;
-  blend_stage(proj, bins, cam, kernels, options.naive_baseline, out, pool, &totals);
+  blend_stage(bins, cam, kernels, options.naive_baseline, out, pool, &totals);
   result.stats.ms_blend = ms_since(t_blend);
   result.stats.kernel = options.naive_baseline ? "naive" : kernels.name;
   result.stats.evals_per_pixel = double(totals.evals) / double(pixels);
   result.stats.blended_per_pixel = double(totals.blended) / double(pixels);
   result.stats.ms_total = ms_since(t_start);
-  return result;
+  return Status::ok();
 }
 
 Result<RenderResult> render(const GaussianCloud& cloud, const Camera& camera,

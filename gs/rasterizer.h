@@ -83,6 +83,11 @@ class Rasterizer {
   Result<RenderResult> render(const GaussianCloud& cloud, const Camera& camera,
                               const RenderOptions& options = {},
                               ThreadPool& pool = ThreadPool::global());
+  // The same into an existing result, whose buffers are reused when the size matches (every
+  // pixel of every output is overwritten). On error *out is left in an unspecified state.
+  Status render_into(const GaussianCloud& cloud, const Camera& camera,
+                     const RenderOptions& options, RenderResult* out,
+                     ThreadPool& pool = ThreadPool::global());
 
  private:
   struct Workspace;
