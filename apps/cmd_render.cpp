@@ -41,8 +41,7 @@ int run_render(std::vector<std::string> argv) {
   const std::vector<double> bg = args.doubles_or("--background", {0, 0, 0}, 3);
   job.options.sh_degree_cap = args.int_or("--sh-degree", 3, 0, 3);
   if (Status s = args.finish(); !s) {
-    std::fprintf(stderr, "%s", kUsage);
-    return fail("render", s);
+    return fail("render", Status::error(s.message() + " (macro render --help for usage)"));
   }
   auto parsed_mode = gs::parse_raster_mode(mode);
   if (!parsed_mode) return fail("render", parsed_mode.status());

@@ -33,8 +33,7 @@ int run_synth(std::vector<std::string> argv) {
   p.closeup_views = args.int_or("--closeup-views", p.closeup_views, 0, 256);
   p.background = !args.flag("--no-background");
   if (Status s = args.finish(); !s) {
-    std::fprintf(stderr, "%s", kUsage);
-    return fail("synth", s);
+    return fail("synth", Status::error(s.message() + " (macro synth --help for usage)"));
   }
   auto parsed_kind = gs::parse_synth_kind(kind);
   if (!parsed_kind) return fail("synth", parsed_kind.status());

@@ -26,14 +26,14 @@ Status check_output(const char* kind, const std::string& path) {
   std::string parent = fs::path(path).parent_path().string();
   if (parent.empty()) parent = ".";
   if (is_directory(path)) {
-    return Status::error(std::string(kind) + " output " + path + ": is a folder, expected a file path");
+    return Status::error(std::string(kind) + ": " + path + ": is a folder, expected a file path");
   }
   if (!is_directory(parent)) {
-    return Status::error(std::string(kind) + " output " + path + ": folder '" + parent +
+    return Status::error(std::string(kind) + ": " + path + ": folder '" + parent +
                          "' does not exist");
   }
   if (::access(parent.c_str(), W_OK) != 0) {
-    return Status::error(std::string(kind) + " output " + path + ": folder '" + parent +
+    return Status::error(std::string(kind) + ": " + path + ": folder '" + parent +
                          "' is not writable");
   }
   return Status::ok();
@@ -58,10 +58,10 @@ Result<RasterMode> parse_raster_mode(const std::string& text) {
 }
 
 Status check_render_outputs(const RenderOutputs& o) {
-  MACRO_TRY(check_output("png", o.png));
-  MACRO_TRY(check_output("exr", o.exr));
-  MACRO_TRY(check_output("tensors", o.tensors));
-  MACRO_TRY(check_output("depth_png", o.depth_png));
+  MACRO_TRY(check_output("--out-png", o.png));
+  MACRO_TRY(check_output("--out-exr", o.exr));
+  MACRO_TRY(check_output("--out-tensors", o.tensors));
+  MACRO_TRY(check_output("--out-depth-png", o.depth_png));
   const std::string* all[] = {&o.png, &o.exr, &o.tensors, &o.depth_png};
   for (int a = 0; a < 4; ++a) {
     for (int b = a + 1; b < 4; ++b) {

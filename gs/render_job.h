@@ -54,7 +54,7 @@ struct RenderJobResult {
 };
 
 // Each output's folder exists and is writable and the paths are distinct. The message names the
-// flag-style output kind (png, exr, tensors, depth_png) and the path.
+// output by its `macro render` flag (--out-png, --out-exr, --out-tensors, --out-depth-png) and path.
 Status check_render_outputs(const RenderOutputs& outputs);
 
 // Writes the requested outputs of a render (see the table at the top). `scene` and `camera` go into

@@ -1,0 +1,226 @@
+// `macro render` and `macro synth` end to end through the binary, on the committed default scene:
+// every output is written and agrees with the others; bad input exits non-zero with a message that
+// names the flag or file, and leaves no output or temporary behind.
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "attention/runtime/file_io.h"
+#include "attention/runtime/safetensors.h"
+#include "gs/image_io.h"
+#include "test_support.h"
+
+using namespace macro;
+
+namespace {
+
+struct Run {
+  int rc = -1;
+  std::string out, err;
+};
+
+std::string slurp(const std::string& path) {
+  std::ifstream f(path);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+// Runs `macro <args>` with MACRO_QUIET unset (CTest sets it), output captured in `logs`.
+Run run_macro(const std::string& args, const test::TempDir& logs) {
+  const std::string out = logs.file("stdout.txt"), err = logs.file("stderr.txt");
+  Run r;
+  r.rc = test::run_command("env -u MACRO_QUIET " + test::macro_exe() + " " + args + " >" + out +
+                           " 2>" + err);
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+std::string default_scene() { return test::source_dir() + "/data/scenes/default"; }
+std::string scene_flags(const std::string& camera = "closeup") {
+  return "--scene " + default_scene() + "/scene.ply --cameras " + default_scene() +
+         "/cameras.json --camera " + camera;
+}
+
+std::vector<std::string> files_in(const std::string& dir) {
+  std::vector<std::string> names;
+  for (auto& e : std::filesystem::recursive_directory_iterator(dir)) {
+    names.push_back(e.path().lexically_relative(dir).string());
+  }
+  return names;
+}
+
+bool contains(const std::string& text, const std::string& what) {
+  return text.find(what) != std::string::npos;
+}
+
+}  // namespace
+
+TEST_CASE("macro render writes PNG, EXR, safetensors and inverse-depth PNG that agree",
+          "[render][render_cli]") {
+  test::TempDir dir("render_cli"), logs("render_cli_logs");
+  Run r = run_macro("render " + scene_flags() + " --out-png " + dir.file("c.png") + " --out-exr " +
+                        dir.file("c.exr") + " --out-tensors " + dir.file("c.safetensors") +
+                        " --out-depth-png " + dir.file("d.png") + " --background 0.2,0.3,0.4",
+                    logs);
+  INFO(r.err);
+  REQUIRE(r.rc == 0);
+  // One summary line (size, Gaussians, visible, per-stage ms) and the files written.
+  CHECK(contains(r.out, "closeup: 960x540, 49813 Gaussians"));
+  CHECK(contains(r.out, "visible"));
+  CHECK(contains(r.out, "blend"));
+  CHECK(files_in(dir.path).size() == 4);
+
+  auto st = SafeTensors::open(dir.file("c.safetensors"));
+  REQUIRE(st);
+  const int64_t H = 540, W = 960;
+  auto color = st->read_f32("color", {H, W, 3});
+  auto alpha = st->read_f32("alpha", {H, W});
+  auto depth_sum = st->read_f32("depth_sum", {H, W});
+  auto inv = st->read_f32("inv_depth_sum", {H, W});
+  REQUIRE(color);
+  REQUIRE(alpha);
+  REQUIRE(depth_sum);
+  REQUIRE(inv);
+  CHECK(st->metadata().at("camera") == "closeup");
+  const size_t n = size_t(H * W);
+  size_t covered = 0;
+  for (size_t p = 0; p < n; ++p) covered += (*alpha)[p] > 0.5f;
+  CHECK(covered > n * 9 / 10);  // the close-up looks at a plane with the background behind
+
+  // EXR channels are the same numbers, depth = depth_sum / alpha.
+  auto exr = gs::read_exr(dir.file("c.exr"));
+  REQUIRE(exr);
+  CHECK(exr->width == W);
+  CHECK(exr->height == H);
+  const char* names[] = {"R", "G", "B", "A", "depth", "invdepth"};
+  for (const char* name : names) REQUIRE(exr->find(name));
+  double worst_rgb = 0, worst_depth = 0;
+  size_t mismatched = 0;
+  for (size_t p = 0; p < n; ++p) {
+    for (int c = 0; c < 3; ++c) {
+      worst_rgb = std::max(worst_rgb, double(std::abs((*exr->find(names[c]))[p] - (*color)[p * 3 + c])));
+    }
+    const float a = (*alpha)[p];
+    const float want = a >= 1e-6f ? (*depth_sum)[p] / a : 0.f;
+    worst_depth = std::max(worst_depth, double(std::abs((*exr->find("depth"))[p] - want)));
+    mismatched += (*exr->find("A"))[p] != a;
+    mismatched += (*exr->find("invdepth"))[p] != (*inv)[p];
+  }
+  CHECK(worst_rgb == 0.0);
+  CHECK(worst_depth == 0.0);
+  CHECK(mismatched == 0);
+
+  // PNG is the colour rounded to 8 bits.
+  auto png = gs::read_image(dir.file("c.png"));
+  REQUIRE(png);
+  REQUIRE(png->width == W);
+  double worst_png = 0;
+  for (size_t k = 0; k < n * 3; ++k) {
+    const float want = std::round(std::clamp((*color)[k], 0.f, 1.f) * 255.f) / 255.f;
+    worst_png = std::max(worst_png, double(std::abs(png->data[k] - want)));
+  }
+  CHECK(worst_png < 1e-6);
+  auto depth_png = gs::read_image(dir.file("d.png"));
+  REQUIRE(depth_png);
+  CHECK(depth_png->height == H);
+}
+
+TEST_CASE("macro render --quiet prints nothing; modes and options run", "[render][render_cli]") {
+  test::TempDir dir("render_cli"), logs("render_cli_logs");
+  Run r = run_macro("render " + scene_flags("train_03") + " --out-png " + dir.file("a.png") +
+                        " --mode antialiased --sh-degree 0 --threads 1 --quiet",
+                    logs);
+  INFO(r.err);
+  CHECK(r.rc == 0);
+  CHECK(r.out.empty());
+  CHECK(r.err.empty());
+  Run m = run_macro("render " + scene_flags("closeup_03") + " --out-tensors " + dir.file("m.safetensors") +
+                        " --mode mip --quiet",
+                    logs);
+  CHECK(m.rc == 0);
+  CHECK(files_in(dir.path).size() == 2);
+}
+
+TEST_CASE("macro render refuses bad input by name and leaves no files", "[render][render_cli]") {
+  test::TempDir dir("render_cli"), logs("render_cli_logs");
+  const std::string outs = " --out-png " + dir.file("c.png") + " --out-exr " + dir.file("c.exr") +
+                           " --out-tensors " + dir.file("c.safetensors");
+  struct Case {
+    const char* what;
+    std::string args;
+    std::vector<std::string> must_name;
+  };
+  std::ofstream(dir.path + "/../render_cli_junk.ply") << "ply\nformat binary_little_endian 1.0\nelement vertex 1000000\nend_header\nxx";
+  const std::string junk = dir.path + "/../render_cli_junk.ply";
+  std::vector<Case> cases = {
+      {"missing scene",
+       "--scene " + dir.file("nope.ply") + " --cameras " + default_scene() + "/cameras.json --camera closeup" + outs,
+       {"nope.ply"}},
+      {"corrupt scene", "--scene " + junk + " --cameras " + default_scene() + "/cameras.json --camera closeup" + outs,
+       {"render_cli_junk.ply"}},
+      {"missing cameras",
+       "--scene " + default_scene() + "/scene.ply --cameras " + dir.file("cams.json") + " --camera closeup" + outs,
+       {"cams.json"}},
+      {"unknown camera", scene_flags("no_such_cam") + outs, {"no_such_cam", "train_00"}},
+      {"background with two numbers", scene_flags() + outs + " --background 1,2", {"--background"}},
+      {"background not numbers", scene_flags() + outs + " --background a,b,c", {"--background"}},
+      {"background out of range", scene_flags() + outs + " --background 2,0,0", {"--background"}},
+      {"bad mode", scene_flags() + outs + " --mode fancy", {"--mode", "fancy"}},
+      {"bad sh degree", scene_flags() + outs + " --sh-degree 7", {"--sh-degree"}},
+      {"unknown flag", scene_flags() + outs + " --colour red", {"--colour"}},
+      {"no --scene", "--cameras x.json --camera closeup" + outs, {"--scene"}},
+      {"no output", scene_flags(), {"--out-png"}},
+      {"output folder missing", scene_flags() + outs + " --out-depth-png " + dir.file("missing/d.png"),
+       {"missing/d.png"}},
+      {"output is a folder", scene_flags() + " --out-png " + dir.path, {dir.path}},
+      {"same output twice", scene_flags() + " --out-png " + dir.file("c.png") + " --out-depth-png " + dir.file("c.png"),
+       {"c.png"}},
+  };
+  for (const Case& c : cases) {
+    Run r = run_macro("render " + c.args, logs);
+    INFO(c.what << ": " << r.err);
+    CHECK(r.rc != 0);
+    for (const std::string& name : c.must_name) CHECK(contains(r.err, name));
+    CHECK(files_in(dir.path).empty());
+  }
+  std::filesystem::remove(junk);
+}
+
+TEST_CASE("macro synth writes the same files for the same seed and refuses bad flags",
+          "[render][render_cli]") {
+  test::TempDir a("synth_cli"), b("synth_cli"), logs("synth_cli_logs");
+  Run r1 = run_macro("synth --out " + a.path + " --seed 3 --gaussians 8000 --width 160 --height 90", logs);
+  Run r2 = run_macro("synth --out " + b.path + " --seed 3 --gaussians 8000 --width 160 --height 90 --quiet", logs);
+  INFO(r1.err);
+  REQUIRE(r1.rc == 0);
+  REQUIRE(r2.rc == 0);
+  CHECK(contains(r1.out, "Gaussians"));
+  CHECK(r2.out.empty());
+  for (const char* f : {"scene.ply", "cameras.json", "geometry.json"}) {
+    auto x = read_file(a.file(f));
+    auto y = read_file(b.file(f));
+    REQUIRE(x);
+    REQUIRE(y);
+    CHECK(*x == *y);
+  }
+  // The synthetic scene renders through the CLI.
+  Run rr = run_macro("render --scene " + a.file("scene.ply") + " --cameras " + a.file("cameras.json") +
+                         " --camera closeup --out-png " + a.file("c.png") + " --quiet",
+                     logs);
+  CHECK(rr.rc == 0);
+  test::TempDir c("synth_cli");
+  Run bad = run_macro("synth --out " + c.path + " --kind cubes", logs);
+  CHECK(bad.rc != 0);
+  CHECK(contains(bad.err, "--kind"));
+  Run few = run_macro("synth --out " + c.path + " --gaussians 5", logs);
+  CHECK(few.rc != 0);
+  CHECK(contains(few.err, "--gaussians"));
+  CHECK(files_in(c.path).empty());
+  Run noout = run_macro("synth --seed 2", logs);
+  CHECK(noout.rc != 0);
+  CHECK(contains(noout.err, "--out"));
+}
