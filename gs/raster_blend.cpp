@@ -56,10 +56,32 @@ void blend_row_scalar(const TileSplat* splats, const uint32_t* idx, int n, float
   counters->blended += blended;
 }
 
+void build_rows_scalar(const RowCullBatch& batch, int n, const RowCullTile& tile,
+                       uint32_t (*rows)[kRowListStride], int* counts) {
+  for (int r = 0; r < kTile; ++r) counts[r] = 0;
+  for (int k = 0; k < n; ++k) {
+    // Rows whose centre lies within the ellipse's vertical extent.
+    const float ext_y = batch.ext_y[k];
+    int r0, r1;
+    row_range(batch.y[k] - ext_y - tile.y0, batch.y[k] + ext_y - tile.y0, tile.h, &r0, &r1);
+    for (int r = r0; r <= r1; ++r) {
+      if (!(tile.live >> r & 1u)) continue;
+      const float dy = tile.y0 + float(r) + 0.5f - batch.y[k];
+      const float half2 = batch.a0[k] - batch.a1[k] * dy * dy;
+      const float centre = batch.x[k] + batch.k[k] * dy;
+      const float gap_lo = tile.x_lo - centre, gap_hi = centre - tile.x_hi;
+      if (half2 < 0.f || (gap_lo > 0.f && gap_lo * gap_lo > half2) ||
+          (gap_hi > 0.f && gap_hi * gap_hi > half2))
+        continue;
+      rows[r][counts[r]++] = uint32_t(k);
+    }
+  }
+}
+
 const RasterKernels& raster_kernels_for(Isa isa) {
-  static const RasterKernels scalar{"scalar", blend_row_scalar};
-  static const RasterKernels avx2{"avx2", blend_row_avx2};
-  static const RasterKernels avx512{"avx512", blend_row_avx512};
+  static const RasterKernels scalar{"scalar", blend_row_scalar, build_rows_scalar};
+  static const RasterKernels avx2{"avx2", blend_row_avx2, build_rows_scalar};
+  static const RasterKernels avx512{"avx512", blend_row_avx512, build_rows_avx512};
   switch (isa) {
     case Isa::kScalar: return scalar;
     case Isa::kAvx2: return avx2;
@@ -114,7 +136,8 @@ void init_rows(const TileRect& rect, RowAccum* acc) {
 // Scratch of one worker (~27 KB), reused tile after tile.
 struct TileScratch {
   TileSplat batch[kBlendBatch];
-  uint32_t rows[kTile][kBlendBatch];
+  RowCullBatch cull;
+  uint32_t rows[kTile][kRowListStride];
   int counts[kTile];
   RowAccum acc[kTile];
 };
@@ -127,34 +150,27 @@ void blend_tile(const Binned& bins, const CameraF& cam, const RasterKernels& ker
   for (int r = 0; r < rect.h; ++r) live |= 1u << r;
   const uint32_t begin = bins.tile_start[t], end = bins.tile_start[t + 1];
   const float tile_x_lo = float(rect.x0) + 0.5f, tile_x_hi = float(rect.x0 + rect.w) - 0.5f;
+  // The records are scattered over the depth-sorted array: prefetch a batch ahead so the misses
+  // overlap with blending the current batch.
+  auto prefetch_batch = [&](uint32_t from) {
+    const uint32_t to = std::min<uint32_t>(end, from + kBlendBatch);
+    for (uint32_t i = from; i < to; ++i) __builtin_prefetch(&bins.splats[bins.pair[i]]);
+  };
+  prefetch_batch(begin);
   for (uint32_t b = begin; b < end && live; b += kBlendBatch) {
     const int nb = int(std::min<uint32_t>(kBlendBatch, end - b));
-    // Gather first: independent loads, so the misses overlap.
-    for (int k = 0; k < nb; ++k) s.batch[k] = bins.splats[bins.pair[b + uint32_t(k)]];
-    std::memset(s.counts, 0, sizeof(s.counts));
+    if (b + kBlendBatch < end) prefetch_batch(b + kBlendBatch);
     for (int k = 0; k < nb; ++k) {
-      const TileSplat& sp = s.batch[k];
-      // Rows whose centre y lies within the ellipse's vertical extent.
-      int r0, r1;
-      row_range(sp.y - sp.ext_y - float(rect.y0), sp.y + sp.ext_y - float(rect.y0), rect.h, &r0,
-                &r1);
-      // Entirely inside the tile horizontally: every row in [r0, r1] is crossed.
-      const bool inside_x = sp.x - sp.ext_x >= tile_x_lo && sp.x + sp.ext_x <= tile_x_hi;
-      for (int r = r0; r <= r1; ++r) {
-        if (!(live >> r & 1u)) continue;
-        if (!inside_x) {
-          // The row's span is centre +- half, half^2 = row_a0 - row_a1 dy^2; compare squares.
-          const float dy = float(rect.y0 + r) + 0.5f - sp.y;
-          const float half2 = sp.row_a0 - sp.row_a1 * dy * dy;
-          const float centre = sp.x + sp.row_k * dy;
-          const float gap_lo = tile_x_lo - centre, gap_hi = centre - tile_x_hi;
-          if (half2 < 0.f || (gap_lo > 0.f && gap_lo * gap_lo > half2) ||
-              (gap_hi > 0.f && gap_hi * gap_hi > half2))
-            continue;
-        }
-        s.rows[r][s.counts[r]++] = uint32_t(k);
-      }
+      const TileSplat& sp = s.batch[k] = bins.splats[bins.pair[b + uint32_t(k)]];
+      s.cull.x[k] = sp.x;
+      s.cull.y[k] = sp.y;
+      s.cull.k[k] = sp.row_k;
+      s.cull.a0[k] = sp.row_a0;
+      s.cull.a1[k] = sp.row_a1;
+      s.cull.ext_y[k] = sp.ext_y;
     }
+    const RowCullTile cull_tile{float(rect.y0), tile_x_lo, tile_x_hi, rect.h, live};
+    kernels.build_rows(s.cull, nb, cull_tile, s.rows, s.counts);
     for (int r = 0; r < rect.h; ++r) {
       if (!(live >> r & 1u) || s.counts[r] == 0) continue;
       kernels.blend_row(s.batch, s.rows[r], s.counts[r], float(rect.x0) + 0.5f,

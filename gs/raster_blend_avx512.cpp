@@ -80,4 +80,36 @@ void blend_row_avx512(const TileSplat* splats, const uint32_t* idx, int n, float
   counters->blended += blended;
 }
 
+void build_rows_avx512(const RowCullBatch& batch, int n, const RowCullTile& tile,
+                       uint32_t (*rows)[kRowListStride], int* counts) {
+  const __m512i lanes = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  const __m512 x_lo = _mm512_set1_ps(tile.x_lo), x_hi = _mm512_set1_ps(tile.x_hi);
+  const __m512 zero = _mm512_setzero_ps();
+  for (int r = 0; r < kTile; ++r) counts[r] = 0;
+  for (int r = 0; r < tile.h; ++r) {
+    if (!(tile.live >> r & 1u)) continue;
+    const __m512 py = _mm512_set1_ps(tile.y0 + float(r) + 0.5f);
+    uint32_t* list = rows[r];
+    int count = 0;
+    for (int c = 0; c < n; c += 16) {
+      const __mmask16 in = n - c >= 16 ? __mmask16(0xffff) : __mmask16((1u << (n - c)) - 1u);
+      const __m512 dy = _mm512_sub_ps(py, _mm512_load_ps(batch.y + c));
+      const __m512 half2 =
+          _mm512_sub_ps(_mm512_load_ps(batch.a0 + c), _mm512_mul_ps(_mm512_mul_ps(_mm512_load_ps(batch.a1 + c), dy), dy));
+      const __m512 centre = _mm512_add_ps(_mm512_load_ps(batch.x + c), _mm512_mul_ps(_mm512_load_ps(batch.k + c), dy));
+      const __m512 gap_lo = _mm512_sub_ps(x_lo, centre), gap_hi = _mm512_sub_ps(centre, x_hi);
+      __mmask16 ok = _mm512_mask_cmp_ps_mask(in, half2, zero, _CMP_GE_OQ);
+      ok &= _mm512_cmp_ps_mask(gap_lo, zero, _CMP_LE_OQ) |
+            _mm512_cmp_ps_mask(_mm512_mul_ps(gap_lo, gap_lo), half2, _CMP_LE_OQ);
+      ok &= _mm512_cmp_ps_mask(gap_hi, zero, _CMP_LE_OQ) |
+            _mm512_cmp_ps_mask(_mm512_mul_ps(gap_hi, gap_hi), half2, _CMP_LE_OQ);
+      // Register compress + full store (a compress straight to memory is slow on some cores).
+      const __m512i idx = _mm512_maskz_compress_epi32(ok, _mm512_add_epi32(lanes, _mm512_set1_epi32(c)));
+      _mm512_storeu_si512(list + count, idx);
+      count += __builtin_popcount(ok);
+    }
+    counts[r] = count;
+  }
+}
+
 }  // namespace macro::gs::raster

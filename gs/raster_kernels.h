@@ -11,7 +11,10 @@
 //   else: rgb += c alpha T, depth += z alpha T, inv_depth += alpha T / z, T = T'
 //
 // Paths: scalar (std::exp, the reference twin), AVX2 (2 x 8 lanes), AVX-512 (16 lanes), each with
-// a polynomial exp (relative error ~2e-7); the table is picked from active_isa().
+// a polynomial exp (relative error ~2e-7); the table is picked from active_isa(). The row lists
+// come from build_rows: scalar (also used by the AVX2 table) or AVX-512 (16 Gaussians per step,
+// compress-stored). Row lists only cull: an entry kept near the cutoff contributes < 1/255 and is
+// skipped by the exact per-pixel test, so the two builders give identical images.
 #pragma once
 
 #include <cstdint>
@@ -55,9 +58,33 @@ struct BlendCounters {
 using BlendRowFn = void (*)(const TileSplat* splats, const uint32_t* idx, int n, float px0,
                             float py, RowAccum* acc, BlendCounters* counters);
 
+// A batch's row-culling fields, structure of arrays (filled by the tile driver's gather).
+struct alignas(64) RowCullBatch {
+  float x[kBlendBatch], y[kBlendBatch];            // mean
+  float k[kBlendBatch], a0[kBlendBatch], a1[kBlendBatch];  // TileSplat row_k, row_a0, row_a1
+  float ext_y[kBlendBatch];
+};
+// A row list holds up to kBlendBatch entries; the stride leaves room for a full-vector store past
+// the last entry.
+inline constexpr int kRowListStride = kBlendBatch + 16;
+// The tile: rows y0 + r + 0.5 for r < h whose bit is set in `live`; columns x_lo..x_hi (pixel
+// centres).
+struct RowCullTile {
+  float y0, x_lo, x_hi;
+  int h;
+  uint32_t live;
+};
+// For every live row r, rows[r][0..counts[r]) = the batch entries (ascending) whose cutoff ellipse
+// crosses the row between x_lo and x_hi: with dy = row centre - y, half^2 = a0 - a1 dy^2 >= 0 and
+// the span x + k dy +- half meets [x_lo, x_hi] (compared in squares, no sqrt). counts[r] = 0 for
+// rows that are not live.
+using BuildRowsFn = void (*)(const RowCullBatch& batch, int n, const RowCullTile& tile,
+                             uint32_t (*rows)[kRowListStride], int* counts);
+
 struct RasterKernels {
   const char* name;
   BlendRowFn blend_row;
+  BuildRowsFn build_rows;
 };
 
 // The table for a path; unsupported paths fall back to the best lower one the build has.
@@ -72,5 +99,9 @@ void blend_row_avx2(const TileSplat* splats, const uint32_t* idx, int n, float p
                     RowAccum* acc, BlendCounters* counters);
 void blend_row_avx512(const TileSplat* splats, const uint32_t* idx, int n, float px0, float py,
                       RowAccum* acc, BlendCounters* counters);
+void build_rows_scalar(const RowCullBatch& batch, int n, const RowCullTile& tile,
+                       uint32_t (*rows)[kRowListStride], int* counts);
+void build_rows_avx512(const RowCullBatch& batch, int n, const RowCullTile& tile,
+                       uint32_t (*rows)[kRowListStride], int* counts);
 
 }  // namespace macro::gs::raster
