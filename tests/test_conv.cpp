@@ -1,6 +1,8 @@
 // conv2d (attention/runtime/conv.h): every kernel path against the double-precision loop nest
 // (conv2d_reference), on the networks' conv kinds at small odd sizes.
 // Bound: max |y - ref| <= 1e-5 * max |ref| (fp32 accumulation over K = Cin*KH*KW <= 1000).
+// bf16 weights: the same bound against the reference on bf16-rounded inputs and weights, and
+// rel L2 <= 1e-2 against the fp32 reference.
 #include <catch2/catch.hpp>
 
 #include <cmath>
@@ -9,6 +11,7 @@
 
 #include "attention/runtime/conv.h"
 #include "attention/runtime/cpu.h"
+#include "attention/runtime/half.h"
 #include "test_support.h"
 
 namespace macro {
@@ -107,6 +110,39 @@ TEST_CASE("conv2d: 1x1 (shortcut, quant_conv), with residual, every path", "[ker
     REQUIRE(set_isa(isa));
     check_conv(shape(1, 33, 9, 10, 65, 1, 1, 0, 0, 0, 0), true, true, nullptr);
     check_conv(shape(2, 8, 3, 5, 8, 1, 1, 0, 0, 0, 0), true, false, nullptr);
+  }
+}
+
+TEST_CASE("conv2d: bf16 weights and activations, every path", "[kernels][conv]") {
+  IsaGuard guard;
+  auto round = [](std::vector<float> v) {
+    for (float& x : v) x = bf16_to_f32(f32_to_bf16(x));
+    return v;
+  };
+  const Conv2dShape shapes[] = {shape(1, 40, 13, 35, 37, 3, 1, 1, 1, 1, 1),
+                                shape(2, 9, 11, 15, 7, 3, 2, 0, 0, 1, 1),
+                                shape(1, 33, 9, 10, 65, 1, 1, 0, 0, 0, 0),
+                                shape(1, 3, 5, 6, 4, 3, 1, 1, 1, 1, 1)};  // odd K = 27
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    for (const Conv2dShape& s : shapes) {
+      auto x = random_vec(size_t(s.n * s.c_in * s.h * s.w), 1);
+      auto w = random_vec(size_t(s.c_out * s.c_in * s.kh * s.kw), 2);
+      auto b = random_vec(size_t(s.c_out), 3);
+      const size_t ny = size_t(s.n * s.c_out * s.out_h() * s.out_w());
+      auto r = random_vec(ny, 4);
+      std::vector<float> ref16(ny), ref32(ny), y(ny, NAN);
+      auto x16 = round(x), w16 = round(w);
+      conv2d_reference(s, x16.data(), w16.data(), b.data(), r.data(), ref16.data());
+      conv2d_reference(s, x.data(), w.data(), b.data(), r.data(), ref32.data());
+      ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, s.kh, s.kw,
+                                         WeightType::kBf16);
+      conv2d(s, x.data(), cw, r.data(), y.data(), nullptr);
+      INFO(isa_name(isa) << " Cin=" << s.c_in << " Cout=" << s.c_out << " k=" << s.kh
+                         << " s=" << s.stride);
+      REQUIRE(max_rel_err(y, ref16) <= 1e-5);
+      REQUIRE(test::compare(y, ref32).rel_l2 <= 1e-2);
+    }
   }
 }
 

@@ -42,17 +42,20 @@ struct Conv2dShape {
   }
 };
 
-// Conv weights [Cout, Cin, KH, KW] (+ bias [Cout]) packed once for one kernel path.
+// Conv weights [Cout, Cin, KH, KW] (+ bias [Cout]) packed once for one kernel path. With
+// WeightType::kBf16 the weights and the gathered input are rounded to bf16 (fp32 accumulation and
+// output; about 2x the fp32 throughput on AVX512-BF16, error ~ 2^-9 relative per product).
 class ConvWeights {
  public:
   ConvWeights() = default;
   static ConvWeights pack(const float* w, const float* bias, int64_t c_out, int64_t c_in, int kh,
-                          int kw, Isa isa = active_isa());
+                          int kw, WeightType type = WeightType::kF32, Isa isa = active_isa());
   int64_t c_out() const { return c_out_; }
   int64_t c_in() const { return c_in_; }
   int kh() const { return kh_; }
   int kw() const { return kw_; }
   bool has_bias() const { return !bias_.empty(); }
+  WeightType type() const { return packed_.type(); }
   const PackedWeights& packed() const { return packed_; }
   const float* bias() const { return bias_.empty() ? nullptr : bias_.data(); }
 

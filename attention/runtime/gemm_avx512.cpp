@@ -58,7 +58,17 @@ inline void store_tile(const MicroTile& t, const __m512* c0, const __m512* c1) {
 
 constexpr int kMrF32 = 12;
 
+// The C tile is read back after the K loop when accumulating: start fetching it now.
+inline void prefetch_c(const MicroTile& t, int mr) {
+  if (!t.load_c) return;
+  for (int r = 0; r < mr && r < t.m; ++r) {
+    _mm_prefetch(reinterpret_cast<const char*>(t.c + r * t.ldc), _MM_HINT_T0);
+    _mm_prefetch(reinterpret_cast<const char*>(t.c + r * t.ldc + 16), _MM_HINT_T0);
+  }
+}
+
 void micro_f32(const MicroTile& t) {
+  prefetch_c(t, kMrF32);
   __m512 c0[kMrF32], c1[kMrF32];
 #pragma GCC unroll 16
   for (int r = 0; r < kMrF32; ++r) c0[r] = c1[r] = _mm512_setzero_ps();

@@ -2,7 +2,7 @@
 // and as a fraction of the machine's own peak measured in the same run (an FMA loop, a bf16
 // dot-product loop, an AMX loop when present), plus the scalar twin on one shape for the ratio.
 //
-//   bench kernels [--threads N] [--reps R] [--quick] [--no-conv] [--no-gemm]
+//   bench kernels [--threads N] [--reps R] [--quick] [--no-conv] [--no-gemm] [--only SUBSTR]
 // --quick crops the conv inputs (the full 512x512 / 536x960 layers take seconds each).
 #include <time.h>
 
@@ -84,8 +84,11 @@ struct Peaks {
 // against the machine as it was at that moment: it is shared with builds) and prints
 // wall: GFLOP/s and % of the wall peak of the same thread count; cpu: GFLOP per CPU-second and %
 // of the per-CPU-second peak.
-void row(const char* what, const std::string& shape, double flop, int reps,
-         const std::function<void()>& fn, double (*probe)(int64_t), ThreadPool* pool) {
+std::string g_only;  // --only SUBSTR: run the rows whose name contains SUBSTR
+
+Timing row(const char* what, const std::string& shape, double flop, int reps,
+           const std::function<void()>& fn, double (*probe)(int64_t), ThreadPool* pool) {
+  if (!g_only.empty() && std::string(what).find(g_only) == std::string::npos) return {};
   const Rate p0 = probe_peak(probe, pool, 3);
   const Timing t = measure(reps, fn);
   const Rate p1 = probe_peak(probe, pool, 3);
@@ -96,6 +99,7 @@ void row(const char* what, const std::string& shape, double flop, int reps,
               " | peak %6.1f\n",
               what, shape.c_str(), threads, t.wall * 1e3, gw, 100.0 * gw / peak.wall, gc,
               100.0 * gc / peak.cpu, peak.wall);
+  return t;
 }
 
 int run(int argc, char** argv) {
@@ -106,6 +110,7 @@ int run(int argc, char** argv) {
     if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threads = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--reps") && i + 1 < argc) reps = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--quick")) quick = true;
+    else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) g_only = argv[++i];
     else if (!std::strcmp(argv[i], "--no-conv")) do_conv = false;
     else if (!std::strcmp(argv[i], "--no-gemm")) do_gemm = false;
     else {
@@ -210,16 +215,16 @@ int run(int argc, char** argv) {
       const double flop = 2.0 * double(m) * n * k;
       std::printf("\nGEMM, unpacked operands, and the scalar twin (baseline):\n");
       auto call = [&] { gemm_f32(m, n, k, a.data(), k, bm.data(), k, c.data(), n, p, pool); };
-      const Timing t = measure(reps, call);
-      row("f32 gemm_f32 trans_b", "M1024 K640 N640", flop, reps, call, kt.probe_fma, pool);
+      const Timing t =
+          row("f32 gemm_f32 trans_b", "M1024 K640 N640", flop, reps, call, kt.probe_fma, pool);
       const Isa saved = active_isa();
       (void)set_isa(Isa::kScalar);
-      const Timing ts = measure(3, call);
-      row("f32 gemm_f32 trans_b, SCALAR twin", "M1024 K640 N640", flop, 3, call, kt.probe_fma,
+      const Timing ts = row("f32 gemm_f32 trans_b, SCALAR twin", "M1024 K640 N640", flop, 3, call, kt.probe_fma,
           pool);
       (void)set_isa(saved);
-      std::printf("  speed-up of %s over the scalar twin: %.1fx (wall), %.1fx (cpu)\n",
-                  isa_name(saved), ts.wall / t.wall, ts.cpu / t.cpu);
+      if (t.wall > 0 && ts.wall > 0)
+        std::printf("  speed-up of %s over the scalar twin: %.1fx (wall), %.1fx (cpu)\n",
+                    isa_name(saved), ts.wall / t.wall, ts.cpu / t.cpu);
     }
   }
 
@@ -241,7 +246,7 @@ int run(int argc, char** argv) {
         {256, 256, 256, 2, 0, 0, 1, 1, 3, "VAE enc downsample 256ch s2"},
         {512, 128, 128, 1, 0, 0, 0, 0, 1, "1x1 512ch @128x128"},
     };
-    std::printf("\nconv2d (NCHW, implicit GEMM, fp32)%s:\n",
+    std::printf("\nconv2d (NCHW, implicit GEMM; fp32, and bf16 weights+activations)%s:\n",
                 quick ? " [--quick: spatial sizes cropped by 4x per side]" : "");
     for (C cv : convs) {
       if (quick) {
@@ -257,13 +262,17 @@ int run(int argc, char** argv) {
       auto b = random_vec(size_t(s.c_out), 8);
       std::vector<float> y(size_t(s.c_out * s.out_h() * s.out_w()));
       ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, s.kh, s.kw);
+      ConvWeights cw16 = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, s.kh, s.kw,
+                                           WeightType::kBf16);
       const double flop = 2.0 * double(s.out_h()) * s.out_w() * s.c_in * s.c_out * s.kh * s.kw;
       const int r = flop > 5e10 ? std::max(3, reps / 2) : reps;
       char shape[64];
       std::snprintf(shape, sizeof shape, "C%ld %ldx%ld s%d", long(cv.c), long(cv.h), long(cv.w),
                     cv.stride);
-      row(cv.what, shape, flop, r, [&] { conv2d(s, x.data(), cw, nullptr, y.data(), pool); },
-          kt.probe_fma, pool);
+      row((std::string("f32  ") + cv.what).c_str(), shape, flop, r,
+          [&] { conv2d(s, x.data(), cw, nullptr, y.data(), pool); }, kt.probe_fma, pool);
+      row((std::string("bf16 ") + cv.what).c_str(), shape, flop, r,
+          [&] { conv2d(s, x.data(), cw16, nullptr, y.data(), pool); }, bf16_probe, pool);
     }
   }
   return 0;
