@@ -14,7 +14,7 @@ constexpr const char* kUsage =
     "usage: macro render --scene FILE --cameras FILE --camera NAME\n"
     "         [--out-png F.png] [--out-exr F.exr] [--out-tensors F.safetensors]\n"
     "         [--out-depth-png F.png] [--mode classic|antialiased|mip] [--background r,g,b]\n"
-    "         [--sh-degree D] [--threads N] [--quiet]\n"
+    "         [--sh-degree D] [--max-gaussians N] [--threads N] [--quiet]\n"
     "  --scene      .ply (Inria/gsplat or SuperSplat compressed), .splat or .spz\n"
     "  --cameras    our cameras.json, a COLMAP sparse folder, transforms.json or a DL3DV split\n"
     "  --out-exr    float channels R,G,B (colour), A (alpha), depth (depth_sum/alpha, 0 if empty),\n"
@@ -40,6 +40,8 @@ int run_render(std::vector<std::string> argv) {
   const std::string mode = args.value_or("--mode", "classic");
   const std::vector<double> bg = args.doubles_or("--background", {0, 0, 0}, 3);
   job.options.sh_degree_cap = args.int_or("--sh-degree", 3, 0, 3);
+  job.limits.max_gaussians = size_t(
+      args.int_or("--max-gaussians", int(job.limits.max_gaussians), 1, 2147483647));
   if (Status s = args.finish(); !s) {
     return fail("render", Status::error(s.message() + " (macro render --help for usage)"));
   }

@@ -23,8 +23,8 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
 Status check_output(const char* kind, const std::string& path) {
   if (path.empty()) return Status::ok();
   namespace fs = std::filesystem;
-  std::string parent = fs::path(path).parent_path().string();
-  if (parent.empty()) parent = ".";
+  const fs::path folder = fs::path(path).parent_path();
+  const std::string parent = folder.empty() ? std::string(".") : folder.string();
   if (is_directory(path)) {
     return Status::error(std::string(kind) + ": " + path + ": is a folder, expected a file path");
   }

@@ -10,6 +10,7 @@
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/safetensors.h"
 #include "gs/image_io.h"
+#include "gs/render_job.h"
 #include "test_support.h"
 
 using namespace macro;
@@ -171,6 +172,7 @@ TEST_CASE("macro render refuses bad input by name and leaves no files", "[render
       {"background out of range", scene_flags() + outs + " --background 2,0,0", {"--background"}},
       {"bad mode", scene_flags() + outs + " --mode fancy", {"--mode", "fancy"}},
       {"bad sh degree", scene_flags() + outs + " --sh-degree 7", {"--sh-degree"}},
+      {"more Gaussians than allowed", scene_flags() + outs + " --max-gaussians 1000", {"scene.ply"}},
       {"unknown flag", scene_flags() + outs + " --colour red", {"--colour"}},
       {"no --scene", "--cameras x.json --camera closeup" + outs, {"--scene"}},
       {"no output", scene_flags(), {"--out-png"}},
@@ -223,4 +225,36 @@ TEST_CASE("macro synth writes the same files for the same seed and refuses bad f
   Run noout = run_macro("synth --seed 2", logs);
   CHECK(noout.rc != 0);
   CHECK(contains(noout.err, "--out"));
+}
+
+TEST_CASE("a failed render job removes the outputs it already wrote", "[render][render_cli]") {
+  test::TempDir dir("render_job");
+  gs::RenderResult r;
+  r.width = 4;
+  r.height = 3;
+  r.color.assign(36, 0.5f);
+  r.alpha.assign(12, 1.f);
+  r.depth_sum.assign(12, 2.f);
+  r.inv_depth_sum.assign(12, 0.5f);
+  gs::RenderOutputs o;
+  o.png = dir.file("a.png");
+  o.exr = dir.file("gone/a.exr");  // fails after the PNG was written
+  std::vector<std::string> written;
+  Status s = gs::write_render_outputs(r, o, "scene", "cam", gs::RasterMode::kClassic, &written);
+  REQUIRE_FALSE(s);
+  CHECK(contains(s.message(), "gone/a.exr"));
+  CHECK(files_in(dir.path).empty());
+  // The up-front check catches it before anything is rendered.
+  Status c = gs::check_render_outputs(o);
+  REQUIRE_FALSE(c);
+  CHECK(contains(c.message(), "--out-exr"));
+  // Buffers that do not match the size are refused.
+  o.exr.clear();
+  r.alpha.pop_back();
+  CHECK_FALSE(gs::write_render_outputs(r, o, "scene", "cam", gs::RasterMode::kClassic));
+  CHECK(files_in(dir.path).empty());
+  // Mode names round-trip.
+  for (gs::RasterMode m : {gs::RasterMode::kClassic, gs::RasterMode::kAntialiased, gs::RasterMode::kMip}) {
+    CHECK(gs::parse_raster_mode(gs::raster_mode_name(m)).value() == m);
+  }
 }
