@@ -1,0 +1,67 @@
+// The single-step Difix / Difix-ref pipeline on a diffusers pipeline folder.
+//
+// Legend: V views (view 0 = the target to fix, then the references), H x W image, h x w latent,
+// Lc x Dc text context (77 x 1024 for SD-Turbo).
+//
+// Folder: model_index.json, unet/ (UNet2DConditionModel), vae/ (Difix AutoencoderKL),
+// scheduler/scheduler_config.json (optional: num_train_timesteps, beta_start, beta_end; the
+// schedule must be scaled_linear with epsilon prediction), text_encoder/ and tokenizer/ (not read
+// here: the caller supplies the text embedding `ctx`).
+//
+// step(images [V,3,H,W] in [-1,1], ctx [V or 1, Lc, Dc], masks):
+//   z   = vae.encode(images).z                      [V, 4, h, w]   (posterior mean, scaled)
+//   eps = unet(z, t, ctx, masks)                    [V, 4, h, w]   (attn1 joint over the views)
+//   z0  = (z - sqrt(1 - abar_t) eps) / sqrt(abar_t) [V, 4, h, w]
+//   image = vae.decode(z0[0], skips of view 0)      [1, 3, H, W]   (not clamped)
+// t = 199 by default. Only view 0's encoder skips are kept.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "attention/nets/scheduler.h"
+#include "attention/nets/unet.h"
+#include "attention/nets/vae.h"
+
+namespace macro {
+class SafeTensors;
+}
+
+namespace macro::nets {
+
+struct DifixOutputs {
+  Tensor z, eps, z0;  // [V, L, h, w]
+  Tensor image;       // [1, 3, H, W]
+};
+
+class DifixPipeline {
+ public:
+  static bool is_pipeline_folder(const std::string& folder);  // model_index.json + unet/ + vae/
+  static Result<std::unique_ptr<DifixPipeline>> load(const std::string& folder, Precision precision);
+
+  Result<DifixOutputs> step(const TensorView& images, const TensorView& ctx, const UNetMasks& masks,
+                            ThreadPool* pool, int timestep = kDefaultTimestep) const;
+
+  static constexpr int kDefaultTimestep = 199;
+  const UNet2DConditionModel& unet() const { return *unet_; }
+  const DifixVae& vae() const { return *vae_; }
+  const DdpmSchedule& schedule() const { return schedule_; }
+
+ private:
+  std::unique_ptr<UNet2DConditionModel> unet_;
+  std::unique_ptr<DifixVae> vae_;
+  DdpmSchedule schedule_;
+};
+
+// scheduler/scheduler_config.json: fields present override the SD-Turbo defaults; an unsupported
+// beta_schedule or prediction_type is an error naming the field.
+Result<DdpmSchedule> load_ddpm_schedule(const std::string& path);
+
+// `macro nn-run` for a U-Net, a Difix VAE and a pipeline folder (nn_run_difix.cpp; dispatched by
+// nn_run.cpp). Inputs are validated by name, dtype, shape and finiteness before anything runs.
+struct NnRunOptions;
+Status nn_run_unet(const NnRunOptions& opt, const SafeTensors& in);
+Status nn_run_vae(const NnRunOptions& opt, const SafeTensors& in);
+Status nn_run_difix(const NnRunOptions& opt, const SafeTensors& in);
+
+}  // namespace macro::nets

@@ -1,0 +1,427 @@
+// Shared network layers (see layers.h): parameter walks, one-time packing, planned forwards.
+#include "attention/nets/layers.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+
+#include "attention/runtime/file_io.h"
+#include "attention/runtime/ops.h"
+
+namespace macro::nets {
+
+std::string join_name(const std::string& prefix, const std::string& name) {
+  return prefix.empty() ? name : prefix + "." + name;
+}
+
+Result<std::string> component_weights_path(const std::string& folder) {
+  for (const char* name :
+       {"diffusion_pytorch_model.safetensors", "diffusion_pytorch_model.safetensors.index.json",
+        "model.safetensors"}) {
+    const std::string p = folder + "/" + name;
+    if (file_exists(p)) return p;
+  }
+  return Status::error(folder +
+                       ": expected diffusion_pytorch_model.safetensors (or its .index.json), "
+                       "found neither");
+}
+
+// ---- workspace ---------------------------------------------------------------------------------
+
+float* Workspace::alloc(int64_t floats) {
+  MACRO_CHECK(floats >= 0);
+  const size_t bytes = Arena::footprint(size_t(floats) * sizeof(float));
+  used_ += bytes;
+  peak_ = std::max(peak_, used_);
+  if (!arena_) return nullptr;
+  return static_cast<float*>(arena_->alloc(size_t(floats) * sizeof(float)));
+}
+
+void Workspace::reset(size_t mark) {
+  MACRO_CHECK(mark <= used_);
+  used_ = mark;
+  if (arena_) arena_->reset(mark);
+}
+
+namespace {
+
+// parallel_for on the run's pool, or inline.
+template <typename Fn>
+void parallel(const Run& r, size_t n, Fn&& fn, size_t grain = 0) {
+  if (n == 0) return;
+  if (r.pool && r.pool->size() > 1) {
+    r.pool->parallel_for(n, [&](size_t b, size_t e, int) { fn(b, e); }, grain);
+  } else {
+    fn(size_t(0), n);
+  }
+}
+
+constexpr int64_t kChunk = 1 << 14;  // elements per task of the elementwise helpers
+
+}  // namespace
+
+void round_if_bf16(const Run& r, float* x, int64_t n) {
+  if (r.planning() || !r.bf16()) return;
+  const size_t chunks = size_t((n + kChunk - 1) / kChunk);
+  parallel(r, chunks, [&](size_t b, size_t e) {
+    for (size_t c = b; c < e; ++c) {
+      const int64_t lo = int64_t(c) * kChunk, hi = std::min(n, lo + kChunk);
+      round_to_bf16(x + lo, hi - lo);
+    }
+  });
+}
+
+void copy_floats(const Run& r, float* dst, const float* src, int64_t n) {
+  if (r.planning() || dst == src) return;
+  const size_t chunks = size_t((n + kChunk - 1) / kChunk);
+  parallel(r, chunks, [&](size_t b, size_t e) {
+    for (size_t c = b; c < e; ++c) {
+      const int64_t lo = int64_t(c) * kChunk, hi = std::min(n, lo + kChunk);
+      std::memcpy(dst + lo, src + lo, size_t(hi - lo) * sizeof(float));
+    }
+  });
+}
+
+void tokens_to_nchw_add(const Run& r, float* dst, const float* src, const float* tokens,
+                        int64_t ldt, int64_t n, int64_t c, int64_t hw) {
+  if (r.planning()) return;
+  constexpr int64_t kTile = 32;  // pixels per task: 32 token rows stay in cache across channels
+  const int64_t tiles = (hw + kTile - 1) / kTile;
+  parallel(r, size_t(n * tiles), [&](size_t b, size_t e) {
+    for (size_t t = b; t < e; ++t) {
+      const int64_t i = int64_t(t) / tiles, p0 = (int64_t(t) % tiles) * kTile;
+      const int64_t p1 = std::min(hw, p0 + kTile);
+      const float* tok = tokens + (i * hw) * ldt;
+      for (int64_t ch = 0; ch < c; ++ch) {
+        const int64_t base = (i * c + ch) * hw;
+        for (int64_t p = p0; p < p1; ++p) dst[base + p] = src[base + p] + tok[p * ldt + ch];
+      }
+    }
+  });
+}
+
+void run_attention(const Run& r, const AttentionArgs& a) {
+  if (r.planning()) return;
+  Status s = attention(a, r.pool ? *r.pool : ThreadPool::global());
+  if (!s) {
+    std::fprintf(stderr, "attention: %s\n", s.message().c_str());
+    MACRO_CHECK(s.is_ok());
+  }
+}
+
+// ---- Linear ------------------------------------------------------------------------------------
+
+void Linear::init(int64_t in_features, int64_t out_features, bool with_bias) {
+  in = in_features;
+  out = out_features;
+  has_bias = with_bias;
+}
+
+void Linear::visit(const std::string& prefix, ParamVisitor& v) {
+  v.param(join_name(prefix, "weight"), weight, {out, in});
+  if (has_bias) v.param(join_name(prefix, "bias"), bias, {out});
+}
+
+void Linear::pack(Precision p) {
+  MACRO_CHECK(weight.loaded());
+  packed = PackedWeights::pack(weight.data, out, in, in,
+                               p == Precision::kBf16 ? WeightType::kBf16 : WeightType::kF32);
+  if (has_bias) b.assign(bias.data, bias.data + out);
+  weight = Param();
+  bias = Param();
+}
+
+void Linear::forward(const Run& r, int64_t m, const float* x, int64_t ldx, float* y, int64_t ldy,
+                     const float* residual, bool trans_x) const {
+  if (r.planning() || m == 0) return;
+  GemmParams p;
+  p.trans_a = trans_x;
+  p.bias_n = b.empty() ? nullptr : b.data();
+  if (residual) {
+    p.residual = residual;
+    p.ldr = ldy;
+  }
+  gemm_packed(m, x, ldx, packed, y, ldy, p, r.pool);
+}
+
+void FusedLinear::pack(const std::vector<const Linear*>& parts, Precision p) {
+  MACRO_CHECK(!parts.empty());
+  in = parts[0]->in;
+  out = 0;
+  bool any_bias = false;
+  for (const Linear* l : parts) {
+    MACRO_CHECK(l->in == in && l->weight.loaded());
+    out += l->out;
+    any_bias |= l->has_bias;
+  }
+  std::vector<float> w(size_t(out * in));
+  b.assign(any_bias ? size_t(out) : 0, 0.0f);
+  int64_t row = 0;
+  for (const Linear* l : parts) {
+    std::memcpy(w.data() + row * in, l->weight.data, size_t(l->out * in) * sizeof(float));
+    if (l->has_bias) std::memcpy(b.data() + row, l->bias.data, size_t(l->out) * sizeof(float));
+    row += l->out;
+  }
+  packed = PackedWeights::pack(w.data(), out, in, in,
+                               p == Precision::kBf16 ? WeightType::kBf16 : WeightType::kF32);
+}
+
+void FusedLinear::forward(const Run& r, int64_t m, const float* x, int64_t ldx, float* y,
+                          int64_t ldy, bool trans_x) const {
+  if (r.planning() || m == 0) return;
+  GemmParams p;
+  p.trans_a = trans_x;
+  p.bias_n = b.empty() ? nullptr : b.data();
+  gemm_packed(m, x, ldx, packed, y, ldy, p, r.pool);
+}
+
+// ---- Conv2d ------------------------------------------------------------------------------------
+
+void Conv2d::init(int64_t cin, int64_t cout, int kernel, bool with_bias) {
+  c_in = cin;
+  c_out = cout;
+  k = kernel;
+  has_bias = with_bias;
+}
+
+void Conv2d::visit(const std::string& prefix, ParamVisitor& v) {
+  v.param(join_name(prefix, "weight"), weight, {c_out, c_in, k, k});
+  if (has_bias) v.param(join_name(prefix, "bias"), bias, {c_out});
+}
+
+void Conv2d::pack(Precision p) {
+  MACRO_CHECK(weight.loaded());
+  const int64_t n = c_out * c_in * k * k;
+  std::vector<float> w(weight.data, weight.data + n);
+  if (weight_scale != 1.0f)
+    for (float& x : w) x *= weight_scale;
+  if (p == Precision::kBf16) round_to_bf16(w.data(), n);
+  packed = ConvWeights::pack(w.data(), has_bias ? bias.data : nullptr, c_out, c_in, k, k);
+  weight = Param();
+  bias = Param();
+}
+
+void Conv2d::forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* y,
+                     const float* residual, int stride, int pt, int pl, int pb, int pr) const {
+  if (!r.bf16()) return forward_scratch(r, const_cast<float*>(x), n, h, w, y, residual, stride, pt,
+                                        pl, pb, pr);  // fp32: x is only read
+  ScratchFrame frame(r);
+  float* t = r.alloc(n * c_in * h * w);
+  copy_floats(r, t, x, n * c_in * h * w);
+  forward_scratch(r, t, n, h, w, y, residual, stride, pt, pl, pb, pr);
+}
+
+void Conv2d::forward_scratch(const Run& r, float* x, int64_t n, int64_t h, int64_t w, float* y,
+                             const float* residual, int stride, int pt, int pl, int pb,
+                             int pr) const {
+  if (r.planning()) return;
+  round_if_bf16(r, x, n * c_in * h * w);
+  Conv2dShape s;
+  s.n = n, s.c_in = c_in, s.h = h, s.w = w, s.c_out = c_out, s.kh = k, s.kw = k;
+  s.stride = stride;
+  s.pad_top = pt, s.pad_left = pl, s.pad_bottom = pb, s.pad_right = pr;
+  conv2d(s, x, packed, residual, y, r.pool);
+}
+
+// ---- norms -------------------------------------------------------------------------------------
+
+void GroupNorm::init(int64_t channels, int num_groups, float epsilon) {
+  c = channels;
+  groups = num_groups;
+  eps = epsilon;
+}
+
+void GroupNorm::visit(const std::string& prefix, ParamVisitor& v) {
+  v.param(join_name(prefix, "weight"), weight, {c});
+  v.param(join_name(prefix, "bias"), bias, {c});
+}
+
+void GroupNorm::pack() {
+  gamma.assign(weight.data, weight.data + c);
+  beta.assign(bias.data, bias.data + c);
+  weight = Param();
+  bias = Param();
+}
+
+void GroupNorm::forward(const Run& r, float* dst, const float* src, int64_t n, int64_t hw,
+                        bool silu) const {
+  if (r.planning()) return;
+  GroupNormParams p;
+  p.groups = groups;
+  p.eps = eps;
+  p.act = silu ? Act::kSilu : Act::kNone;
+  group_norm(dst, src, gamma.data(), beta.data(), n, c, hw, p, r.pool);
+}
+
+void LayerNorm::init(int64_t features, float epsilon) {
+  d = features;
+  eps = epsilon;
+}
+
+void LayerNorm::visit(const std::string& prefix, ParamVisitor& v) {
+  v.param(join_name(prefix, "weight"), weight, {d});
+  v.param(join_name(prefix, "bias"), bias, {d});
+}
+
+void LayerNorm::pack() {
+  gamma.assign(weight.data, weight.data + d);
+  beta.assign(bias.data, bias.data + d);
+  weight = Param();
+  bias = Param();
+}
+
+void LayerNorm::forward(const Run& r, float* dst, const float* src, int64_t m) const {
+  if (r.planning()) return;
+  layer_norm(dst, src, gamma.data(), beta.data(), m, d, eps, r.pool);
+}
+
+// ---- ResnetBlock2D -----------------------------------------------------------------------------
+
+void ResnetBlock2D::init(int64_t cin, int64_t cout, int64_t temb_channels, int groups, float eps) {
+  c_in = cin;
+  c_out = cout;
+  temb = temb_channels;
+  norm1.init(cin, groups, eps);
+  conv1.init(cin, cout, 3);
+  norm2.init(cout, groups, eps);
+  conv2.init(cout, cout, 3);
+  if (temb > 0) time_emb_proj.init(temb, cout, true);
+  has_shortcut = cin != cout;
+  if (has_shortcut) conv_shortcut.init(cin, cout, 1);
+}
+
+void ResnetBlock2D::visit(const std::string& prefix, ParamVisitor& v) {
+  norm1.visit(join_name(prefix, "norm1"), v);
+  conv1.visit(join_name(prefix, "conv1"), v);
+  if (temb > 0) time_emb_proj.visit(join_name(prefix, "time_emb_proj"), v);
+  norm2.visit(join_name(prefix, "norm2"), v);
+  conv2.visit(join_name(prefix, "conv2"), v);
+  if (has_shortcut) conv_shortcut.visit(join_name(prefix, "conv_shortcut"), v);
+}
+
+void ResnetBlock2D::pack(Precision p) {
+  norm1.pack();
+  norm2.pack();
+  conv1.pack(p);
+  conv2.pack(p);
+  if (temb > 0) time_emb_proj.pack(p);
+  if (has_shortcut) conv_shortcut.pack(p);
+}
+
+void ResnetBlock2D::forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w,
+                            const float* temb_silu, float* out) const {
+  const int64_t hw = h * w;
+  ScratchFrame frame(r);
+  float* t1 = r.alloc(n * c_in * hw);   // SiLU(GN1(x)), then conv1's bf16-rounded input
+  float* t2 = r.alloc(n * c_out * hw);  // conv1 output (+ temb), then SiLU(GN2(.))
+  float* tp = temb > 0 ? r.alloc(c_out) : nullptr;
+  const float* residual = x;
+  if (has_shortcut) {
+    conv_shortcut.forward(r, x, n, h, w, out, nullptr, 1, 0, 0, 0, 0);  // out = shortcut(x)
+    residual = out;
+  }
+  norm1.forward(r, t1, x, n, hw, /*silu=*/true);
+  conv1.forward_scratch(r, t1, n, h, w, t2, nullptr, 1, 1, 1, 1, 1);
+  if (temb > 0) {
+    MACRO_CHECK(temb_silu != nullptr || r.planning());
+    time_emb_proj.forward(r, 1, temb_silu, temb, tp, c_out);  // [Cout]
+    if (!r.planning())
+      for (int64_t i = 0; i < n; ++i)
+        add_channel_broadcast(t2 + i * c_out * hw, t2 + i * c_out * hw, tp, c_out, hw, r.pool);
+  }
+  norm2.forward(r, t2, t2, n, hw, /*silu=*/true);
+  conv2.forward_scratch(r, t2, n, h, w, out, residual, 1, 1, 1, 1, 1);  // out = residual + h
+}
+
+// ---- resampling --------------------------------------------------------------------------------
+
+void Downsample2D::init(int64_t channels, bool vae_pad) {
+  conv.init(channels, channels, 3);
+  vae_padding = vae_pad;
+}
+
+void Downsample2D::out_size(int64_t h, int64_t w, int64_t* oh, int64_t* ow) const {
+  if (vae_padding) {
+    *oh = (h + 1 - 3) / 2 + 1;
+    *ow = (w + 1 - 3) / 2 + 1;
+  } else {
+    *oh = (h + 2 - 3) / 2 + 1;
+    *ow = (w + 2 - 3) / 2 + 1;
+  }
+}
+
+void Downsample2D::forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w,
+                           float* out) const {
+  if (vae_padding)
+    conv.forward(r, x, n, h, w, out, nullptr, 2, 0, 0, 1, 1);
+  else
+    conv.forward(r, x, n, h, w, out, nullptr, 2, 1, 1, 1, 1);
+}
+
+void Upsample2D::init(int64_t channels) { conv.init(channels, channels, 3); }
+
+void Upsample2D::forward(const Run& r, const float* x, int64_t n, int64_t c, int64_t h, int64_t w,
+                         int64_t oh, int64_t ow, float* out) const {
+  ScratchFrame frame(r);
+  float* t = r.alloc(n * c * oh * ow);
+  if (!r.planning()) upsample_nearest(t, x, n * c, h, w, oh, ow, r.pool);
+  conv.forward_scratch(r, t, n, oh, ow, out, nullptr, 1, 1, 1, 1, 1);
+}
+
+// ---- VAE attention -----------------------------------------------------------------------------
+
+void VaeAttention::init(int64_t channels, int groups, float eps) {
+  c = channels;
+  group_norm.init(channels, groups, eps);
+  to_q.init(c, c, true);
+  to_k.init(c, c, true);
+  to_v.init(c, c, true);
+  to_out.init(c, c, true);
+}
+
+void VaeAttention::visit(const std::string& prefix, ParamVisitor& v) {
+  group_norm.visit(join_name(prefix, "group_norm"), v);
+  to_q.visit(join_name(prefix, "to_q"), v);
+  to_k.visit(join_name(prefix, "to_k"), v);
+  to_v.visit(join_name(prefix, "to_v"), v);
+  to_out.visit(join_name(prefix, "to_out.0"), v);
+}
+
+void VaeAttention::pack(Precision p) {
+  group_norm.pack();
+  qkv.pack({&to_q, &to_k, &to_v}, p);
+  to_q = Linear();
+  to_k = Linear();
+  to_v = Linear();
+  to_out.pack(p);
+}
+
+void VaeAttention::forward(const Run& r, float* x, int64_t n, int64_t hw) const {
+  ScratchFrame frame(r);
+  float* g = r.alloc(n * c * hw);     // GN(x), NCHW
+  float* q = r.alloc(hw * 3 * c);     // [HW, 3C] q | k | v of one item
+  float* a = r.alloc(hw * c);         // attention output [HW, C]
+  float* o = r.alloc(hw * c);         // to_out [HW, C]
+  group_norm.forward(r, g, x, n, hw, false);
+  for (int64_t i = 0; i < n; ++i) {
+    qkv.forward(r, hw, g + i * c * hw, hw, q, 3 * c, /*trans_x=*/true);
+    round_if_bf16(r, q, hw * 3 * c);
+    AttentionArgs args;
+    args.q = q;
+    args.k = q + c;
+    args.v = q + 2 * c;
+    args.q_stride = args.k_stride = args.v_stride = size_t(3 * c);
+    args.out = a;
+    args.out_stride = size_t(c);
+    args.nq = args.nk = int(hw);
+    args.heads = 1;
+    args.head_dim = int(c);
+    args.scale = float(1.0 / std::sqrt(double(c)));
+    run_attention(r, args);
+    to_out.forward(r, hw, a, c, o, c);
+    tokens_to_nchw_add(r, x + i * c * hw, x + i * c * hw, o, c, 1, c, hw);
+  }
+}
+
+}  // namespace macro::nets

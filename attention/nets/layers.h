@@ -1,0 +1,223 @@
+// Building blocks shared by the Difix U-Net and VAE, as structs mirroring diffusers tensor names.
+//
+// Legend: N batch (views), C / Cin / Cout channels, H x W spatial, HW = H*W, M token rows, D
+// features, T temb features. Activations are fp32 NCHW [N, C, HW] or token-major [M, D].
+//
+// Life cycle of every module:
+//   1. init(...) from the config (shapes only, nothing allocated);
+//   2. visit(prefix, v): lists (name, Param&, shape) so a WeightStore walk binds the checkpoint;
+//   3. pack(precision): copies norms/biases and packs GEMM/conv weights once (PackedWeights /
+//      ConvWeights); after this the checkpoint may be closed (Params are cleared);
+//   4. forward(run, ...): pure compute with scratch from the run's Workspace.
+//
+// Workspace: a forward is executed twice, first in planning mode (nothing computed, every
+// allocation only counted, so the peak is exact for the input shape), then for real on an Arena of
+// exactly that size. Every compute helper here returns at once while planning, so forward code
+// reads as straight-line maths; code that touches memory directly must check run.planning().
+//
+// Precision::kBf16: weights rounded to bf16, every matmul/conv input rounded to bf16, fp32
+// accumulation; norms, softmax, residual adds and activations stay fp32. Linear layers use the
+// bf16 GEMM kernels; conv2d has no bf16 kernel yet, so convs run the fp32 kernel on bf16-rounded
+// operands (same numerics, no speed-up).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "attention/nets/taesd.h"  // Precision (shared enum; TODO move to its own header)
+#include "attention/nets/weights.h"
+#include "attention/runtime/attention.h"
+#include "attention/runtime/conv.h"
+#include "attention/runtime/gemm.h"
+#include "attention/runtime/tensor.h"
+#include "attention/runtime/thread_pool.h"
+
+namespace macro::nets {
+
+// "a.b" joining that tolerates an empty prefix.
+std::string join_name(const std::string& prefix, const std::string& name);
+
+// Plans (counts) or serves scratch from an Arena, with stack marks.
+class Workspace {
+ public:
+  Workspace() = default;                      // planning mode
+  explicit Workspace(Arena* arena) : arena_(arena) {}  // execution mode
+  bool planning() const { return arena_ == nullptr; }
+  float* alloc(int64_t floats);  // nullptr while planning
+  size_t mark() const { return used_; }
+  void reset(size_t mark);
+  size_t peak() const { return peak_; }
+
+ private:
+  Arena* arena_ = nullptr;
+  size_t used_ = 0, peak_ = 0;
+};
+
+// What every forward receives.
+struct Run {
+  Workspace* ws = nullptr;
+  ThreadPool* pool = nullptr;  // nullptr: the calling thread (attention then uses the global pool)
+  Precision precision = Precision::kF32;
+  bool planning() const { return ws->planning(); }
+  bool bf16() const { return precision == Precision::kBf16; }
+  float* alloc(int64_t n) const { return ws->alloc(n); }
+};
+
+// RAII stack frame over the run's workspace.
+struct ScratchFrame {
+  Workspace* ws;
+  size_t m;
+  explicit ScratchFrame(const Run& r) : ws(r.ws), m(r.ws->mark()) {}
+  ~ScratchFrame() { ws->reset(m); }
+};
+
+// ---- modules -----------------------------------------------------------------------------------
+
+// y = x W^T + b; W [out, in], b [out].
+struct Linear {
+  int64_t in = 0, out = 0;
+  bool has_bias = true;
+  Param weight, bias;
+  PackedWeights packed;
+  std::vector<float> b;
+
+  void init(int64_t in_features, int64_t out_features, bool with_bias);
+  void visit(const std::string& prefix, ParamVisitor& v);
+  void pack(Precision p);
+  // y [M, out] (row stride ldy) = x [M, in] (row stride ldx) W^T + b (+ residual [M, ldy], may
+  // alias y). trans_x: x given as [in, M] (an NCHW plane: ldx = HW).
+  void forward(const Run& r, int64_t m, const float* x, int64_t ldx, float* y, int64_t ldy,
+               const float* residual = nullptr, bool trans_x = false) const;
+};
+
+// Several Linears with the same input packed as one [sum out, in] GEMM (q|k|v).
+struct FusedLinear {
+  int64_t in = 0, out = 0;
+  PackedWeights packed;
+  std::vector<float> b;  // empty when no part has a bias
+  void pack(const std::vector<const Linear*>& parts, Precision p);
+  void forward(const Run& r, int64_t m, const float* x, int64_t ldx, float* y, int64_t ldy,
+               bool trans_x = false) const;
+};
+
+struct Conv2d {
+  int64_t c_in = 0, c_out = 0;
+  int k = 3;
+  bool has_bias = true;
+  float weight_scale = 1.0f;  // folded into the packed weights (Difix skip gamma)
+  Param weight, bias;
+  ConvWeights packed;
+
+  void init(int64_t cin, int64_t cout, int kernel, bool with_bias = true);
+  void visit(const std::string& prefix, ParamVisitor& v);
+  void pack(Precision p);
+  // y [N, Cout, OH, OW] = conv(x [N, Cin, H, W]) + b (+ residual, may alias y). Pads: top, left,
+  // bottom, right. In bf16 mode x is rounded into a scratch copy (forward) or in place
+  // (forward_scratch: x is the caller's scratch and may be modified).
+  void forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* y,
+               const float* residual, int stride, int pt, int pl, int pb, int pr) const;
+  void forward_scratch(const Run& r, float* x, int64_t n, int64_t h, int64_t w, float* y,
+                       const float* residual, int stride, int pt, int pl, int pb, int pr) const;
+  // Same padding k/2 on all sides, stride 1.
+  void forward_same(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* y,
+                    const float* residual = nullptr) const {
+    forward(r, x, n, h, w, y, residual, 1, k / 2, k / 2, k / 2, k / 2);
+  }
+};
+
+struct GroupNorm {
+  int64_t c = 0;
+  int groups = 32;
+  float eps = 1e-5f;
+  Param weight, bias;
+  std::vector<float> gamma, beta;
+
+  void init(int64_t channels, int num_groups, float epsilon);
+  void visit(const std::string& prefix, ParamVisitor& v);
+  void pack();
+  // dst, src [N, C, HW] (may alias); silu fuses the activation.
+  void forward(const Run& r, float* dst, const float* src, int64_t n, int64_t hw, bool silu) const;
+};
+
+struct LayerNorm {
+  int64_t d = 0;
+  float eps = 1e-5f;
+  Param weight, bias;
+  std::vector<float> gamma, beta;
+
+  void init(int64_t features, float epsilon);
+  void visit(const std::string& prefix, ParamVisitor& v);
+  void pack();
+  void forward(const Run& r, float* dst, const float* src, int64_t m) const;  // [M, D]
+};
+
+// diffusers ResnetBlock2D: h = conv1(SiLU(GN1(x))) (+ time_emb_proj(SiLU(emb))); h =
+// conv2(SiLU(GN2(h))); out = shortcut(x) + h, shortcut = 1x1 conv with bias iff Cin != Cout.
+struct ResnetBlock2D {
+  int64_t c_in = 0, c_out = 0, temb = 0;  // temb 0: no time embedding (VAE)
+  GroupNorm norm1, norm2;
+  Conv2d conv1, conv2, conv_shortcut;
+  Linear time_emb_proj;
+  bool has_shortcut = false;
+
+  void init(int64_t cin, int64_t cout, int64_t temb_channels, int groups, float eps);
+  void visit(const std::string& prefix, ParamVisitor& v);
+  void pack(Precision p);
+  // x [N, Cin, H, W] -> out [N, Cout, H, W] (out must not alias x). temb_silu: SiLU(emb) [T],
+  // shared by all N items, or null when temb == 0.
+  void forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w,
+               const float* temb_silu, float* out) const;
+};
+
+// Stride-2 3x3 conv. UNet: symmetric pad 1 (out = ceil(n/2)); VAE encoder: pad right/bottom 1 only.
+struct Downsample2D {
+  Conv2d conv;
+  bool vae_padding = false;
+  void init(int64_t channels, bool vae_pad);
+  void visit(const std::string& prefix, ParamVisitor& v) { conv.visit(join_name(prefix, "conv"), v); }
+  void pack(Precision p) { conv.pack(p); }
+  void out_size(int64_t h, int64_t w, int64_t* oh, int64_t* ow) const;
+  void forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* out) const;
+};
+
+// Nearest-neighbour resize to (oh, ow) (x2 normally; the next skip's size for odd latents), then
+// a 3x3 pad-1 conv.
+struct Upsample2D {
+  Conv2d conv;
+  void init(int64_t channels);
+  void visit(const std::string& prefix, ParamVisitor& v) { conv.visit(join_name(prefix, "conv"), v); }
+  void pack(Precision p) { conv.pack(p); }
+  void forward(const Run& r, const float* x, int64_t n, int64_t c, int64_t h, int64_t w,
+               int64_t oh, int64_t ow, float* out) const;
+};
+
+// VAE mid-block attention: GN(eps) -> tokens -> single-head attention (q/k/v/out with biases,
+// scale 1/sqrt(C)) -> + x. In place on x [N, C, HW]; each item attends within itself.
+struct VaeAttention {
+  int64_t c = 0;
+  GroupNorm group_norm;
+  Linear to_q, to_k, to_v, to_out;
+  FusedLinear qkv;
+
+  void init(int64_t channels, int groups, float eps);
+  void visit(const std::string& prefix, ParamVisitor& v);
+  void pack(Precision p);
+  void forward(const Run& r, float* x, int64_t n, int64_t hw) const;
+};
+
+// <folder>/diffusion_pytorch_model.safetensors (or its sharded .index.json); error if neither.
+Result<std::string> component_weights_path(const std::string& folder);
+
+// ---- helpers (all no-ops while planning) --------------------------------------------------------
+
+// Round x to bf16 in place when the run is bf16.
+void round_if_bf16(const Run& r, float* x, int64_t n);
+void copy_floats(const Run& r, float* dst, const float* src, int64_t n);
+// dst[n, c, p] = src[n, c, p] + tokens[(n * HW + p), c] (tokens row stride ldt); dst may alias src.
+void tokens_to_nchw_add(const Run& r, float* dst, const float* src, const float* tokens,
+                        int64_t ldt, int64_t n, int64_t c, int64_t hw);
+// The fused attention kernel; masks/shapes are invariants here (MACRO_CHECK on failure).
+void run_attention(const Run& r, const AttentionArgs& a);
+
+}  // namespace macro::nets

@@ -1,0 +1,488 @@
+// UNet2DConditionModel (see unet.h): module tree from the config, the weight walk, the forward.
+#include "attention/nets/unet.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "attention/runtime/file_io.h"
+#include "attention/runtime/ops.h"
+
+namespace macro::nets {
+
+// ---- attention and transformer -----------------------------------------------------------------
+
+void CrossAttention::init(int64_t channels, int64_t context_dim, int num_heads, bool self_attention) {
+  c = channels;
+  ctx_dim = context_dim;
+  heads = num_heads;
+  self = self_attention;
+  const int64_t kv = self ? c : ctx_dim;
+  to_q.init(c, c, false);
+  to_k.init(kv, c, false);
+  to_v.init(kv, c, false);
+  to_out.init(c, c, true);
+}
+
+void CrossAttention::visit(const std::string& prefix, ParamVisitor& v) {
+  to_q.visit(join_name(prefix, "to_q"), v);
+  to_k.visit(join_name(prefix, "to_k"), v);
+  to_v.visit(join_name(prefix, "to_v"), v);
+  to_out.visit(join_name(prefix, "to_out.0"), v);
+}
+
+void CrossAttention::pack(Precision p) {
+  if (self) {
+    qkv.pack({&to_q, &to_k, &to_v}, p);
+    to_q = Linear();
+  } else {
+    qkv.pack({&to_k, &to_v}, p);
+    to_q.pack(p);
+  }
+  to_k = Linear();
+  to_v = Linear();
+  to_out.pack(p);
+}
+
+void BasicTransformerBlock::init(int64_t channels, int64_t context_dim, int num_heads) {
+  c = channels;
+  norm1.init(c, 1e-5f);
+  norm2.init(c, 1e-5f);
+  norm3.init(c, 1e-5f);
+  attn1.init(c, c, num_heads, true);
+  attn2.init(c, context_dim, num_heads, false);
+  ff_proj.init(c, 8 * c, true);
+  ff_out.init(4 * c, c, true);
+}
+
+void BasicTransformerBlock::visit(const std::string& prefix, ParamVisitor& v) {
+  norm1.visit(join_name(prefix, "norm1"), v);
+  attn1.visit(join_name(prefix, "attn1"), v);
+  norm2.visit(join_name(prefix, "norm2"), v);
+  attn2.visit(join_name(prefix, "attn2"), v);
+  norm3.visit(join_name(prefix, "norm3"), v);
+  ff_proj.visit(join_name(prefix, "ff.net.0.proj"), v);
+  ff_out.visit(join_name(prefix, "ff.net.2"), v);
+}
+
+void BasicTransformerBlock::pack(Precision p) {
+  norm1.pack();
+  norm2.pack();
+  norm3.pack();
+  attn1.pack(p);
+  attn2.pack(p);
+  ff_proj.pack(p);
+  ff_out.pack(p);
+}
+
+void BasicTransformerBlock::forward(const Run& r, float* x, int64_t views, int64_t hw,
+                                    const float* ctx, int64_t ctx_views, int64_t lc,
+                                    const BlockSparseMask* mask) const {
+  const int64_t m = views * hw;
+  const int64_t dc = attn2.ctx_dim;
+  const int heads = attn1.heads;
+  ScratchFrame frame(r);
+  float* n = r.alloc(m * c);           // LayerNorm output, then attention output [M, C]
+  float* big = r.alloc(m * 8 * c);     // q|k|v [M, 3C], q2 [M, C], GEGLU projection [M, 8C]
+  float* g = r.alloc(m * 4 * c);       // GEGLU output [M, 4C]
+  float* kv = r.alloc(ctx_views * lc * 2 * c);  // cross k|v [Vc*Lc, 2C]
+
+  // attn1: joint self-attention over all views' tokens (view-major), optionally masked.
+  norm1.forward(r, n, x, m);
+  attn1.qkv.forward(r, m, n, c, big, 3 * c);  // [M, 3C]
+  round_if_bf16(r, big, m * 3 * c);
+  AttentionArgs a1;
+  a1.q = big;
+  a1.k = big + c;
+  a1.v = big + 2 * c;
+  a1.q_stride = a1.k_stride = a1.v_stride = size_t(3 * c);
+  a1.out = n;
+  a1.out_stride = size_t(c);
+  a1.nq = a1.nk = int(m);
+  a1.heads = heads;
+  a1.head_dim = int(c / heads);
+  a1.mask = mask;
+  run_attention(r, a1);
+  attn1.to_out.forward(r, m, n, c, x, c, /*residual=*/x);
+
+  // attn2: per-view cross-attention to the text context.
+  norm2.forward(r, n, x, m);
+  attn2.to_q.forward(r, m, n, c, big, c);                   // [M, C]
+  attn2.qkv.forward(r, ctx_views * lc, ctx, dc, kv, 2 * c);  // [Vc*Lc, 2C]
+  round_if_bf16(r, big, m * c);
+  round_if_bf16(r, kv, ctx_views * lc * 2 * c);
+  for (int64_t v = 0; v < views; ++v) {
+    const float* kv_v = kv + (ctx_views == 1 ? 0 : v) * lc * 2 * c;
+    AttentionArgs a2;
+    a2.q = big + v * hw * c;
+    a2.k = kv_v;
+    a2.v = kv_v + c;
+    a2.q_stride = size_t(c);
+    a2.k_stride = a2.v_stride = size_t(2 * c);
+    a2.out = n + v * hw * c;
+    a2.out_stride = size_t(c);
+    a2.nq = int(hw);
+    a2.nk = int(lc);
+    a2.heads = heads;
+    a2.head_dim = int(c / heads);
+    run_attention(r, a2);
+  }
+  attn2.to_out.forward(r, m, n, c, x, c, x);
+
+  // Feed-forward: GEGLU (value = first half, gate = second half, exact-erf GELU).
+  norm3.forward(r, n, x, m);
+  ff_proj.forward(r, m, n, c, big, 8 * c);
+  if (!r.planning()) geglu(g, big, m, 4 * c, r.pool);
+  ff_out.forward(r, m, g, 4 * c, x, c, x);
+}
+
+void Transformer2D::init(int64_t channels, int64_t context_dim, int num_heads, int groups) {
+  c = channels;
+  norm.init(c, groups, 1e-6f);
+  proj_in.init(c, c, true);
+  proj_out.init(c, c, true);
+  block.init(c, context_dim, num_heads);
+}
+
+void Transformer2D::visit(const std::string& prefix, ParamVisitor& v) {
+  norm.visit(join_name(prefix, "norm"), v);
+  proj_in.visit(join_name(prefix, "proj_in"), v);
+  block.visit(join_name(prefix, "transformer_blocks.0"), v);
+  proj_out.visit(join_name(prefix, "proj_out"), v);
+}
+
+void Transformer2D::pack(Precision p) {
+  norm.pack();
+  proj_in.pack(p);
+  proj_out.pack(p);
+  block.pack(p);
+}
+
+void Transformer2D::forward(const Run& r, float* x, int64_t views, int64_t hw, const float* ctx,
+                            int64_t ctx_views, int64_t lc, const BlockSparseMask* mask) const {
+  const int64_t m = views * hw;
+  ScratchFrame frame(r);
+  float* g = r.alloc(m * c);  // GN(x) NCHW, later proj_out tokens [M, C]
+  float* t = r.alloc(m * c);  // tokens [M, C]
+  norm.forward(r, g, x, views, hw, false);
+  for (int64_t v = 0; v < views; ++v)  // NCHW plane read transposed: tokens [HW, C]
+    proj_in.forward(r, hw, g + v * c * hw, hw, t + v * hw * c, c, nullptr, /*trans_x=*/true);
+  block.forward(r, t, views, hw, ctx, ctx_views, lc, mask);
+  proj_out.forward(r, m, t, c, g, c);
+  tokens_to_nchw_add(r, x, x, g, c, views, c, hw);
+}
+
+// ---- blocks ------------------------------------------------------------------------------------
+
+void UNetBlock::visit(const std::string& prefix, ParamVisitor& v) {
+  for (size_t j = 0; j < resnets.size(); ++j)
+    resnets[j].visit(join_name(prefix, "resnets." + std::to_string(j)), v);
+  for (size_t j = 0; j < attentions.size(); ++j)
+    attentions[j].visit(join_name(prefix, "attentions." + std::to_string(j)), v);
+  if (has_down) downsampler.visit(join_name(prefix, "downsamplers.0"), v);
+  if (has_up) upsampler.visit(join_name(prefix, "upsamplers.0"), v);
+}
+
+void UNetBlock::pack(Precision p) {
+  for (auto& rb : resnets) rb.pack(p);
+  for (auto& at : attentions) at.pack(p);
+  if (has_down) downsampler.pack(p);
+  if (has_up) upsampler.pack(p);
+}
+
+// ---- the model ---------------------------------------------------------------------------------
+
+Result<std::unique_ptr<UNet2DConditionModel>> UNet2DConditionModel::build(const UNetConfig& cfg) {
+  auto m = std::make_unique<UNet2DConditionModel>();
+  m->cfg_ = cfg;
+  const auto& boc = cfg.block_out_channels;
+  const int n = int(boc.size());
+  if (n < 1 || int(cfg.num_heads.size()) != n)
+    return Status::error("UNet config: expected one head count per level");
+  const int groups = cfg.norm_num_groups;
+  const float eps = float(cfg.norm_eps);
+  const int64_t c0 = boc[0], temb = cfg.time_embed_dim();
+  for (int i = 0; i < n; ++i)
+    if (boc[i] / cfg.num_heads[i] > attention_detail::kMaxHeadDim)
+      return Status::error("UNet config: head dim " + std::to_string(boc[i] / cfg.num_heads[i]) +
+                           " at level " + std::to_string(i) + " exceeds the attention kernel's " +
+                           std::to_string(attention_detail::kMaxHeadDim));
+  m->conv_in.init(cfg.in_channels, c0, 3);
+  m->time_linear_1.init(c0, temb, true);
+  m->time_linear_2.init(temb, temb, true);
+  int64_t out = c0;
+  m->down_blocks.resize(size_t(n));
+  for (int i = 0; i < n; ++i) {
+    UNetBlock& b = m->down_blocks[size_t(i)];
+    const int64_t in = out;
+    out = boc[size_t(i)];
+    const bool cross = cfg.down_block_types[size_t(i)] == "CrossAttnDownBlock2D";
+    b.resnets.resize(size_t(cfg.layers_per_block));
+    if (cross) b.attentions.resize(size_t(cfg.layers_per_block));
+    for (int j = 0; j < cfg.layers_per_block; ++j) {
+      b.resnets[size_t(j)].init(j == 0 ? in : out, out, temb, groups, eps);
+      if (cross)
+        b.attentions[size_t(j)].init(out, cfg.cross_attention_dim, cfg.num_heads[size_t(i)], groups);
+    }
+    b.c_out = out;
+    b.has_down = i + 1 < n;
+    if (b.has_down) b.downsampler.init(out, /*vae_pad=*/false);
+  }
+  const int64_t cl = boc.back();
+  m->mid_block.resnets.resize(2);
+  m->mid_block.attentions.resize(1);
+  m->mid_block.resnets[0].init(cl, cl, temb, groups, eps);
+  m->mid_block.resnets[1].init(cl, cl, temb, groups, eps);
+  m->mid_block.attentions[0].init(cl, cfg.cross_attention_dim, cfg.num_heads.back(), groups);
+  m->mid_block.c_out = cl;
+  std::vector<int> rev(boc.rbegin(), boc.rend()), rev_heads(cfg.num_heads.rbegin(), cfg.num_heads.rend());
+  out = rev[0];
+  m->up_blocks.resize(size_t(n));
+  for (int i = 0; i < n; ++i) {
+    UNetBlock& b = m->up_blocks[size_t(i)];
+    const int64_t prev = out;
+    out = rev[size_t(i)];
+    const int64_t in = rev[size_t(std::min(i + 1, n - 1))];
+    const bool cross = cfg.up_block_types[size_t(i)] == "CrossAttnUpBlock2D";
+    const int layers = cfg.layers_per_block + 1;
+    b.resnets.resize(size_t(layers));
+    if (cross) b.attentions.resize(size_t(layers));
+    for (int j = 0; j < layers; ++j) {
+      const int64_t skip = j == layers - 1 ? in : out;
+      const int64_t rin = j == 0 ? prev : out;
+      b.resnets[size_t(j)].init(rin + skip, out, temb, groups, eps);
+      if (cross) b.attentions[size_t(j)].init(out, cfg.cross_attention_dim, rev_heads[size_t(i)], groups);
+    }
+    b.c_out = out;
+    b.has_up = i + 1 < n;
+    if (b.has_up) b.upsampler.init(out);
+  }
+  m->conv_norm_out.init(c0, groups, eps);
+  m->conv_out.init(c0, cfg.out_channels, 3);
+  return m;
+}
+
+void UNet2DConditionModel::visit(ParamVisitor& v) {
+  conv_in.visit("conv_in", v);
+  time_linear_1.visit("time_embedding.linear_1", v);
+  time_linear_2.visit("time_embedding.linear_2", v);
+  for (size_t i = 0; i < down_blocks.size(); ++i)
+    down_blocks[i].visit("down_blocks." + std::to_string(i), v);
+  mid_block.visit("mid_block", v);
+  for (size_t i = 0; i < up_blocks.size(); ++i) up_blocks[i].visit("up_blocks." + std::to_string(i), v);
+  conv_norm_out.visit("conv_norm_out", v);
+  conv_out.visit("conv_out", v);
+}
+
+void UNet2DConditionModel::pack(Precision p) {
+  precision_ = p;
+  conv_in.pack(p);
+  time_linear_1.pack(p);
+  time_linear_2.pack(p);
+  for (auto& b : down_blocks) b.pack(p);
+  mid_block.pack(p);
+  for (auto& b : up_blocks) b.pack(p);
+  conv_norm_out.pack();
+  conv_out.pack(p);
+}
+
+Result<std::unique_ptr<UNet2DConditionModel>> UNet2DConditionModel::load(const std::string& folder,
+                                                                         Precision precision) {
+  MACRO_ASSIGN_OR_RETURN(UNetConfig cfg, load_unet_config(folder + "/config.json"));
+  MACRO_ASSIGN_OR_RETURN(std::string weights, component_weights_path(folder));
+  MACRO_ASSIGN_OR_RETURN(auto model, build(cfg));
+  MACRO_ASSIGN_OR_RETURN(auto store, WeightStore::open(weights));
+  model->visit(*store);
+  MACRO_TRY(store->finish());
+  model->pack(precision);
+  return model;
+}
+
+std::vector<std::pair<int64_t, int64_t>> UNet2DConditionModel::level_grids(int64_t h, int64_t w) const {
+  std::vector<std::pair<int64_t, int64_t>> g;
+  for (size_t i = 0; i < down_blocks.size(); ++i) {
+    g.emplace_back(h, w);
+    if (down_blocks[i].has_down) down_blocks[i].downsampler.out_size(h, w, &h, &w);
+  }
+  return g;
+}
+
+namespace {
+
+struct Skip {
+  const float* data;
+  int64_t c, h, w;
+};
+
+}  // namespace
+
+void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t views, int64_t h,
+                                        int64_t w, float t, const float* ctx, int64_t ctx_views,
+                                        int64_t lc, const UNetMasks& masks, float* eps,
+                                        const UNetTap& tap) const {
+  const auto grids = level_grids(h, w);
+  const int n = levels();
+  const int64_t c0 = cfg_.block_out_channels[0], temb = cfg_.time_embed_dim();
+  auto mask_at = [&](int level) -> const BlockSparseMask* {
+    return size_t(level) < masks.level.size() ? masks.level[size_t(level)] : nullptr;
+  };
+  auto emit = [&](const std::string& name, const float* data, int64_t c, int64_t hh, int64_t ww) {
+    if (tap && !r.planning()) tap(name, data, Shape{views, c, hh, ww});
+  };
+
+  // Time embedding: SiLU(linear_2(SiLU(linear_1(sinusoid(t))))) — the SiLU every resnet applies.
+  float* sinus = r.alloc(c0);
+  float* e1 = r.alloc(temb);
+  float* emb = r.alloc(temb);
+  if (!r.planning()) {
+    TimestepEmbeddingParams tp;
+    tp.dim = int(c0);
+    tp.flip_sin_to_cos = cfg_.flip_sin_to_cos;
+    tp.freq_shift = float(cfg_.freq_shift);
+    timestep_embedding(sinus, &t, 1, tp);
+  }
+  time_linear_1.forward(r, 1, sinus, c0, e1, temb);
+  if (!r.planning()) activation(e1, e1, temb, Act::kSilu, nullptr);
+  time_linear_2.forward(r, 1, e1, temb, emb, temb);
+  if (!r.planning()) activation(emb, emb, temb, Act::kSilu, nullptr);
+
+  // Down path: every resnet/transformer output and every downsample is a skip (kept until popped).
+  std::vector<Skip> skips;
+  int64_t hh = grids[0].first, ww = grids[0].second, cc = c0;
+  float* cur = r.alloc(views * c0 * hh * ww);
+  conv_in.forward_same(r, z, views, hh, ww, cur);  // [V, C0, h, w]
+  emit("conv_in", cur, cc, hh, ww);
+  skips.push_back({cur, cc, hh, ww});
+  for (int i = 0; i < n; ++i) {
+    const UNetBlock& b = down_blocks[size_t(i)];
+    for (size_t j = 0; j < b.resnets.size(); ++j) {
+      float* o = r.alloc(views * b.c_out * hh * ww);
+      b.resnets[j].forward(r, cur, views, hh, ww, emb, o);
+      cc = b.c_out;
+      if (!b.attentions.empty()) b.attentions[j].forward(r, o, views, hh * ww, ctx, ctx_views, lc, mask_at(i));
+      cur = o;
+      skips.push_back({cur, cc, hh, ww});
+    }
+    if (b.has_down) {
+      int64_t oh, ow;
+      b.downsampler.out_size(hh, ww, &oh, &ow);
+      float* o = r.alloc(views * cc * oh * ow);
+      b.downsampler.forward(r, cur, views, hh, ww, o);
+      cur = o;
+      hh = oh, ww = ow;
+      skips.push_back({cur, cc, hh, ww});
+    }
+    emit("down_blocks." + std::to_string(i), cur, cc, hh, ww);
+  }
+
+  // Mid block at the last level.
+  {
+    const UNetBlock& b = mid_block;
+    float* a = r.alloc(views * cc * hh * ww);
+    b.resnets[0].forward(r, cur, views, hh, ww, emb, a);
+    b.attentions[0].forward(r, a, views, hh * ww, ctx, ctx_views, lc, mask_at(n - 1));
+    float* o = r.alloc(views * cc * hh * ww);
+    b.resnets[1].forward(r, a, views, hh, ww, emb, o);
+    cur = o;
+    emit("mid_block", cur, cc, hh, ww);
+  }
+
+  // Up path: ping-pong buffers sized for the largest level, one concat buffer.
+  int64_t max_h = 0, max_cat = 0;
+  {
+    int64_t ch = cc;
+    for (int i = 0; i < n; ++i) {
+      const UNetBlock& b = up_blocks[size_t(i)];
+      const auto [gh, gw] = grids[size_t(n - 1 - i)];
+      for (const ResnetBlock2D& rb : b.resnets) max_cat = std::max(max_cat, views * rb.c_in * gh * gw);
+      max_h = std::max(max_h, views * b.c_out * gh * gw);
+      if (b.has_up && n - 2 - i >= 0) {
+        const auto [nh, nw] = grids[size_t(n - 2 - i)];
+        max_h = std::max(max_h, views * b.c_out * nh * nw);
+      }
+      ch = b.c_out;
+    }
+    (void)ch;
+  }
+  float* hbuf[2] = {r.alloc(max_h), r.alloc(max_h)};
+  float* cat = r.alloc(max_cat);
+  int which = 0;
+  for (int i = 0; i < n; ++i) {
+    const UNetBlock& b = up_blocks[size_t(i)];
+    const int level = n - 1 - i;
+    for (size_t j = 0; j < b.resnets.size(); ++j) {
+      MACRO_CHECK(!skips.empty());
+      const Skip s = skips.back();
+      skips.pop_back();
+      MACRO_CHECK(s.h == hh && s.w == ww && cc + s.c == b.resnets[j].c_in);
+      const int64_t hw = hh * ww;
+      for (int64_t v = 0; v < views; ++v) {  // cat[v] = [h[v], skip[v]] on channels
+        copy_floats(r, cat + v * (cc + s.c) * hw, cur + v * cc * hw, cc * hw);
+        copy_floats(r, cat + v * (cc + s.c) * hw + cc * hw, s.data + v * s.c * hw, s.c * hw);
+      }
+      float* o = hbuf[which];
+      which ^= 1;
+      b.resnets[j].forward(r, cat, views, hh, ww, emb, o);
+      cc = b.c_out;
+      if (!b.attentions.empty())
+        b.attentions[j].forward(r, o, views, hw, ctx, ctx_views, lc, mask_at(level));
+      cur = o;
+    }
+    if (b.has_up) {
+      // diffusers upsamples to the next skip's size (forward_upsample_size for odd latents).
+      const int64_t oh = skips.empty() ? 2 * hh : skips.back().h;
+      const int64_t ow = skips.empty() ? 2 * ww : skips.back().w;
+      float* o = hbuf[which];
+      which ^= 1;
+      b.upsampler.forward(r, cur, views, cc, hh, ww, oh, ow, o);
+      cur = o;
+      hh = oh, ww = ow;
+    }
+    emit("up_blocks." + std::to_string(i), cur, cc, hh, ww);
+  }
+
+  // Output: conv_out(SiLU(GN(h))).
+  float* t2 = r.alloc(views * cc * hh * ww);
+  conv_norm_out.forward(r, t2, cur, views, hh * ww, /*silu=*/true);
+  conv_out.forward_scratch(r, t2, views, hh, ww, eps, nullptr, 1, 1, 1, 1, 1);
+}
+
+Result<Tensor> UNet2DConditionModel::forward(const TensorView& z, float timestep,
+                                             const TensorView& ctx, const UNetMasks& masks,
+                                             ThreadPool* pool, const UNetTap& tap) const {
+  if (z.dtype != DType::kF32 || z.rank != 4 || !z.is_contiguous() || z.dim(1) != cfg_.in_channels ||
+      z.dim(0) < 1 || z.dim(2) < 1 || z.dim(3) < 1)
+    return Status::error("unet: z: expected contiguous F32 [V," + std::to_string(cfg_.in_channels) +
+                         ",h,w], found " + z.describe());
+  const int64_t views = z.dim(0), h = z.dim(2), w = z.dim(3);
+  if (ctx.dtype != DType::kF32 || ctx.rank != 3 || !ctx.is_contiguous() ||
+      (ctx.dim(0) != views && ctx.dim(0) != 1) || ctx.dim(1) < 1 ||
+      ctx.dim(2) != cfg_.cross_attention_dim)
+    return Status::error("unet: ctx: expected contiguous F32 [" + std::to_string(views) + " or 1,L," +
+                         std::to_string(cfg_.cross_attention_dim) + "], found " + ctx.describe());
+  const auto grids = level_grids(h, w);
+  if (masks.level.size() > grids.size())
+    return Status::error("unet: masks: expected at most " + std::to_string(grids.size()) +
+                         " levels, found " + std::to_string(masks.level.size()));
+  for (size_t l = 0; l < masks.level.size(); ++l) {
+    const BlockSparseMask* m = masks.level[l];
+    if (!m) continue;
+    const int64_t tokens = views * grids[l].first * grids[l].second;
+    if (m->nq != tokens || m->nk != tokens)
+      return Status::error("unet: mask level " + std::to_string(l) + ": expected " +
+                           std::to_string(tokens) + " x " + std::to_string(tokens) +
+                           " tokens (views x " + std::to_string(grids[l].first) + "x" +
+                           std::to_string(grids[l].second) + "), found " + std::to_string(m->nq) +
+                           " x " + std::to_string(m->nk));
+  }
+  Tensor eps = Tensor::f32({views, cfg_.out_channels, h, w});
+  Workspace plan;
+  forward_impl(Run{&plan, pool, precision_}, nullptr, views, h, w, timestep, nullptr, ctx.dim(0),
+               ctx.dim(1), masks, nullptr, tap);
+  Arena arena(plan.peak());
+  Workspace ws(&arena);
+  forward_impl(Run{&ws, pool, precision_}, z.f32(), views, h, w, timestep, ctx.f32(), ctx.dim(0),
+               ctx.dim(1), masks, eps.f32(), tap);
+  return eps;
+}
+
+}  // namespace macro::nets

@@ -1,0 +1,350 @@
+// The Difix VAE (see vae.h): module tree, weight walk, encode with skips, decode with skip adds.
+#include "attention/nets/vae.h"
+
+#include <algorithm>
+
+#include "attention/runtime/ops.h"
+
+namespace macro::nets {
+namespace {
+constexpr float kVaeEps = 1e-6f;  // every VAE GroupNorm (difix-spec 5.1)
+}
+
+void VaeBlock::visit(const std::string& prefix, ParamVisitor& v) {
+  for (size_t j = 0; j < resnets.size(); ++j)
+    resnets[j].visit(join_name(prefix, "resnets." + std::to_string(j)), v);
+  if (has_down) downsampler.visit(join_name(prefix, "downsamplers.0"), v);
+  if (has_up) upsampler.visit(join_name(prefix, "upsamplers.0"), v);
+}
+
+void VaeBlock::pack(Precision p) {
+  for (auto& rb : resnets) rb.pack(p);
+  if (has_down) downsampler.pack(p);
+  if (has_up) upsampler.pack(p);
+}
+
+void VaeMidBlock::init(int64_t c, int groups) {
+  resnet0.init(c, c, 0, groups, kVaeEps);
+  resnet1.init(c, c, 0, groups, kVaeEps);
+  attention.init(c, groups, kVaeEps);
+}
+
+void VaeMidBlock::visit(const std::string& prefix, ParamVisitor& v) {
+  resnet0.visit(join_name(prefix, "resnets.0"), v);
+  attention.visit(join_name(prefix, "attentions.0"), v);
+  resnet1.visit(join_name(prefix, "resnets.1"), v);
+}
+
+void VaeMidBlock::pack(Precision p) {
+  resnet0.pack(p);
+  attention.pack(p);
+  resnet1.pack(p);
+}
+
+void VaeMidBlock::forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* a,
+                          float* out) const {
+  resnet0.forward(r, x, n, h, w, nullptr, a);
+  attention.forward(r, a, n, h * w);
+  resnet1.forward(r, a, n, h, w, nullptr, out);
+}
+
+int64_t DifixVae::skip_channels(int i) const {
+  const auto& boc = cfg_.block_out_channels;
+  return i == 0 ? boc[0] : boc[size_t(i - 1)];
+}
+
+Result<std::unique_ptr<DifixVae>> DifixVae::build(const VaeConfig& cfg) {
+  auto m = std::make_unique<DifixVae>();
+  m->cfg_ = cfg;
+  const auto& boc = cfg.block_out_channels;
+  const int n = int(boc.size());
+  const int g = cfg.norm_num_groups;
+  for (int c : boc)
+    if (c % g != 0)
+      return Status::error("VAE config: block_out_channels " + std::to_string(c) +
+                           " is not a multiple of norm_num_groups " + std::to_string(g));
+  if (boc.back() > attention_detail::kMaxHeadDim)
+    return Status::error("VAE config: mid attention width " + std::to_string(boc.back()) +
+                         " exceeds the attention kernel's head dim limit " +
+                         std::to_string(attention_detail::kMaxHeadDim));
+  const int64_t lat = cfg.latent_channels;
+  // Encoder.
+  m->enc_conv_in.init(cfg.in_channels, boc[0], 3);
+  m->down_blocks.resize(size_t(n));
+  int64_t out = boc[0];
+  for (int i = 0; i < n; ++i) {
+    VaeBlock& b = m->down_blocks[size_t(i)];
+    b.c_in = out;
+    out = boc[size_t(i)];
+    b.c_out = out;
+    b.resnets.resize(size_t(cfg.layers_per_block));
+    for (int j = 0; j < cfg.layers_per_block; ++j)
+      b.resnets[size_t(j)].init(j == 0 ? b.c_in : out, out, 0, g, kVaeEps);
+    b.has_down = i + 1 < n;
+    if (b.has_down) b.downsampler.init(out, /*vae_pad=*/true);
+  }
+  m->enc_mid.init(boc.back(), g);
+  m->enc_norm_out.init(boc.back(), g, kVaeEps);
+  m->enc_conv_out.init(boc.back(), 2 * lat, 3);
+  m->quant_conv.init(2 * lat, 2 * lat, 1);
+  // Decoder.
+  m->post_quant_conv.init(lat, lat, 1);
+  m->dec_conv_in.init(lat, boc.back(), 3);
+  m->dec_mid.init(boc.back(), g);
+  std::vector<int> rev(boc.rbegin(), boc.rend());
+  m->up_blocks.resize(size_t(n));
+  m->skip_convs.resize(size_t(n));
+  out = rev[0];
+  for (int i = 0; i < n; ++i) {
+    VaeBlock& b = m->up_blocks[size_t(i)];
+    b.c_in = out;
+    Conv2d& sc = m->skip_convs[size_t(i)];
+    sc.init(m->skip_channels(n - 1 - i), b.c_in, 1, /*bias=*/false);
+    sc.weight_scale = float(cfg.gamma);
+    out = rev[size_t(i)];
+    b.c_out = out;
+    b.resnets.resize(size_t(cfg.layers_per_block + 1));
+    for (int j = 0; j <= cfg.layers_per_block; ++j)
+      b.resnets[size_t(j)].init(j == 0 ? b.c_in : out, out, 0, g, kVaeEps);
+    b.has_up = i + 1 < n;
+    if (b.has_up) b.upsampler.init(out);
+  }
+  m->dec_norm_out.init(boc[0], g, kVaeEps);
+  m->dec_conv_out.init(boc[0], cfg.out_channels, 3);
+  return m;
+}
+
+void DifixVae::visit(ParamVisitor& v) {
+  enc_conv_in.visit("encoder.conv_in", v);
+  for (size_t i = 0; i < down_blocks.size(); ++i)
+    down_blocks[i].visit("encoder.down_blocks." + std::to_string(i), v);
+  enc_mid.visit("encoder.mid_block", v);
+  enc_norm_out.visit("encoder.conv_norm_out", v);
+  enc_conv_out.visit("encoder.conv_out", v);
+  quant_conv.visit("quant_conv", v);
+  post_quant_conv.visit("post_quant_conv", v);
+  dec_conv_in.visit("decoder.conv_in", v);
+  dec_mid.visit("decoder.mid_block", v);
+  for (size_t i = 0; i < up_blocks.size(); ++i)
+    up_blocks[i].visit("decoder.up_blocks." + std::to_string(i), v);
+  if (cfg_.has_skip_convs)
+    for (size_t i = 0; i < skip_convs.size(); ++i)
+      skip_convs[i].visit("decoder.skip_conv_" + std::to_string(i + 1), v);
+  dec_norm_out.visit("decoder.conv_norm_out", v);
+  dec_conv_out.visit("decoder.conv_out", v);
+}
+
+void DifixVae::pack(Precision p) {
+  precision_ = p;
+  enc_conv_in.pack(p);
+  for (auto& b : down_blocks) b.pack(p);
+  enc_mid.pack(p);
+  enc_norm_out.pack();
+  enc_conv_out.pack(p);
+  quant_conv.pack(p);
+  post_quant_conv.pack(p);
+  dec_conv_in.pack(p);
+  dec_mid.pack(p);
+  for (auto& b : up_blocks) b.pack(p);
+  if (cfg_.has_skip_convs)
+    for (auto& s : skip_convs) s.pack(p);
+  dec_norm_out.pack();
+  dec_conv_out.pack(p);
+}
+
+Result<std::unique_ptr<DifixVae>> DifixVae::load(const std::string& folder, Precision precision) {
+  MACRO_ASSIGN_OR_RETURN(VaeConfig cfg, load_vae_config(folder + "/config.json"));
+  MACRO_ASSIGN_OR_RETURN(std::string weights, component_weights_path(folder));
+  MACRO_ASSIGN_OR_RETURN(auto model, build(cfg));
+  WeightStoreOptions opt;
+  opt.lora_scale = cfg.lora_rank > 0 ? cfg.lora_scale : 0.0;
+  MACRO_ASSIGN_OR_RETURN(auto store, WeightStore::open(weights, opt));
+  model->visit(*store);
+  MACRO_TRY(store->finish());
+  model->pack(precision);
+  return model;
+}
+
+// ---- encode ------------------------------------------------------------------------------------
+
+void DifixVae::encode_impl(const Run& r, const float* x, int64_t h, int64_t w, float* moments,
+                           const std::vector<float*>& skip_out) const {
+  const int n = levels();
+  const auto& boc = cfg_.block_out_channels;
+  // Ping-pong buffers for the largest level activation.
+  int64_t max_act = 0;
+  {
+    int64_t hh = h, ww = w;
+    for (int i = 0; i < n; ++i) {
+      const VaeBlock& b = down_blocks[size_t(i)];
+      max_act = std::max(max_act, std::max(b.c_in, b.c_out) * hh * ww);
+      if (b.has_down) b.downsampler.out_size(hh, ww, &hh, &ww);
+    }
+  }
+  float* buf[2] = {r.alloc(max_act), r.alloc(max_act)};
+  auto other = [&](const float* cur) { return cur == buf[0] ? buf[1] : buf[0]; };
+  int64_t hh = h, ww = w, cc = boc[0];
+  float* cur = skip_out[0] ? skip_out[0] : buf[0];
+  enc_conv_in.forward_same(r, x, 1, hh, ww, cur);  // S_0
+  for (int i = 0; i < n; ++i) {
+    const VaeBlock& b = down_blocks[size_t(i)];
+    for (const ResnetBlock2D& rb : b.resnets) {
+      float* o = other(cur);
+      rb.forward(r, cur, 1, hh, ww, nullptr, o);
+      cur = o;
+      cc = rb.c_out;
+    }
+    if (b.has_down) {
+      int64_t oh, ow;
+      b.downsampler.out_size(hh, ww, &oh, &ow);
+      float* o = skip_out[size_t(i + 1)] ? skip_out[size_t(i + 1)] : other(cur);  // S_{i+1}
+      b.downsampler.forward(r, cur, 1, hh, ww, o);
+      cur = o;
+      hh = oh, ww = ow;
+    }
+  }
+  float* a = other(cur);
+  float* mid = r.alloc(cc * hh * ww);
+  enc_mid.forward(r, cur, 1, hh, ww, a, mid);
+  enc_norm_out.forward(r, a, mid, 1, hh * ww, /*silu=*/true);
+  float* e = r.alloc(2 * cfg_.latent_channels * hh * ww);
+  enc_conv_out.forward_scratch(r, a, 1, hh, ww, e, nullptr, 1, 1, 1, 1, 1);
+  quant_conv.forward_scratch(r, e, 1, hh, ww, moments, nullptr, 1, 0, 0, 0, 0);
+}
+
+Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skips,
+                                     ThreadPool* pool) const {
+  const int64_t f = downscale();
+  if (images.dtype != DType::kF32 || images.rank != 4 || !images.is_contiguous() ||
+      images.dim(1) != cfg_.in_channels || images.dim(0) < 1 || images.dim(2) < f ||
+      images.dim(3) < f || images.dim(2) % f || images.dim(3) % f)
+    return Status::error("vae: images: expected contiguous F32 [N," + std::to_string(cfg_.in_channels) +
+                         ",H,W] with H, W positive multiples of " + std::to_string(f) + ", found " +
+                         images.describe());
+  const int64_t n = images.dim(0), H = images.dim(2), W = images.dim(3);
+  if (keep_skips < 0 || keep_skips > n) return Status::error("vae: keep_skips out of range");
+  const int64_t h = H / f, w = W / f, lat = cfg_.latent_channels;
+  VaeEncoding enc;
+  enc.moments = Tensor::f32({n, 2 * lat, h, w});
+  enc.z = Tensor::f32({n, lat, h, w});
+  {
+    int64_t hh = H, ww = W;
+    for (int i = 0; i < levels(); ++i) {
+      enc.skips.push_back(Tensor::f32({keep_skips, skip_channels(i), hh, ww}));
+      if (down_blocks[size_t(i)].has_down) down_blocks[size_t(i)].downsampler.out_size(hh, ww, &hh, &ww);
+    }
+  }
+  auto skip_ptrs = [&](int64_t img) {
+    std::vector<float*> p(size_t(levels()), nullptr);
+    if (img < keep_skips)
+      for (int i = 0; i < levels(); ++i) {
+        const Tensor& s = enc.skips[size_t(i)];
+        p[size_t(i)] = s.f32() + img * (s.numel() / keep_skips);
+      }
+    return p;
+  };
+  Workspace plan;
+  std::vector<float*> none(size_t(levels()), nullptr);
+  encode_impl(Run{&plan, pool, precision_}, nullptr, H, W, nullptr, none);
+  Arena arena(plan.peak());
+  const int64_t in_img = cfg_.in_channels * H * W;
+  for (int64_t img = 0; img < n; ++img) {
+    arena.reset();
+    Workspace ws(&arena);
+    encode_impl(Run{&ws, pool, precision_}, images.f32() + img * in_img, H, W,
+                enc.moments.f32() + img * 2 * lat * h * w, skip_ptrs(img));
+  }
+  // z = scaling * mean (first L channels of the moments).
+  const float s = float(cfg_.scaling_factor);
+  for (int64_t img = 0; img < n; ++img)
+    scale(enc.z.f32() + img * lat * h * w, enc.moments.f32() + img * 2 * lat * h * w, s, lat * h * w,
+          nullptr);
+  return enc;
+}
+
+// ---- decode ------------------------------------------------------------------------------------
+
+void DifixVae::decode_impl(const Run& r, const float* z, int64_t h, int64_t w,
+                           const std::vector<const float*>& skips, float* out) const {
+  const int n = levels();
+  const int64_t lat = cfg_.latent_channels;
+  int64_t max_act = 0;
+  {
+    int64_t hh = h, ww = w;
+    for (int i = 0; i < n; ++i) {
+      const VaeBlock& b = up_blocks[size_t(i)];
+      max_act = std::max(max_act, std::max(b.c_in, b.c_out) * hh * ww);
+      if (b.has_up) hh *= 2, ww *= 2;
+      max_act = std::max(max_act, b.c_out * hh * ww);
+    }
+  }
+  float* buf[2] = {r.alloc(max_act), r.alloc(max_act)};
+  auto other = [&](const float* cur) { return cur == buf[0] ? buf[1] : buf[0]; };
+  float* d = r.alloc(lat * h * w);
+  float* p = r.alloc(lat * h * w);
+  if (!r.planning()) scale(d, z, float(1.0 / cfg_.scaling_factor), lat * h * w, nullptr);
+  post_quant_conv.forward_scratch(r, d, 1, h, w, p, nullptr, 1, 0, 0, 0, 0);
+  float* cur = buf[0];
+  dec_conv_in.forward_scratch(r, p, 1, h, w, cur, nullptr, 1, 1, 1, 1, 1);
+  {
+    float* mid = r.alloc(up_blocks[0].c_in * h * w);
+    dec_mid.forward(r, cur, 1, h, w, other(cur), mid);
+    cur = mid;  // other(mid) is buf[0]: the ping-pong continues from there
+  }
+  int64_t hh = h, ww = w, cc = up_blocks[0].c_in;
+  for (int i = 0; i < n; ++i) {
+    const VaeBlock& b = up_blocks[size_t(i)];
+    if (!cfg_.ignore_skip) {  // h += skip_conv_{i+1}(gamma * S_{n-1-i}); gamma is in the weights
+      const Conv2d& sc = skip_convs[size_t(i)];
+      sc.forward(r, skips[size_t(n - 1 - i)], 1, hh, ww, cur, /*residual=*/cur, 1, 0, 0, 0, 0);
+    }
+    for (const ResnetBlock2D& rb : b.resnets) {
+      float* o = other(cur);
+      rb.forward(r, cur, 1, hh, ww, nullptr, o);
+      cur = o;
+      cc = rb.c_out;
+    }
+    if (b.has_up) {
+      float* o = other(cur);
+      b.upsampler.forward(r, cur, 1, cc, hh, ww, 2 * hh, 2 * ww, o);
+      cur = o;
+      hh *= 2, ww *= 2;
+    }
+  }
+  float* t = other(cur);
+  dec_norm_out.forward(r, t, cur, 1, hh * ww, /*silu=*/true);
+  dec_conv_out.forward_scratch(r, t, 1, hh, ww, out, nullptr, 1, 1, 1, 1, 1);
+}
+
+Result<Tensor> DifixVae::decode(const TensorView& z, const std::vector<TensorView>& skips,
+                                ThreadPool* pool) const {
+  const int64_t lat = cfg_.latent_channels, f = downscale();
+  if (z.dtype != DType::kF32 || z.rank != 4 || !z.is_contiguous() || z.dim(0) != 1 ||
+      z.dim(1) != lat || z.dim(2) < 1 || z.dim(3) < 1)
+    return Status::error("vae: z: expected contiguous F32 [1," + std::to_string(lat) + ",h,w], found " +
+                         z.describe());
+  const int64_t h = z.dim(2), w = z.dim(3);
+  if (int(skips.size()) != levels())
+    return Status::error("vae: expected " + std::to_string(levels()) + " skip tensors, found " +
+                         std::to_string(skips.size()));
+  std::vector<const float*> ptrs;
+  for (int i = 0; i < levels(); ++i) {
+    const TensorView& s = skips[size_t(i)];
+    const int64_t scale_i = f >> i;  // S_i is at H / 2^i
+    if (s.dtype != DType::kF32 || s.rank != 4 || !s.is_contiguous() || s.dim(0) != 1 ||
+        s.dim(1) != skip_channels(i) || s.dim(2) != h * scale_i || s.dim(3) != w * scale_i)
+      return Status::error("vae: skip" + std::to_string(i) + ": expected contiguous F32 [1," +
+                           std::to_string(skip_channels(i)) + "," + std::to_string(h * scale_i) +
+                           "," + std::to_string(w * scale_i) + "], found " + s.describe());
+    ptrs.push_back(s.f32());
+  }
+  Tensor out = Tensor::f32({1, cfg_.out_channels, h * f, w * f});
+  Workspace plan;
+  decode_impl(Run{&plan, pool, precision_}, nullptr, h, w, ptrs, nullptr);
+  Arena arena(plan.peak());
+  Workspace ws(&arena);
+  decode_impl(Run{&ws, pool, precision_}, z.f32(), h, w, ptrs, out.f32());
+  return out;
+}
+
+}  // namespace macro::nets

@@ -1,0 +1,96 @@
+// The Difix VAE: diffusers AutoencoderKL plus Difix's encoder->decoder skip connections.
+//
+// Legend: N images (views), C channels, H x W image, h x w = H/2^(n-1) x W/2^(n-1) latent for n
+// levels (n = 4: /8), L latent channels, S_i the tensor ENTERING encoder down block i
+// (S_0 = conv_in output [C0, H, W], S_i = down block i-1 output).
+//
+//   encode  x [N,3,H,W] in [-1,1] -> moments = quant_conv(encoder(x)) [N,2L,h,w];
+//           mean = moments[:, :L]; z = scaling_factor * mean (the posterior mode, deterministic)
+//   decode  d = z / scaling_factor -> post_quant_conv -> decoder.conv_in -> mid (res, attn, res)
+//           -> for up block i: h += skip_conv_{i+1}(gamma * S_{n-1-i}); h = up_block_i(h)
+//           -> GN -> SiLU -> conv_out           (not clamped)
+//
+// Every GroupNorm has eps 1e-6; the mid attention is one head with biases, scale 1/sqrt(C). The
+// encoder downsample pads right/bottom only. The decoder's PEFT LoRA (Difix release layout) is
+// merged at load by the WeightStore with VaeConfig::lora_scale; gamma is folded into the skip convs.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "attention/nets/diffusers_config.h"
+#include "attention/nets/layers.h"
+
+namespace macro::nets {
+
+struct VaeBlock {
+  std::vector<ResnetBlock2D> resnets;
+  bool has_down = false, has_up = false;
+  Downsample2D downsampler;
+  Upsample2D upsampler;
+  int64_t c_in = 0, c_out = 0;
+  void visit(const std::string& prefix, ParamVisitor& v);
+  void pack(Precision p);
+};
+
+struct VaeMidBlock {
+  ResnetBlock2D resnet0, resnet1;
+  VaeAttention attention;
+  void init(int64_t c, int groups);
+  void visit(const std::string& prefix, ParamVisitor& v);
+  void pack(Precision p);
+  // x [N, C, H, W] -> out (a and out scratch-sized like x; x is left unchanged).
+  void forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* a,
+               float* out) const;
+};
+
+struct VaeEncoding {
+  Tensor moments;             // [N, 2L, h, w]
+  Tensor z;                   // [N, L, h, w] = scaling_factor * mean
+  std::vector<Tensor> skips;  // S_i [K, C_i, H_i, W_i] for the first K = keep_skips images
+};
+
+class DifixVae {
+ public:
+  static Result<std::unique_ptr<DifixVae>> load(const std::string& folder, Precision precision);
+  static Result<std::unique_ptr<DifixVae>> build(const VaeConfig& cfg);
+  void visit(ParamVisitor& v);
+  void pack(Precision p);
+
+  const VaeConfig& config() const { return cfg_; }
+  int levels() const { return int(cfg_.block_out_channels.size()); }
+  int downscale() const { return 1 << (levels() - 1); }
+  // Channels of S_i.
+  int64_t skip_channels(int i) const;
+
+  // images [N, Cin, H, W] (H, W multiples of downscale()). Skips are kept for the first
+  // `keep_skips` images (0..N). Images are encoded one at a time (the convs are threaded inside).
+  Result<VaeEncoding> encode(const TensorView& images, int64_t keep_skips, ThreadPool* pool) const;
+  // z [1, L, h, w] with that image's skips S_i [1, C_i, H_i, W_i] (views of any encoding with
+  // matching sizes) -> image [1, Cout, H, W], not clamped.
+  Result<Tensor> decode(const TensorView& z, const std::vector<TensorView>& skips,
+                        ThreadPool* pool) const;
+
+ private:
+  void encode_impl(const Run& r, const float* x, int64_t h, int64_t w, float* moments,
+                   const std::vector<float*>& skip_out) const;
+  void decode_impl(const Run& r, const float* z, int64_t h, int64_t w,
+                   const std::vector<const float*>& skips, float* out) const;
+
+  VaeConfig cfg_;
+  Precision precision_ = Precision::kF32;
+  // encoder
+  Conv2d enc_conv_in, enc_conv_out, quant_conv;
+  std::vector<VaeBlock> down_blocks;
+  VaeMidBlock enc_mid;
+  GroupNorm enc_norm_out;
+  // decoder
+  Conv2d post_quant_conv, dec_conv_in, dec_conv_out;
+  std::vector<Conv2d> skip_convs;  // decoder.skip_conv_{i+1}, added before up block i
+  std::vector<VaeBlock> up_blocks;
+  VaeMidBlock dec_mid;
+  GroupNorm dec_norm_out;
+};
+
+}  // namespace macro::nets

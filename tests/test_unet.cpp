@@ -1,0 +1,327 @@
+// U-Net (attention/nets/unet.h) against the diffusers goldens in shared/golden/unet-tiny: single
+// view (with intermediates), odd latent, two joint views, MACRO masked/unmasked; bf16 deviation;
+// checkpoint mismatches reported by name; the full-size SD-Turbo layout from the manifest loads.
+#include <catch2/catch.hpp>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+
+#include "attention/nets/nn_run.h"
+#include "attention/nets/synthetic_checkpoint.h"
+#include "attention/nets/unet.h"
+#include "attention/runtime/attention_mask.h"
+#include "attention/runtime/file_io.h"
+#include "attention/runtime/safetensors.h"
+#include "test_support.h"
+
+using namespace macro;
+using namespace macro::nets;
+
+namespace {
+
+std::string unet_dir() { return test::golden_dir() + "/unet-tiny"; }
+
+Tensor read_tensor(const SafeTensors& f, const std::string& name) {
+  const TensorEntry* e = f.find(name);
+  REQUIRE(e != nullptr);
+  auto v = f.read_f32(name);
+  REQUIRE(v.is_ok());
+  return Tensor::from_f32(e->shape, *v);
+}
+
+struct Bound {
+  double rel_l2, max_abs;
+};
+constexpr Bound kFp32{1e-4, 1e-3};
+// bf16 weights and matmul inputs through ~20 random-weight layers: measured 1.1-1.2e-2 rel L2,
+// max abs <= 2.6e-2 on these cases (2026-11-22).
+constexpr Bound kBf16{3e-2, 1e-1};
+
+test::Diff check_close(const std::string& what, const Tensor& got, const Tensor& want, Bound b) {
+  REQUIRE(got.shape() == want.shape());
+  const test::Diff d = test::compare(got.f32(), want.f32(), size_t(want.numel()));
+  std::printf("  %-40s rel L2 %.3e  max abs %.3e\n", what.c_str(), d.rel_l2, d.max_abs);
+  INFO(what << ": rel L2 " << d.rel_l2 << ", max abs " << d.max_abs);
+  CHECK(d.rel_l2 <= b.rel_l2);
+  CHECK(d.max_abs <= b.max_abs);
+  return d;
+}
+
+// Dense golden masks -> block-sparse masks for each level present.
+void golden_masks(const SafeTensors& g, std::vector<BlockSparseMask>* store, UNetMasks* masks) {
+  store->clear();
+  store->reserve(8);
+  masks->level.clear();
+  for (int l = 0; l < 8; ++l) {
+    const TensorEntry* e = g.find("mask.level" + std::to_string(l));
+    if (!e) break;
+    auto m = mask_from_dense(e->data, int(e->shape[0]), int(e->shape[1]), 0, true);
+    REQUIRE(m.is_ok());
+    store->push_back(std::move(*m));
+    masks->level.push_back(&store->back());
+  }
+}
+
+void run_case(const UNet2DConditionModel& unet, const std::string& name, Bound b,
+              bool intermediates = false) {
+  auto g = SafeTensors::open(unet_dir() + "/" + name + ".safetensors");
+  REQUIRE(g.is_ok());
+  Tensor z = read_tensor(*g, "input.z"), ctx = read_tensor(*g, "input.ctx");
+  Tensor t = read_tensor(*g, "input.timestep");
+  std::vector<BlockSparseMask> store;
+  UNetMasks masks;
+  golden_masks(*g, &store, &masks);
+  std::map<std::string, Tensor> taps;
+  UNetTap tap;
+  if (intermediates)
+    tap = [&](const std::string& n, const float* data, const Shape& s) {
+      Tensor c = Tensor::f32(s);
+      std::copy(data, data + c.numel(), c.f32());
+      taps.emplace(n, std::move(c));
+    };
+  std::printf("unet-tiny %s (%s, %zu masked levels)\n", name.c_str(),
+              precision_name(unet.precision()), masks.level.size());
+  auto eps = unet.forward(z, t.f32()[0], ctx, masks, &ThreadPool::global(), tap);
+  REQUIRE(eps.is_ok());
+  check_close("output.eps", *eps, read_tensor(*g, "output.eps"), b);
+  if (intermediates) {
+    int seen = 0;
+    for (const std::string& n : g->names()) {
+      if (n.rfind("intermediate.", 0) != 0) continue;
+      const std::string key = n.substr(13);
+      REQUIRE(taps.count(key));
+      check_close(n, taps.at(key), read_tensor(*g, n), b);
+      ++seen;
+    }
+    CHECK(seen == 10);
+  }
+}
+
+std::unique_ptr<UNet2DConditionModel> load_tiny(Precision p) {
+  auto m = UNet2DConditionModel::load(unet_dir(), p);
+  INFO((m.is_ok() ? "" : m.status().message()));
+  REQUIRE(m.is_ok());
+  return std::move(*m);
+}
+
+}  // namespace
+
+TEST_CASE("unet-tiny fp32 matches the diffusers goldens", "[nets][unet]") {
+  auto unet = load_tiny(Precision::kF32);
+  run_case(*unet, "case-single", kFp32, /*intermediates=*/true);
+  run_case(*unet, "case-odd", kFp32);
+  run_case(*unet, "case-ref2", kFp32);
+  run_case(*unet, "case-macro-masked", kFp32);
+  run_case(*unet, "case-macro-unmasked", kFp32);
+}
+
+TEST_CASE("unet-tiny bf16 stays within its stated bound", "[nets][unet][bf16]") {
+  auto unet = load_tiny(Precision::kBf16);
+  for (const char* c : {"case-single", "case-odd", "case-ref2", "case-macro-masked",
+                        "case-macro-unmasked"})
+    run_case(*unet, c, kBf16);
+}
+
+TEST_CASE("unet: the MACRO mask changes the result and skips work", "[nets][unet]") {
+  auto g = SafeTensors::open(unet_dir() + "/case-macro-masked.safetensors");
+  REQUIRE(g.is_ok());
+  std::vector<BlockSparseMask> store;
+  UNetMasks masks;
+  golden_masks(*g, &store, &masks);
+  REQUIRE(masks.level.size() == 4);
+  // Level 0: 5 views x 384 tokens; the mask allows far fewer pairs than the full square.
+  const BlockSparseMask& m0 = *masks.level[0];
+  CHECK(m0.nq == 5 * 16 * 24);
+  CHECK(m0.computed_pairs() < int64_t(m0.nq) * m0.nq);
+  auto masked = read_tensor(*g, "output.eps");
+  auto u = SafeTensors::open(unet_dir() + "/case-macro-unmasked.safetensors");
+  REQUIRE(u.is_ok());
+  auto unmasked = read_tensor(*u, "output.eps");
+  CHECK(test::compare(masked.f32(), unmasked.f32(), size_t(masked.numel())).rel_l2 > 1e-3);
+}
+
+TEST_CASE("unet: bad shapes and masks are refused", "[nets][unet]") {
+  auto unet = load_tiny(Precision::kF32);
+  Tensor z = Tensor::f32({2, 4, 8, 8}), ctx = Tensor::f32({2, 77, 48});
+  Tensor bad_z = Tensor::f32({2, 3, 8, 8}), bad_ctx = Tensor::f32({2, 77, 40});
+  auto r1 = unet->forward(bad_z, 199, ctx, {}, nullptr);
+  REQUIRE_FALSE(r1.is_ok());
+  CHECK_THAT(r1.status().message(), Catch::Contains("z"));
+  auto r2 = unet->forward(z, 199, bad_ctx, {}, nullptr);
+  REQUIRE_FALSE(r2.is_ok());
+  CHECK_THAT(r2.status().message(), Catch::Contains("ctx"));
+  std::vector<uint8_t> dense(100 * 100, 1);
+  auto m = mask_from_dense(dense.data(), 100, 100);
+  REQUIRE(m.is_ok());
+  UNetMasks masks;
+  masks.level = {&*m};
+  auto r3 = unet->forward(z, 199, ctx, masks, nullptr);
+  REQUIRE_FALSE(r3.is_ok());
+  CHECK_THAT(r3.status().message(), Catch::Contains("mask level 0"));
+  // A good call with one shared ctx row ([1, 77, 48]) works.
+  Tensor ctx1 = Tensor::f32({1, 77, 48});
+  CHECK(unet->forward(z, 199, ctx1, {}, nullptr).is_ok());
+}
+
+namespace {
+
+// Copy the tiny checkpoint through `edit` (which may drop, rename or reshape tensors).
+std::string edited_copy(const test::TempDir& dir, const std::string& src_dir,
+                        const std::function<void(std::vector<TensorToWrite>&,
+                                                 std::vector<std::vector<float>>&)>& edit) {
+  auto f = SafeTensors::open(src_dir + "/diffusion_pytorch_model.safetensors");
+  REQUIRE(f.is_ok());
+  std::vector<TensorToWrite> ts;
+  std::vector<std::vector<float>> data;
+  data.reserve(f->names().size() + 4);
+  for (const std::string& n : f->names()) {
+    const TensorEntry* e = f->find(n);
+    ts.push_back({n, e->dtype, e->shape, e->data});
+  }
+  edit(ts, data);
+  const std::string out = dir.path + "/model";
+  std::filesystem::create_directories(out);
+  std::filesystem::copy_file(src_dir + "/config.json", out + "/config.json");
+  REQUIRE(write_safetensors(out + "/diffusion_pytorch_model.safetensors", ts).is_ok());
+  return out;
+}
+
+TensorToWrite* find_tw(std::vector<TensorToWrite>& ts, const std::string& name) {
+  for (auto& t : ts)
+    if (t.name == name) return &t;
+  FAIL("no tensor " << name);
+  return nullptr;
+}
+
+}  // namespace
+
+TEST_CASE("unet: missing, extra and mis-shaped tensors are reported by name", "[nets][unet]") {
+  const std::string victim = "up_blocks.2.attentions.1.transformer_blocks.0.attn2.to_k.weight";
+  {
+    test::TempDir dir("unet-missing");
+    auto folder = edited_copy(dir, unet_dir(), [&](auto& ts, auto&) {
+      ts.erase(std::remove_if(ts.begin(), ts.end(), [&](auto& t) { return t.name == victim; }),
+               ts.end());
+    });
+    auto m = UNet2DConditionModel::load(folder, Precision::kF32);
+    REQUIRE_FALSE(m.is_ok());
+    CHECK_THAT(m.status().message(), Catch::Contains("missing") && Catch::Contains(victim));
+  }
+  {
+    test::TempDir dir("unet-extra");
+    auto folder = edited_copy(dir, unet_dir(), [&](auto& ts, auto&) {
+      TensorToWrite extra = *find_tw(ts, victim);
+      extra.name = "down_blocks.0.attentions.0.extra_thing.weight";
+      ts.push_back(extra);
+    });
+    auto m = UNet2DConditionModel::load(folder, Precision::kF32);
+    REQUIRE_FALSE(m.is_ok());
+    CHECK_THAT(m.status().message(),
+               Catch::Contains("unused") && Catch::Contains("extra_thing.weight"));
+  }
+  {
+    test::TempDir dir("unet-shape");
+    auto folder = edited_copy(dir, unet_dir(), [&](auto& ts, auto&) {
+      TensorToWrite* t = find_tw(ts, victim);
+      std::swap(t->shape[0], t->shape[1]);  // [64,48] -> [48,64]
+    });
+    auto m = UNet2DConditionModel::load(folder, Precision::kF32);
+    REQUIRE_FALSE(m.is_ok());
+    CHECK_THAT(m.status().message(), Catch::Contains("mis-shaped") && Catch::Contains(victim) &&
+                                         Catch::Contains("[48,64]"));
+  }
+}
+
+TEST_CASE("unet: a config with other widths, heads and layers builds and runs", "[nets][unet]") {
+  // Not the tiny or full sizes: 3 levels, 1 layer per block, 4 groups, heads 1/2/4.
+  UNetConfig cfg;
+  cfg.down_block_types = {"CrossAttnDownBlock2D", "CrossAttnDownBlock2D", "DownBlock2D"};
+  cfg.up_block_types = {"UpBlock2D", "CrossAttnUpBlock2D", "CrossAttnUpBlock2D"};
+  cfg.block_out_channels = {16, 24, 32};
+  cfg.num_heads = {1, 2, 4};
+  cfg.layers_per_block = 1;
+  cfg.norm_num_groups = 4;
+  cfg.cross_attention_dim = 12;
+  auto m = UNet2DConditionModel::build(cfg);
+  REQUIRE(m.is_ok());
+  // Bind every parameter to a small deterministic value through the visitor.
+  struct Filler : ParamVisitor {
+    std::vector<std::unique_ptr<std::vector<float>>> store;
+    size_t count = 0;
+    void param(const std::string& name, Param& p, const std::vector<int64_t>& shape) override {
+      int64_t n = 1;
+      for (int64_t d : shape) n *= d;
+      auto v = std::make_unique<std::vector<float>>(size_t(n));
+      const bool norm = name.find("norm") != std::string::npos && name.find(".weight") != std::string::npos;
+      for (int64_t i = 0; i < n; ++i)
+        (*v)[size_t(i)] = norm ? 1.0f : 0.05f * float(std::sin(double(i) * 0.37 + double(count)));
+      p.data = v->data();
+      p.shape = shape;
+      store.push_back(std::move(v));
+      ++count;
+    }
+  } filler;
+  (*m)->visit(filler);
+  CHECK(filler.count > 50);
+  (*m)->pack(Precision::kF32);
+  Tensor z = Tensor::f32({2, 4, 7, 5}), ctx = Tensor::f32({2, 5, 12});
+  for (int64_t i = 0; i < z.numel(); ++i) z.f32()[i] = float(std::cos(double(i)));
+  for (int64_t i = 0; i < ctx.numel(); ++i) ctx.f32()[i] = float(std::sin(double(i)));
+  auto eps = (*m)->forward(z, 199, ctx, {}, &ThreadPool::global());
+  REQUIRE(eps.is_ok());
+  CHECK(eps->shape() == Shape{2, 4, 7, 5});
+  for (int64_t i = 0; i < eps->numel(); ++i) REQUIRE(std::isfinite(eps->f32()[i]));
+}
+
+TEST_CASE("unet: the full-size SD-Turbo layout from the manifest loads (bf16 storage)",
+          "[nets][unet][full]") {
+  test::TempDir dir("unet-full");
+  SyntheticCheckpointOptions o;
+  o.bf16 = true;
+  REQUIRE(write_synthetic_component(test::golden_dir() + "/manifests/unet.json", dir.path,
+                                    "UNet2DConditionModel", o)
+              .is_ok());
+  auto m = UNet2DConditionModel::load(dir.path, Precision::kBf16);
+  INFO((m.is_ok() ? "" : m.status().message()));
+  REQUIRE(m.is_ok());
+  CHECK((*m)->config().block_out_channels == std::vector<int>{320, 640, 1280, 1280});
+  // One small forward (latent 8x8, one view) proves the packed tree is complete.
+  Tensor z = Tensor::f32({1, 4, 8, 8}), ctx = Tensor::f32({1, 77, 1024});
+  for (int64_t i = 0; i < z.numel(); ++i) z.f32()[i] = float(std::sin(double(i)));
+  auto eps = (*m)->forward(z, 199, ctx, {}, &ThreadPool::global());
+  REQUIRE(eps.is_ok());
+  for (int64_t i = 0; i < eps->numel(); ++i) REQUIRE(std::isfinite(eps->f32()[i]));
+}
+
+TEST_CASE("nn-run unet folder: golden case through the library entry point", "[nets][unet][nn-run]") {
+  test::TempDir dir("nn-run-unet");
+  auto g = SafeTensors::open(unet_dir() + "/case-odd.safetensors");
+  REQUIRE(g.is_ok());
+  Tensor z = read_tensor(*g, "input.z"), ctx = read_tensor(*g, "input.ctx");
+  const int64_t t = 199;
+  const std::string in = dir.file("in.safetensors"), out = dir.file("out.safetensors");
+  REQUIRE(write_safetensors(in, {{"input.z", DType::kF32, z.shape(), z.f32()},
+                                 {"input.ctx", DType::kF32, ctx.shape(), ctx.f32()},
+                                 {"input.timestep", DType::kI64, {1}, &t}})
+              .is_ok());
+  NnRunOptions opt;
+  opt.model = unet_dir();
+  opt.inputs = in;
+  opt.out = out;
+  opt.pool = &ThreadPool::global();
+  Status s = nn_run(opt);
+  INFO(s.message());
+  REQUIRE(s.is_ok());
+  auto o = SafeTensors::open(out);
+  REQUIRE(o.is_ok());
+  CHECK(o->metadata().at("model") == "unet");
+  check_close("nn-run output.eps", read_tensor(*o, "output.eps"), read_tensor(*g, "output.eps"), kFp32);
+  // A NaN in the input is refused naming the tensor.
+  z.f32()[5] = NAN;
+  REQUIRE(write_safetensors(in, {{"input.z", DType::kF32, z.shape(), z.f32()},
+                                 {"input.ctx", DType::kF32, ctx.shape(), ctx.f32()}})
+              .is_ok());
+  Status bad = nn_run(opt);
+  REQUIRE_FALSE(bad.is_ok());
+  CHECK_THAT(bad.message(), Catch::Contains("input.z") && Catch::Contains("NaN"));
+}
