@@ -88,6 +88,10 @@ void block_scalar(const BlockJob& job, const BlockScratch& sc) {
   }
 }
 
+void blocks_scalar(const BlockJob* jobs, int count, const BlockScratch* scratch) {
+  for (int g = 0; g < count; ++g) block_scalar(jobs[g], scratch[g]);
+}
+
 void score_tile_scalar(const float* const* k_rows, int keys, const float* qt, int d, float* s) {
   for (int c = 0; c < keys; ++c) {
     float* sc = s + size_t(c) * kBQ;
@@ -186,100 +190,113 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, ThreadPool& po
 
   const BlockSparseMask* mask = a.mask;
   const int nqb = (a.nq + kBQ - 1) / kBQ, nkb = (a.nk + kBK - 1) / kBK;
-  const int max_entries = nkb;
   const ScratchLayout layout(d);
-  // Per worker: floats (layout), then entry lists, row pointers and one combined causal tile.
-  struct WorkerBufs {
+  // Query blocks per work item: the group's blocks share each K/V block while it is in cache.
+  // Keep the group's scratch near 256 KiB (L2 holds it with the K/V blocks).
+  const int group = std::clamp(int((256u << 10) / (layout.total * sizeof(float))), 1, kMaxGroup);
+  const int groups = (nqb + group - 1) / group;
+  // Per worker and group slot: floats (layout), entry lists, row pointers, one causal tile.
+  struct Slot {
     std::vector<int32_t> key_blocks;
     std::vector<const uint8_t*> tiles;
     std::vector<uint8_t> causal_tile;
+    const float* q_rows[kBQ];
+    float* out_rows[kBQ];
+    const float* v_rows[kBK];
   };
   const int workers = pool.size();
-  std::unique_ptr<float[]> floats(new float[layout.total * size_t(workers) + 16]);
+  const size_t slots = size_t(workers) * size_t(group);
+  std::unique_ptr<float[]> floats(new float[layout.total * slots + 16]);
   float* base = reinterpret_cast<float*>((reinterpret_cast<uintptr_t>(floats.get()) + 63) &
                                          ~uintptr_t(63));
-  std::vector<WorkerBufs> bufs(static_cast<size_t>(workers));
-  for (auto& b : bufs) {
-    b.key_blocks.resize(size_t(std::max(max_entries, 1)));
-    b.tiles.resize(size_t(std::max(max_entries, 1)));
+  std::vector<Slot> slot(slots);
+  for (auto& b : slot) {
+    b.key_blocks.resize(size_t(std::max(nkb, 1)));
+    b.tiles.resize(size_t(std::max(nkb, 1)));
     if (a.causal) b.causal_tile.resize(size_t(kBQ) * kBK);
   }
 
-  const size_t items = size_t(nqb) * size_t(a.heads);
+  // Fill job j (query block qb of head h) in slot b.
+  auto prepare = [&](int h, int qb, Slot& b, BlockJob& job) {
+    const int rows = std::min(kBQ, a.nq - qb * kBQ);
+    for (int r = 0; r < rows; ++r) {
+      const int mr = qb * kBQ + r;
+      const size_t i =
+          mask && !mask->query_index.empty() ? size_t(mask->query_index[size_t(mr)]) : mr;
+      b.q_rows[r] = a.q + i * a.q_stride + size_t(h) * d;
+      b.out_rows[r] = a.out + i * a.out_stride + size_t(h) * d;
+    }
+    // Key blocks this query block visits.
+    int entries = 0;
+    if (mask) {
+      for (int e = mask->block_begin[size_t(qb)]; e < mask->block_begin[size_t(qb) + 1]; ++e) {
+        b.key_blocks[size_t(entries)] = mask->key_block[size_t(e)];
+        b.tiles[size_t(entries)] = mask->tile_data(mask->tile[size_t(e)]);
+        ++entries;
+      }
+    } else {
+      for (int kb = 0; kb < nkb; ++kb) {
+        b.key_blocks[size_t(kb)] = kb;
+        b.tiles[size_t(kb)] = nullptr;
+      }
+      entries = nkb;
+    }
+    if (a.causal) {  // keep key blocks that start at or before the last row of the block
+      const int last_row = qb * kBQ + rows - 1;
+      int kept = 0;
+      for (int e = 0; e < entries; ++e) {
+        const int kb = b.key_blocks[size_t(e)];
+        if (kb * kBK > last_row) continue;
+        const uint8_t* t = b.tiles[size_t(e)];
+        if (kb * kBK + kBK - 1 > qb * kBQ) {  // crosses the diagonal: combine tiles
+          uint8_t* ct = b.causal_tile.data();
+          for (int r = 0; r < kBQ; ++r)
+            for (int cc = 0; cc < kBK; ++cc)
+              ct[tile_offset(r, cc)] =
+                  (kb * kBK + cc <= qb * kBQ + r) && (!t || t[tile_offset(r, cc)]);
+          t = ct;  // only one block per query block can cross (BQ == BK)
+        }
+        b.key_blocks[size_t(kept)] = kb;
+        b.tiles[size_t(kept)] = t;
+        ++kept;
+      }
+      entries = kept;
+    }
+    job.rows = rows;
+    job.d = d;
+    job.scale_log2e = a.scale * kLog2e;
+    job.q_rows = b.q_rows;
+    job.out_rows = b.out_rows;
+    job.entries = entries;
+    job.key_blocks = b.key_blocks.data();
+    job.tiles = b.tiles.data();
+    job.k = a.k ? a.k + size_t(h) * d : nullptr;
+    job.v = a.v ? a.v + size_t(h) * d : nullptr;
+    job.k_stride = a.k_stride;
+    job.v_stride = a.v_stride;
+    job.key_index = mask && !mask->key_index.empty() ? mask->key_index.data() : nullptr;
+    job.nk = a.nk;
+  };
+
+  const size_t items = size_t(groups) * size_t(a.heads);
   pool.parallel_for(
       items,
       [&](size_t begin, size_t end, int worker) {
-        float* w = base + layout.total * size_t(worker);
-        WorkerBufs& wb = bufs[size_t(worker)];
-        const float* v_rows[kBK];
-        BlockScratch sc{w + layout.qt, w + layout.s,     w + layout.o, w + layout.m,
-                        w + layout.l,  w + layout.alpha, v_rows};
-        const float* q_rows[kBQ];
-        float* out_rows[kBQ];
+        BlockJob jobs[kMaxGroup];
+        BlockScratch scratch[kMaxGroup];
+        for (int g = 0; g < group; ++g) {
+          const size_t k = size_t(worker) * size_t(group) + size_t(g);
+          float* w = base + layout.total * k;
+          scratch[g] = BlockScratch{w + layout.qt, w + layout.s,     w + layout.o, w + layout.m,
+                                    w + layout.l,  w + layout.alpha, slot[k].v_rows};
+        }
         for (size_t item = begin; item < end; ++item) {
           const int h = int(item % size_t(a.heads));
-          const int qb = int(item / size_t(a.heads));
-          const int rows = std::min(kBQ, a.nq - qb * kBQ);
-          for (int r = 0; r < rows; ++r) {
-            const int mr = qb * kBQ + r;
-            const size_t i =
-                mask && !mask->query_index.empty() ? size_t(mask->query_index[size_t(mr)]) : mr;
-            q_rows[r] = a.q + i * a.q_stride + size_t(h) * d;
-            out_rows[r] = a.out + i * a.out_stride + size_t(h) * d;
-          }
-          // Key blocks this query block visits.
-          int entries = 0;
-          if (mask) {
-            for (int e = mask->block_begin[size_t(qb)]; e < mask->block_begin[size_t(qb) + 1];
-                 ++e) {
-              wb.key_blocks[size_t(entries)] = mask->key_block[size_t(e)];
-              wb.tiles[size_t(entries)] = mask->tile_data(mask->tile[size_t(e)]);
-              ++entries;
-            }
-          } else {
-            for (int kb = 0; kb < nkb; ++kb) {
-              wb.key_blocks[size_t(kb)] = kb;
-              wb.tiles[size_t(kb)] = nullptr;
-            }
-            entries = nkb;
-          }
-          if (a.causal) {  // keep key blocks that start at or before the last row of the block
-            const int last_row = qb * kBQ + rows - 1;
-            int kept = 0;
-            for (int e = 0; e < entries; ++e) {
-              const int kb = wb.key_blocks[size_t(e)];
-              if (kb * kBK > last_row) continue;
-              const uint8_t* t = wb.tiles[size_t(e)];
-              if (kb * kBK + kBK - 1 > qb * kBQ) {  // crosses the diagonal: combine tiles
-                uint8_t* ct = wb.causal_tile.data();
-                for (int r = 0; r < kBQ; ++r)
-                  for (int cc = 0; cc < kBK; ++cc)
-                    ct[tile_offset(r, cc)] =
-                        (kb * kBK + cc <= qb * kBQ + r) && (!t || t[tile_offset(r, cc)]);
-                t = ct;  // only one block per query block can cross (BQ == BK)
-              }
-              wb.key_blocks[size_t(kept)] = kb;
-              wb.tiles[size_t(kept)] = t;
-              ++kept;
-            }
-            entries = kept;
-          }
-          BlockJob job;
-          job.rows = rows;
-          job.d = d;
-          job.scale_log2e = a.scale * kLog2e;
-          job.q_rows = q_rows;
-          job.out_rows = out_rows;
-          job.entries = entries;
-          job.key_blocks = wb.key_blocks.data();
-          job.tiles = wb.tiles.data();
-          job.k = a.k ? a.k + size_t(h) * d : nullptr;
-          job.v = a.v ? a.v + size_t(h) * d : nullptr;
-          job.k_stride = a.k_stride;
-          job.v_stride = a.v_stride;
-          job.key_index = mask && !mask->key_index.empty() ? mask->key_index.data() : nullptr;
-          job.nk = a.nk;
-          kern.block(job, sc);
+          const int qb0 = int(item / size_t(a.heads)) * group;
+          const int count = std::min(group, nqb - qb0);
+          for (int g = 0; g < count; ++g)
+            prepare(h, qb0 + g, slot[size_t(worker) * size_t(group) + size_t(g)], jobs[g]);
+          kern.block(jobs, count, scratch);
         }
       },
       1);
@@ -291,7 +308,7 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, ThreadPool& po
 static_assert(kAttnBlockQ == kAttnBlockK, "the causal split assumes square tiles");
 
 const AttentionKernels& scalar_kernels() {
-  static const AttentionKernels k{Isa::kScalar, 1, block_scalar, score_tile_scalar,
+  static const AttentionKernels k{Isa::kScalar, 1, blocks_scalar, score_tile_scalar,
                                   fma_peak_scalar};
   return k;
 }

@@ -7,14 +7,17 @@
 // q[i * q_stride + h * D .. + D). Rows may be wider than C (row strides), so q, k and v can be
 // slices of one fused [N, 3C] qkv buffer.
 //
-// Work is split over (head, 64-query block) items on the ThreadPool; every item is computed by one
-// thread in a fixed order, so the result is bit-identical for any thread count. Per-thread scratch
-// (packed K^T tile, score tile, output accumulator: about (128 + 8 D) KiB... see attention.cpp) is
-// allocated once per call.
+// Work is split over (head, group of up to four 64-query blocks) items on the ThreadPool; every
+// item is computed by one thread in a fixed order, so the result is bit-identical for any thread
+// count. The blocks of a group share each K/V block while it is in cache. Per-thread scratch
+// (packed Q^T [D, 64], score tile [64, 64], output accumulator [64, D]: 16 KiB + 512 D bytes, i.e.
+// 48 KiB at D = 64, 272 KiB at D = 512) is allocated once per call.
 //
 // Masking: a BlockSparseMask (attention_mask.h) lists, per 64-query block, the 64-key blocks it may
 // see; unlisted tiles cost nothing. `causal` allows key j for query i iff j <= i (CLIP text
-// encoder); it combines with a mask that has no token permutation.
+// encoder); it combines with a mask that has no token permutation. For a dense mask from a file
+// (the goldens' `mask.levelL`), build it with mask_from_dense(..., group_tokens = true) so that
+// interleaved groups become full/empty tiles.
 // A query row that may attend to no key at all gets an output of zeros (never NaN).
 //
 // Paths: scalar twin (any D), AVX2 (D % 8 == 0), AVX-512 (D % 16 == 0), chosen from active_isa()
@@ -87,7 +90,11 @@ struct BlockScratch {
   const float** v_rows = nullptr;  // [BK]
 };
 
-using BlockFn = void (*)(const BlockJob& job, const BlockScratch& scratch);
+// Up to kMaxGroup query blocks of one head, processed together so that each K/V block read from
+// memory serves all of them (their key block lists are merged); every job has its own scratch.
+// The result of a job does not depend on which other jobs share its call.
+inline constexpr int kMaxGroup = 4;
+using BlockFn = void (*)(const BlockJob* jobs, int count, const BlockScratch* scratch);
 // s[c * BQ + r] = sum_d k_rows[c][d] * qt[d * BQ + r], for c < keys, all BQ query lanes: the
 // S^T = K Q^T micro-GEMM of the block kernel, exposed so the benchmark can measure its rate alone.
 using ScoreTileFn = void (*)(const float* const* k_rows, int keys, const float* qt, int d,

@@ -1,6 +1,6 @@
 // AVX2 + FMA (fp32) instantiation of the fused attention block kernel (attention_simd.h).
-// 16 ymm registers: score tile 6 rows x 2 ymm (16 keys per pass) = 12 accumulators; P V 6 rows x
-// 2 ymm (16 channels per pass).
+// 16 ymm registers: score tile S^T 6 keys x 2 ymm (16 queries per pass) = 12 accumulators; P V
+// 6 query rows x 2 ymm (16 channels per pass).
 #include <immintrin.h>
 
 #include "attention/runtime/attention_simd.h"
@@ -23,18 +23,6 @@ struct Avx2 {
   static V add(V a, V b) { return _mm256_add_ps(a, b); }
   static V sub(V a, V b) { return _mm256_sub_ps(a, b); }
   static V max(V a, V b) { return _mm256_max_ps(a, b); }
-  static float hmax(V a) {
-    __m128 m = _mm_max_ps(_mm256_castps256_ps128(a), _mm256_extractf128_ps(a, 1));
-    m = _mm_max_ps(m, _mm_movehl_ps(m, m));
-    m = _mm_max_ss(m, _mm_movehdup_ps(m));
-    return _mm_cvtss_f32(m);
-  }
-  static float hsum(V a) {
-    __m128 s = _mm_add_ps(_mm256_castps256_ps128(a), _mm256_extractf128_ps(a, 1));
-    s = _mm_add_ps(s, _mm_movehl_ps(s, s));
-    s = _mm_add_ss(s, _mm_movehdup_ps(s));
-    return _mm_cvtss_f32(s);
-  }
 
   static V exp2(V x) {
     x = _mm256_max_ps(x, _mm256_set1_ps(-127.0f));
@@ -50,12 +38,6 @@ struct Avx2 {
   static V mask_tile(V s, const uint8_t* t) {
     const __m256i b = _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(t)));
     const V blocked = _mm256_castsi256_ps(_mm256_cmpeq_epi32(b, _mm256_setzero_si256()));
-    return _mm256_blendv_ps(s, _mm256_set1_ps(-__builtin_inff()), blocked);
-  }
-  static V mask_tail(V s, int n) {
-    if (n >= W) return s;
-    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-    const V blocked = _mm256_castsi256_ps(_mm256_cmpgt_epi32(lane, _mm256_set1_epi32(n - 1)));
     return _mm256_blendv_ps(s, _mm256_set1_ps(-__builtin_inff()), blocked);
   }
 };
@@ -79,7 +61,7 @@ double fma_peak_avx2(int64_t iterations) {
 }  // namespace
 
 const AttentionKernels& avx2_kernels() {
-  static const AttentionKernels k{Isa::kAvx2, Avx2::W, block_simd<Avx2>, score_tile_simd<Avx2>,
+  static const AttentionKernels k{Isa::kAvx2, Avx2::W, blocks_simd<Avx2>, score_tile_simd<Avx2>,
                                   fma_peak_avx2};
   return k;
 }

@@ -1,5 +1,6 @@
 // AVX-512 (fp32) instantiation of the fused attention block kernel (attention_simd.h).
-// Score tile: 6 rows x 4 zmm (64 keys) = 24 accumulators; P V: 6 rows x 4 zmm (64 channels).
+// Score tile S^T: 6 keys x 4 zmm (64 queries) = 24 accumulators; P V: 6 query rows x 4 zmm
+// (64 channels).
 // GCC 12's _mm512_undefined_* helpers trip -Wuninitialized once inlined (GCC bug 105593).
 #pragma GCC diagnostic ignored "-Wuninitialized"
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
@@ -25,8 +26,6 @@ struct Avx512 {
   static V add(V a, V b) { return _mm512_add_ps(a, b); }
   static V sub(V a, V b) { return _mm512_sub_ps(a, b); }
   static V max(V a, V b) { return _mm512_max_ps(a, b); }
-  static float hmax(V a) { return _mm512_reduce_max_ps(a); }
-  static float hsum(V a) { return _mm512_reduce_add_ps(a); }
 
   static V exp2(V x) {
     x = _mm512_max_ps(x, _mm512_set1_ps(-127.0f));
@@ -44,11 +43,6 @@ struct Avx512 {
     const __m128i b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(t));
     const __mmask16 allowed = _mm_test_epi8_mask(b, b);
     return _mm512_mask_blend_ps(allowed, _mm512_set1_ps(-__builtin_inff()), s);
-  }
-  static V mask_tail(V s, int n) {
-    if (n >= W) return s;
-    const __mmask16 keep = n <= 0 ? __mmask16(0) : __mmask16((1u << n) - 1);
-    return _mm512_mask_blend_ps(keep, _mm512_set1_ps(-__builtin_inff()), s);
   }
 };
 
@@ -70,7 +64,7 @@ double fma_peak_avx512(int64_t iterations) {
 }  // namespace
 
 const AttentionKernels& avx512_kernels() {
-  static const AttentionKernels k{Isa::kAvx512, Avx512::W, block_simd<Avx512>,
+  static const AttentionKernels k{Isa::kAvx512, Avx512::W, blocks_simd<Avx512>,
                                   score_tile_simd<Avx512>, fma_peak_avx512};
   return k;
 }

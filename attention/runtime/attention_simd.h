@@ -12,6 +12,7 @@
 #pragma once
 
 #include <algorithm>
+#include <climits>
 #include <cstdint>
 #include <limits>
 
@@ -172,45 +173,95 @@ inline void pack_qt(const BlockJob& job, float* qt) {
       std::fill(qt + size_t(i) * kTileQ + job.rows, qt + size_t(i + 1) * kTileQ, 0.0f);
 }
 
+// Ask for the next key block's K and V rows while this one is computed: the rows are strided
+// (one head's D floats out of each token row), which the hardware prefetchers follow poorly.
+inline void prefetch_key_block(const BlockJob& job, int kb) {
+  const int cols = std::min(kTileK, job.nk - kb * kTileK);
+  for (int c = 0; c < cols; ++c) {
+    const int col = kb * kTileK + c;
+    const size_t j = job.key_index ? size_t(job.key_index[col]) : size_t(col);
+    const float* kr = job.k + j * job.k_stride;
+    const float* vr = job.v + j * job.v_stride;
+    for (int i = 0; i < job.d; i += 16) {
+      __builtin_prefetch(kr + i);
+      __builtin_prefetch(vr + i);
+    }
+  }
+}
+
 template <typename T>
-void block_simd(const BlockJob& job, const BlockScratch& sc) {
-  using V = typename T::V;
-  constexpr int NV = kTileQ / T::W;
-  const int d = job.d, rows = job.rows;
+void block_init(const BlockJob& job, const BlockScratch& sc) {
   for (int r = 0; r < kTileQ; r += T::W) {
     T::store(sc.m + r, T::set1(-std::numeric_limits<float>::infinity()));
     T::store(sc.l + r, T::zero());
   }
-  for (int r = 0; r < rows; ++r)
-    for (int i = 0; i < d; i += T::W) T::store(sc.o + size_t(r) * d + i, T::zero());
+  for (int r = 0; r < job.rows; ++r)
+    for (int i = 0; i < job.d; i += T::W) T::store(sc.o + size_t(r) * job.d + i, T::zero());
   pack_qt(job, sc.qt);
+}
+
+// One key block for one query block: S^T, mask, online softmax, O += P V.
+template <typename T>
+void block_step(const BlockJob& job, const BlockScratch& sc, const float* const* k_rows,
+                const float* const* v_rows, int cols, const uint8_t* tile) {
+  constexpr int NV = kTileQ / T::W;
+  score_tile<T>(k_rows, cols, sc.qt, job.d, sc.s);
+  if (tile) {
+    for (int c = 0; c < cols; ++c)
+      for (int v = 0; v < NV; ++v) {
+        float* p = sc.s + size_t(c) * kTileQ + v * T::W;
+        T::store(p, T::mask_tile(T::load(p), tile + size_t(c) * kTileQ + v * T::W));
+      }
+  }
+  softmax_tile<T>(sc.s, cols, sc.m, sc.l, sc.alpha);
+  pv_tile<T>(job.rows, sc.s, cols, v_rows, sc.o, job.d, sc.alpha);
+}
+
+template <typename T>
+void block_finish(const BlockJob& job, const BlockScratch& sc) {
+  using V = typename T::V;
+  for (int r = 0; r < job.rows; ++r) {
+    const V inv = T::set1(sc.l[r] > 0 ? 1.0f / sc.l[r] : 0.0f);
+    const float* o = sc.o + size_t(r) * job.d;
+    for (int i = 0; i < job.d; i += T::W)
+      T::store(job.out_rows[r] + i, T::mul(T::load(o + i), inv));
+  }
+}
+
+// The query blocks of a group walk the union of their key block lists in ascending order; each
+// K/V block is visited once and applied to every job that lists it, so a job sees exactly its
+// own blocks in its own order (results do not depend on the grouping).
+template <typename T>
+void blocks_simd(const BlockJob* jobs, int count, const BlockScratch* scratch) {
+  for (int g = 0; g < count; ++g) block_init<T>(jobs[g], scratch[g]);
+  int pos[kMaxGroup] = {};
   const float* k_rows[kTileK];
-  for (int e = 0; e < job.entries; ++e) {
-    const int kb = job.key_blocks[e];
-    const int cols = std::min(kTileK, job.nk - kb * kTileK);
-    const uint8_t* tile = job.tiles[e];
+  const float* const* v_rows = scratch[0].v_rows;
+  auto next_block = [&](const int* at) {
+    int kb = INT32_MAX;
+    for (int g = 0; g < count; ++g)
+      if (at[g] < jobs[g].entries) kb = std::min(kb, int(jobs[g].key_blocks[at[g]]));
+    return kb;
+  };
+  const BlockJob& j0 = jobs[0];
+  for (int kb = next_block(pos); kb != INT32_MAX;) {
+    const int cols = std::min(kTileK, j0.nk - kb * kTileK);
     for (int c = 0; c < cols; ++c) {
       const int col = kb * kTileK + c;
-      const size_t j = job.key_index ? size_t(job.key_index[col]) : size_t(col);
-      k_rows[c] = job.k + j * job.k_stride;
-      sc.v_rows[c] = job.v + j * job.v_stride;
+      const size_t j = j0.key_index ? size_t(j0.key_index[col]) : size_t(col);
+      k_rows[c] = j0.k + j * j0.k_stride;
+      scratch[0].v_rows[c] = j0.v + j * j0.v_stride;
     }
-    score_tile<T>(k_rows, cols, sc.qt, d, sc.s);
-    if (tile) {
-      for (int c = 0; c < cols; ++c)
-        for (int v = 0; v < NV; ++v) {
-          float* p = sc.s + size_t(c) * kTileQ + v * T::W;
-          T::store(p, T::mask_tile(T::load(p), tile + size_t(c) * kTileQ + v * T::W));
-        }
-    }
-    softmax_tile<T>(sc.s, cols, sc.m, sc.l, sc.alpha);
-    pv_tile<T>(rows, sc.s, cols, sc.v_rows, sc.o, d, sc.alpha);
+    for (int g = 0; g < count; ++g)
+      if (pos[g] < jobs[g].entries && jobs[g].key_blocks[pos[g]] == kb) ++pos[g];
+    const int next = next_block(pos);
+    if (next != INT32_MAX) prefetch_key_block(j0, next);
+    for (int g = 0; g < count; ++g)
+      if (pos[g] > 0 && jobs[g].key_blocks[pos[g] - 1] == kb)
+        block_step<T>(jobs[g], scratch[g], k_rows, v_rows, cols, jobs[g].tiles[pos[g] - 1]);
+    kb = next;
   }
-  for (int r = 0; r < rows; ++r) {
-    const V inv = T::set1(sc.l[r] > 0 ? 1.0f / sc.l[r] : 0.0f);
-    const float* o = sc.o + size_t(r) * d;
-    for (int i = 0; i < d; i += T::W) T::store(job.out_rows[r] + i, T::mul(T::load(o + i), inv));
-  }
+  for (int g = 0; g < count; ++g) block_finish<T>(jobs[g], scratch[g]);
 }
 
 // Exposed score micro-GEMM for the benchmark: s[c][r] = sum_d rows[c][d] * packed[d][r].

@@ -1,7 +1,7 @@
 // bench attention: fused block-sparse attention against the machine's own rates, measured in the
 // same run.
 //
-//   bench attention [--threads N] [--reps R] [--quick]
+//   bench attention [--threads N] [--reps R] [--quick] [--unet-only]
 //
 // Baselines (same run, same thread count):
 //  - FMA peak: a register-only FMA loop of the active path (per thread, times threads);
@@ -158,7 +158,7 @@ Buffers make_buffers(int n, int c) {
 int run(int argc, char** argv) {
   std::vector<int> thread_counts = {1, 2};
   int reps = 3;
-  bool quick = false;
+  bool quick = false, unet_only = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) {
       thread_counts = {std::atoi(argv[++i])};
@@ -166,6 +166,8 @@ int run(int argc, char** argv) {
       reps = std::max(1, std::atoi(argv[++i]));
     } else if (!std::strcmp(argv[i], "--quick")) {
       quick = true;
+    } else if (!std::strcmp(argv[i], "--unet-only")) {
+      unet_only = true;
     } else {
       std::fprintf(stderr, "bench attention: unknown flag '%s'\n", argv[i]);
       return 2;
@@ -221,8 +223,10 @@ int run(int argc, char** argv) {
     };
     char label[160];
     std::snprintf(label, sizeof label, "MACRO L1 dense %d tok, %dx%d", n, heads, d);
-    const Timing dense = time_case(label, buf, n, heads, nullptr, double(n) * n);
+    const Timing dense =
+        unet_only ? Timing{} : time_case(label, buf, n, heads, nullptr, double(n) * n);
     for (const MaskCase& m : masks) {
+      if (unet_only) break;
       const double frac = double(m.mask.allowed_pairs()) / (double(n) * n);
       std::snprintf(label, sizeof label, "  masked: %s", m.name.c_str());
       const Timing t = time_case(label, buf, n, heads, &m.mask, double(m.mask.allowed_pairs()));
