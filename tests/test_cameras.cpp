@@ -697,6 +697,9 @@ TEST_CASE("bad input: missing and mistyped fields name the field and the frame",
            {"ours4.json", R"([{"name": "cam3", "width": 4, "height": 4, "fx": 1, "fy": 1, "cx": 2, "cy": 2,
               "world_to_camera": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,1,1]]}])",
             {"'cam3': world_to_camera: last row is [0, 0, 1, 1]"}},
+           {"ours5.json", R"([{"name": "cam3", "width": 4, "height": 4, "fx": 1, "fy": 1, "cx": 2, "cy": 2,
+              "world_to_camera": [[1,0,0,0],[0,1,0.5,0],[0,0,1,0],[0,0,0,1]]}])",
+            {"ours5.json: camera 'cam3': rotation is not orthonormal"}},
            {"ns.json", R"({"w": 4, "h": 4, "fl_y": 2, "cx": 2, "cy": 2, "frames": [
               {"file_path": "x/a.png", "fl_x": 2, "transform_matrix": )" + gl + R"(},
               {"file_path": "x/b.png", "transform_matrix": )" + gl + "}]}",
@@ -834,4 +837,23 @@ TEST_CASE("bad input: COLMAP binary truncated, lying counts, unknown models and 
   write_bytes(dir + "/cameras.bin", cams.b);
   write_bytes(dir + "/images.bin", rig_images_bin(5).b);
   CHECK_THAT(error_of(load_cameras(dir)), Contains("camera id 5 is not in"));
+  // Random byte corruption: every outcome is a clean load of valid cameras or a message.
+  std::mt19937 rng(11);
+  int failures = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    Bytes c = cams, i = imgs;
+    std::vector<uint8_t>& target = trial % 2 ? c.b : i.b;
+    const int edits = 1 + int(rng() % 4);
+    for (int e = 0; e < edits; ++e) target[rng() % target.size()] = uint8_t(rng());
+    write_bytes(dir + "/cameras.bin", c.b);
+    write_bytes(dir + "/images.bin", i.b);
+    auto r = load_cameras(dir);
+    if (r.is_ok()) {
+      for (const Camera& cam : r->cameras) CHECK(cam.validate().is_ok());
+    } else {
+      ++failures;
+      CHECK_THAT(r.status().message(), Contains(".bin"));
+    }
+  }
+  CHECK(failures > 0);
 }
