@@ -35,7 +35,8 @@ inline constexpr int kTilePixels = kTile * kTile;
 // Extent culling. A Gaussian reaches alpha >= kMinAlpha only where its squared Mahalanobis distance
 // d^2 <= 2 ln(o / kMinAlpha) (o = opacity after AA/mip factors). The cull uses that radius^2
 // enlarged by this relative margin plus kCutoffAbsMargin, so float round-off in the culling can
-// only keep extra pixels (which the exact per-pixel test then skips), never drop a contributing one.
+// only keep extra pixels (which the exact per-pixel test then skips), never drop a contributing
+// one.
 inline constexpr float kCutoffRelMargin = 1e-3f;
 inline constexpr float kCutoffAbsMargin = 1e-3f;
 

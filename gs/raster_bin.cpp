@@ -31,17 +31,20 @@ struct Chunks {
 // One stable LSD pass: scatter (key, id) by the digit (key >> shift) & mask. Per-chunk histograms
 // (hist: [kBinChunks, kRadixBuckets]) make it parallel and still stable: chunk ch's keys of digit
 // d land after those of every earlier chunk.
-void radix_pass(const uint32_t* key_in, const uint32_t* id_in, uint32_t* key_out,
-                uint32_t* id_out, size_t n, int shift, uint32_t mask, uint32_t* hist,
-                ThreadPool& pool) {
+void radix_pass(const uint32_t* key_in, const uint32_t* id_in, uint32_t* key_out, uint32_t* id_out,
+                size_t n, int shift, uint32_t mask, uint32_t* hist, ThreadPool& pool) {
   const Chunks chunks(n);
-  pool.parallel_for(kBinChunks, [&](size_t cb, size_t ce, int) {
-    for (size_t ch = cb; ch < ce; ++ch) {
-      uint32_t* h = hist + ch * kRadixBuckets;
-      std::memset(h, 0, sizeof(uint32_t) * kRadixBuckets);
-      for (size_t i = chunks.begin(ch); i < chunks.end(ch); ++i) ++h[(key_in[i] >> shift) & mask];
-    }
-  }, 1);
+  pool.parallel_for(
+      kBinChunks,
+      [&](size_t cb, size_t ce, int) {
+        for (size_t ch = cb; ch < ce; ++ch) {
+          uint32_t* h = hist + ch * kRadixBuckets;
+          std::memset(h, 0, sizeof(uint32_t) * kRadixBuckets);
+          for (size_t i = chunks.begin(ch); i < chunks.end(ch); ++i)
+            ++h[(key_in[i] >> shift) & mask];
+        }
+      },
+      1);
   uint32_t sum = 0;
   for (uint32_t d = 0; d <= mask; ++d)
     for (size_t ch = 0; ch < size_t(kBinChunks); ++ch) {
@@ -50,28 +53,31 @@ void radix_pass(const uint32_t* key_in, const uint32_t* id_in, uint32_t* key_out
       h = sum;
       sum += c;
     }
-  pool.parallel_for(kBinChunks, [&](size_t cb, size_t ce, int) {
-    for (size_t ch = cb; ch < ce; ++ch) {
-      uint32_t* h = hist + ch * kRadixBuckets;
-      for (size_t i = chunks.begin(ch); i < chunks.end(ch); ++i) {
-        const uint32_t pos = h[(key_in[i] >> shift) & mask]++;
-        key_out[pos] = key_in[i];
-        id_out[pos] = id_in[i];
-      }
-    }
-  }, 1);
+  pool.parallel_for(
+      kBinChunks,
+      [&](size_t cb, size_t ce, int) {
+        for (size_t ch = cb; ch < ce; ++ch) {
+          uint32_t* h = hist + ch * kRadixBuckets;
+          for (size_t i = chunks.begin(ch); i < chunks.end(ch); ++i) {
+            const uint32_t pos = h[(key_in[i] >> shift) & mask]++;
+            key_out[pos] = key_in[i];
+            id_out[pos] = id_in[i];
+          }
+        }
+      },
+      1);
 }
 
 }  // namespace
 
 size_t bin_scratch_bytes(size_t n, size_t pairs, int tiles) {
-  return Arena::carve_size<TileSplat>(n)                           // depth-sorted records
-         + 4 * Arena::carve_size<uint32_t>(n)                      // keys, ids (x2)
-         + Arena::carve_size<uint64_t>(n + 1)                      // pair offsets
-         + 3 * Arena::carve_size<uint32_t>(pairs)                  // pair tile, pair id, output
+  return Arena::carve_size<TileSplat>(n)                            // depth-sorted records
+         + 4 * Arena::carve_size<uint32_t>(n)                       // keys, ids (x2)
+         + Arena::carve_size<uint64_t>(n + 1)                       // pair offsets
+         + 3 * Arena::carve_size<uint32_t>(pairs)                   // pair tile, pair id, output
          + Arena::carve_size<uint32_t>(size_t(kBinChunks) * tiles)  // chunk histograms
-         + Arena::carve_size<uint32_t>(size_t(tiles) + 1)          // tile_start
-         + Arena::carve_size<uint32_t>(n)                          // tiles in depth order
+         + Arena::carve_size<uint32_t>(size_t(tiles) + 1)           // tile_start
+         + Arena::carve_size<uint32_t>(n)                           // tiles in depth order
          + Arena::carve_size<uint32_t>(size_t(kBinChunks) * kRadixBuckets);  // radix hist
 }
 
@@ -98,28 +104,37 @@ void bin_stage(const Projected& proj, const CameraF& cam, TileRule rule, uint64_
   //    three stable LSD passes.
   const Chunks gchunks(n);
   uint32_t* chunk_visible = radix_hist;  // [kBinChunks + 1], before the radix passes use it
-  pool.parallel_for(kBinChunks, [&](size_t cb, size_t ce, int) {
-    for (size_t ch = cb; ch < ce; ++ch) {
-      uint32_t c = 0;
-      for (size_t g = gchunks.begin(ch); g < gchunks.end(ch); ++g) c += proj.tiles[g] != 0;
-      chunk_visible[ch + 1] = c;
-    }
-  }, 1);
+  pool.parallel_for(
+      kBinChunks,
+      [&](size_t cb, size_t ce, int) {
+        for (size_t ch = cb; ch < ce; ++ch) {
+          uint32_t c = 0;
+          for (size_t g = gchunks.begin(ch); g < gchunks.end(ch); ++g) c += proj.tiles[g] != 0;
+          chunk_visible[ch + 1] = c;
+        }
+      },
+      1);
   chunk_visible[0] = 0;
   for (int ch = 0; ch < kBinChunks; ++ch) chunk_visible[ch + 1] += chunk_visible[ch];
   const size_t v = chunk_visible[kBinChunks];
-  pool.parallel_for(kBinChunks, [&](size_t cb, size_t ce, int) {
-    for (size_t ch = cb; ch < ce; ++ch) {
-      size_t o = chunk_visible[ch];
-      for (size_t g = gchunks.begin(ch); g < gchunks.end(ch); ++g) {
-        if (proj.tiles[g] == 0) continue;
-        key_a[o] = proj.depth_key[g];
-        id_a[o] = uint32_t(g);
-        ++o;
-      }
-    }
-  }, 1);
-  struct Digit { int shift; uint32_t mask; };
+  pool.parallel_for(
+      kBinChunks,
+      [&](size_t cb, size_t ce, int) {
+        for (size_t ch = cb; ch < ce; ++ch) {
+          size_t o = chunk_visible[ch];
+          for (size_t g = gchunks.begin(ch); g < gchunks.end(ch); ++g) {
+            if (proj.tiles[g] == 0) continue;
+            key_a[o] = proj.depth_key[g];
+            id_a[o] = uint32_t(g);
+            ++o;
+          }
+        }
+      },
+      1);
+  struct Digit {
+    int shift;
+    uint32_t mask;
+  };
   const Digit digits[3] = {{0, 0x7ff}, {11, 0x7ff}, {22, 0x3ff}};
   uint32_t *kin = key_a, *iin = id_a, *kout = key_b, *iout = id_b;
   for (const Digit& d : digits) {
@@ -136,39 +151,49 @@ void bin_stage(const Projected& proj, const CameraF& cam, TileRule rule, uint64_
 
   // 2. Records in depth order; the record at rank k owns pairs [offset[k], offset[k+1]).
   TileSplat* sorted = out->splats;
-  pool.parallel_for(v, [&](size_t begin, size_t end, int) {
-    constexpr size_t kAhead = 16;
-    for (size_t k = begin; k < end; ++k) {
-      if (k + kAhead < end) __builtin_prefetch(&proj.splats[order[k + kAhead]]);
-      sorted[k] = proj.splats[order[k]];
-      sorted_tiles[k] = proj.tiles[order[k]];
-    }
-  }, 4096);
+  pool.parallel_for(
+      v,
+      [&](size_t begin, size_t end, int) {
+        constexpr size_t kAhead = 16;
+        for (size_t k = begin; k < end; ++k) {
+          if (k + kAhead < end) __builtin_prefetch(&proj.splats[order[k + kAhead]]);
+          sorted[k] = proj.splats[order[k]];
+          sorted_tiles[k] = proj.tiles[order[k]];
+        }
+      },
+      4096);
   offset[0] = 0;
   for (size_t k = 0; k < v; ++k) offset[k + 1] = offset[k] + sorted_tiles[k];
   MACRO_CHECK(offset[v] == pairs);
-  pool.parallel_for(v, [&](size_t begin, size_t end, int) {
-    for (size_t k = begin; k < end; ++k) {
-      uint64_t o = offset[k];
-      for_each_tile(sorted[k], cam, rule, [&](int tx, int ty) {
-        pair_tile[o] = uint32_t(ty * cam.tiles_x + tx);
-        pair_src[o] = uint32_t(k);
-        ++o;
-      });
-      MACRO_CHECK(o == offset[k + 1]);
-    }
-  }, 1024);
+  pool.parallel_for(
+      v,
+      [&](size_t begin, size_t end, int) {
+        for (size_t k = begin; k < end; ++k) {
+          uint64_t o = offset[k];
+          for_each_tile(sorted[k], cam, rule, [&](int tx, int ty) {
+            pair_tile[o] = uint32_t(ty * cam.tiles_x + tx);
+            pair_src[o] = uint32_t(k);
+            ++o;
+          });
+          MACRO_CHECK(o == offset[k + 1]);
+        }
+      },
+      1024);
 
   // 3. Stable counting sort of the pairs by tile, over C fixed chunks.
   const size_t chunk = (pairs + kBinChunks - 1) / kBinChunks;
-  pool.parallel_for(kBinChunks, [&](size_t begin, size_t end, int) {
-    for (size_t ch = begin; ch < end; ++ch) {
-      uint32_t* h = hist + ch * size_t(tiles);
-      std::memset(h, 0, sizeof(uint32_t) * size_t(tiles));
-      const size_t b = std::min<size_t>(pairs, ch * chunk), e = std::min<size_t>(pairs, b + chunk);
-      for (size_t i = b; i < e; ++i) ++h[pair_tile[i]];
-    }
-  }, 1);
+  pool.parallel_for(
+      kBinChunks,
+      [&](size_t begin, size_t end, int) {
+        for (size_t ch = begin; ch < end; ++ch) {
+          uint32_t* h = hist + ch * size_t(tiles);
+          std::memset(h, 0, sizeof(uint32_t) * size_t(tiles));
+          const size_t b = std::min<size_t>(pairs, ch * chunk),
+                       e = std::min<size_t>(pairs, b + chunk);
+          for (size_t i = b; i < e; ++i) ++h[pair_tile[i]];
+        }
+      },
+      1);
   uint32_t sum = 0;
   for (int t = 0; t < tiles; ++t) {
     out->tile_start[t] = sum;
@@ -180,13 +205,17 @@ void bin_stage(const Projected& proj, const CameraF& cam, TileRule rule, uint64_
     }
   }
   out->tile_start[tiles] = sum;
-  pool.parallel_for(kBinChunks, [&](size_t begin, size_t end, int) {
-    for (size_t ch = begin; ch < end; ++ch) {
-      uint32_t* h = hist + ch * size_t(tiles);
-      const size_t b = std::min<size_t>(pairs, ch * chunk), e = std::min<size_t>(pairs, b + chunk);
-      for (size_t i = b; i < e; ++i) out->pair[h[pair_tile[i]]++] = pair_src[i];
-    }
-  }, 1);
+  pool.parallel_for(
+      kBinChunks,
+      [&](size_t begin, size_t end, int) {
+        for (size_t ch = begin; ch < end; ++ch) {
+          uint32_t* h = hist + ch * size_t(tiles);
+          const size_t b = std::min<size_t>(pairs, ch * chunk),
+                       e = std::min<size_t>(pairs, b + chunk);
+          for (size_t i = b; i < e; ++i) out->pair[h[pair_tile[i]]++] = pair_src[i];
+        }
+      },
+      1);
 }
 
 }  // namespace macro::gs::raster

@@ -83,9 +83,12 @@ const RasterKernels& raster_kernels_for(Isa isa) {
   static const RasterKernels avx2{"avx2", blend_row_avx2, build_rows_scalar};
   static const RasterKernels avx512{"avx512", blend_row_avx512, build_rows_avx512};
   switch (isa) {
-    case Isa::kScalar: return scalar;
-    case Isa::kAvx2: return avx2;
-    default: return avx512;  // AVX-512, AVX512-BF16, AMX machines all run the AVX-512 kernel
+    case Isa::kScalar:
+      return scalar;
+    case Isa::kAvx2:
+      return avx2;
+    default:
+      return avx512;  // AVX-512, AVX512-BF16, AMX machines all run the AVX-512 kernel
   }
 }
 
@@ -182,8 +185,8 @@ void blend_tile(const Binned& bins, const CameraF& cam, const RasterKernels& ker
 }
 
 // The naive tiled loop: every pixel walks its tile's whole list with the scalar math.
-void blend_tile_reference(const Binned& bins, const CameraF& cam, int t,
-                          const BlendOutputs& out, BlendCounters* counters) {
+void blend_tile_reference(const Binned& bins, const CameraF& cam, int t, const BlendOutputs& out,
+                          BlendCounters* counters) {
   const TileRect rect = tile_rect(cam, t);
   const uint32_t begin = bins.tile_start[t], end = bins.tile_start[t + 1];
   for (int i = rect.y0; i < rect.y0 + rect.h; ++i) {
@@ -222,26 +225,28 @@ void blend_tile_reference(const Binned& bins, const CameraF& cam, int t,
 
 }  // namespace
 
-void blend_stage(const Binned& bins, const CameraF& cam,
-                 const RasterKernels& kernels, bool reference, const BlendOutputs& out,
-                 ThreadPool& pool, BlendTotals* totals) {
+void blend_stage(const Binned& bins, const CameraF& cam, const RasterKernels& kernels,
+                 bool reference, const BlendOutputs& out, ThreadPool& pool, BlendTotals* totals) {
   const int tiles = cam.tiles_x * cam.tiles_y;
   std::atomic<uint64_t> evals{0}, blended{0};
   std::vector<std::unique_ptr<TileScratch>> scratch(size_t(pool.size()));
   if (!reference)
     for (auto& s : scratch) s = std::make_unique<TileScratch>();
-  pool.parallel_for(size_t(tiles), [&](size_t begin, size_t end, int worker) {
-    BlendCounters counters;
-    if (reference) {
-      for (size_t t = begin; t < end; ++t)
-        blend_tile_reference(bins, cam, int(t), out, &counters);
-    } else {
-      for (size_t t = begin; t < end; ++t)
-        blend_tile(bins, cam, kernels, int(t), *scratch[size_t(worker)], out, &counters);
-    }
-    evals += counters.evals;
-    blended += counters.blended;
-  }, 2);
+  pool.parallel_for(
+      size_t(tiles),
+      [&](size_t begin, size_t end, int worker) {
+        BlendCounters counters;
+        if (reference) {
+          for (size_t t = begin; t < end; ++t)
+            blend_tile_reference(bins, cam, int(t), out, &counters);
+        } else {
+          for (size_t t = begin; t < end; ++t)
+            blend_tile(bins, cam, kernels, int(t), *scratch[size_t(worker)], out, &counters);
+        }
+        evals += counters.evals;
+        blended += counters.blended;
+      },
+      2);
   totals->evals = evals;
   totals->blended = blended;
 }

@@ -21,7 +21,8 @@ inline __m256 exp_neg256(__m256 x) {  // x <= 0
   p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(1.f));
   p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(1.f));
   // 2^n for n in [-126, 0]: exponent bits (n + 127) << 23.
-  const __m256i bits = _mm256_slli_epi32(_mm256_add_epi32(_mm256_cvtps_epi32(n), _mm256_set1_epi32(127)), 23);
+  const __m256i bits =
+      _mm256_slli_epi32(_mm256_add_epi32(_mm256_cvtps_epi32(n), _mm256_set1_epi32(127)), 23);
   return _mm256_mul_ps(p, _mm256_castsi256_ps(bits));
 }
 
@@ -38,7 +39,8 @@ void blend_row_avx2(const TileSplat* splats, const uint32_t* idx, int n, float p
   if (!acc->active) return;
   __m256 px[2], T[2], cr[2], cg[2], cb[2], cd[2], ci[2], act[2];
   for (int h = 0; h < 2; ++h) {
-    px[h] = _mm256_add_ps(_mm256_set1_ps(px0 + float(8 * h)), _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7));
+    px[h] =
+        _mm256_add_ps(_mm256_set1_ps(px0 + float(8 * h)), _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7));
     T[h] = _mm256_load_ps(acc->T + 8 * h);
     cr[h] = _mm256_load_ps(acc->r + 8 * h);
     cg[h] = _mm256_load_ps(acc->g + 8 * h);
@@ -65,7 +67,8 @@ void blend_row_avx2(const TileSplat* splats, const uint32_t* idx, int n, float p
       const __m256 dx = _mm256_sub_ps(x, px[h]);
       const __m256 sigma = _mm256_fmadd_ps(_mm256_fmadd_ps(ha, dx, bdy), dx, hcdy2);
       __m256 valid = _mm256_and_ps(act[h], _mm256_cmp_ps(sigma, zero, _CMP_GE_OQ));
-      const __m256 alpha = _mm256_min_ps(max_alpha, _mm256_mul_ps(o, exp_neg256(_mm256_sub_ps(zero, sigma))));
+      const __m256 alpha =
+          _mm256_min_ps(max_alpha, _mm256_mul_ps(o, exp_neg256(_mm256_sub_ps(zero, sigma))));
       valid = _mm256_and_ps(valid, _mm256_cmp_ps(alpha, min_alpha, _CMP_GE_OQ));
       const __m256 next_t = _mm256_mul_ps(T[h], _mm256_sub_ps(one, alpha));
       const __m256 stop = _mm256_and_ps(valid, _mm256_cmp_ps(next_t, t_stop, _CMP_LE_OQ));

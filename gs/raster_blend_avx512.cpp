@@ -34,8 +34,8 @@ void blend_row_avx512(const TileSplat* splats, const uint32_t* idx, int n, float
                       RowAccum* acc, BlendCounters* counters) {
   __mmask16 active = static_cast<__mmask16>(acc->active);
   if (!active) return;
-  const __m512 px = _mm512_add_ps(_mm512_set1_ps(px0),
-                                  _mm512_setr_ps(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15));
+  const __m512 px = _mm512_add_ps(
+      _mm512_set1_ps(px0), _mm512_setr_ps(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15));
   __m512 T = _mm512_load_ps(acc->T);
   __m512 cr = _mm512_load_ps(acc->r), cg = _mm512_load_ps(acc->g), cb = _mm512_load_ps(acc->b);
   __m512 cd = _mm512_load_ps(acc->depth), ci = _mm512_load_ps(acc->inv_depth);
@@ -95,8 +95,10 @@ void build_rows_avx512(const RowCullBatch& batch, int n, const RowCullTile& tile
       const __mmask16 in = n - c >= 16 ? __mmask16(0xffff) : __mmask16((1u << (n - c)) - 1u);
       const __m512 dy = _mm512_sub_ps(py, _mm512_load_ps(batch.y + c));
       const __m512 half2 =
-          _mm512_sub_ps(_mm512_load_ps(batch.a0 + c), _mm512_mul_ps(_mm512_mul_ps(_mm512_load_ps(batch.a1 + c), dy), dy));
-      const __m512 centre = _mm512_add_ps(_mm512_load_ps(batch.x + c), _mm512_mul_ps(_mm512_load_ps(batch.k + c), dy));
+          _mm512_sub_ps(_mm512_load_ps(batch.a0 + c),
+                        _mm512_mul_ps(_mm512_mul_ps(_mm512_load_ps(batch.a1 + c), dy), dy));
+      const __m512 centre = _mm512_add_ps(_mm512_load_ps(batch.x + c),
+                                          _mm512_mul_ps(_mm512_load_ps(batch.k + c), dy));
       const __m512 gap_lo = _mm512_sub_ps(x_lo, centre), gap_hi = _mm512_sub_ps(centre, x_hi);
       __mmask16 ok = _mm512_mask_cmp_ps_mask(in, half2, zero, _CMP_GE_OQ);
       ok &= _mm512_cmp_ps_mask(gap_lo, zero, _CMP_LE_OQ) |
@@ -104,7 +106,8 @@ void build_rows_avx512(const RowCullBatch& batch, int n, const RowCullTile& tile
       ok &= _mm512_cmp_ps_mask(gap_hi, zero, _CMP_LE_OQ) |
             _mm512_cmp_ps_mask(_mm512_mul_ps(gap_hi, gap_hi), half2, _CMP_LE_OQ);
       // Register compress + full store (a compress straight to memory is slow on some cores).
-      const __m512i idx = _mm512_maskz_compress_epi32(ok, _mm512_add_epi32(lanes, _mm512_set1_epi32(c)));
+      const __m512i idx =
+          _mm512_maskz_compress_epi32(ok, _mm512_add_epi32(lanes, _mm512_set1_epi32(c)));
       _mm512_storeu_si512(list + count, idx);
       count += __builtin_popcount(ok);
     }

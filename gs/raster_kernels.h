@@ -27,11 +27,11 @@ namespace macro::gs::raster {
 // One Gaussian as the blend loop reads it: one 64-byte record, so a tile's gather of a Gaussian
 // touches a single cache line.
 struct alignas(64) TileSplat {
-  float x, y;        // mean in pixels
-  float a, b, c;     // conic (inverse 2D covariance): power = -0.5(a dx^2 + c dy^2) - b dx dy
-  float opacity;     // after the AA / mip factor
-  float r, g, bl;    // colour (SH + 0.5, >= 0)
-  float z, inv_z;    // camera-space depth of the mean and its inverse
+  float x, y;      // mean in pixels
+  float a, b, c;   // conic (inverse 2D covariance): power = -0.5(a dx^2 + c dy^2) - b dx dy
+  float opacity;   // after the AA / mip factor
+  float r, g, bl;  // colour (SH + 0.5, >= 0)
+  float z, inv_z;  // camera-space depth of the mean and its inverse
   // The cutoff ellipse (Mahalanobis radius^2 2 ln(255 o), with margin) where alpha can reach 1/255:
   float ext_x, ext_y;  // half extents in pixels
   // On the row at offset dy from the mean it spans dx in row_k dy +- sqrt(row_a0 - row_a1 dy^2)
@@ -60,7 +60,7 @@ using BlendRowFn = void (*)(const TileSplat* splats, const uint32_t* idx, int n,
 
 // A batch's row-culling fields, structure of arrays (filled by the tile driver's gather).
 struct alignas(64) RowCullBatch {
-  float x[kBlendBatch], y[kBlendBatch];            // mean
+  float x[kBlendBatch], y[kBlendBatch];                    // mean
   float k[kBlendBatch], a0[kBlendBatch], a1[kBlendBatch];  // TileSplat row_k, row_a0, row_a1
   float ext_y[kBlendBatch];
 };
@@ -90,9 +90,12 @@ struct RasterKernels {
 // The table for a path; unsupported paths fall back to the best lower one the build has.
 const RasterKernels& raster_kernels_for(Isa isa);
 // The table for active_isa() (read it per render so set_isa() in tests takes effect).
-inline const RasterKernels& raster_kernels() { return raster_kernels_for(active_isa()); }
+inline const RasterKernels& raster_kernels() {
+  return raster_kernels_for(active_isa());
+}
 
-// The individual paths (defined in raster_blend.cpp, raster_blend_avx2.cpp, raster_blend_avx512.cpp).
+// The individual paths (defined in raster_blend.cpp, raster_blend_avx2.cpp,
+// raster_blend_avx512.cpp).
 void blend_row_scalar(const TileSplat* splats, const uint32_t* idx, int n, float px0, float py,
                       RowAccum* acc, BlendCounters* counters);
 void blend_row_avx2(const TileSplat* splats, const uint32_t* idx, int n, float px0, float py,

@@ -21,8 +21,8 @@ namespace {
 constexpr float kC1 = 0.4886025119029199f;
 constexpr float kC2[5] = {1.0925484305920792f, -1.0925484305920792f, 0.31539156525252005f,
                           -1.0925484305920792f, 0.5462742152960396f};
-constexpr float kC3[7] = {-0.5900435899266435f, 2.890611442640554f, -0.4570457994644658f,
-                          0.3731763325901154f, -0.4570457994644658f, 1.445305721320277f,
+constexpr float kC3[7] = {-0.5900435899266435f, 2.890611442640554f,   -0.4570457994644658f,
+                          0.3731763325901154f,  -0.4570457994644658f, 1.445305721320277f,
                           -0.5900435899266435f};
 
 // sh: [K,3] coefficients of one Gaussian; degree <= 3. Returns SH(dir) per channel (no +0.5).
@@ -93,9 +93,10 @@ Fate project_one(const GaussianCloud& cloud, size_t g, const CameraF& cam,
   if (!(qn > 0.f) || !std::isfinite(qn)) return Fate::kInvalid;
   const float iq = 1.f / qn;
   const float w = q[0] * iq, x = q[1] * iq, y = q[2] * iq, z = q[3] * iq;
-  const float Rq[9] = {1.f - 2.f * (y * y + z * z), 2.f * (x * y - w * z), 2.f * (x * z + w * y),
-                       2.f * (x * y + w * z), 1.f - 2.f * (x * x + z * z), 2.f * (y * z - w * x),
-                       2.f * (x * z - w * y), 2.f * (y * z + w * x), 1.f - 2.f * (x * x + y * y)};
+  const float Rq[9] = {
+      1.f - 2.f * (y * y + z * z), 2.f * (x * y - w * z),       2.f * (x * z + w * y),
+      2.f * (x * y + w * z),       1.f - 2.f * (x * x + z * z), 2.f * (y * z - w * x),
+      2.f * (x * z - w * y),       2.f * (y * z + w * x),       1.f - 2.f * (x * x + y * y)};
 
   // Jacobian of the perspective projection at the clamped position (gsplat persp_proj).
   const float rz = 1.f / tz, rz2 = rz * rz;
@@ -113,7 +114,8 @@ Fate project_one(const GaussianCloud& cloud, size_t g, const CameraF& cam,
   float A[6];
   for (int r = 0; r < 2; ++r)
     for (int k = 0; k < 3; ++k)
-      A[3 * r + k] = (JW[3 * r] * Rq[k] + JW[3 * r + 1] * Rq[3 + k] + JW[3 * r + 2] * Rq[6 + k]) * sc[k];
+      A[3 * r + k] =
+          (JW[3 * r] * Rq[k] + JW[3 * r + 1] * Rq[3 + k] + JW[3 * r + 2] * Rq[6 + k]) * sc[k];
   float sxx = A[0] * A[0] + A[1] * A[1] + A[2] * A[2];
   float sxy = A[0] * A[3] + A[1] * A[4] + A[2] * A[5];
   float syy = A[3] * A[3] + A[4] * A[4] + A[5] * A[5];
@@ -206,34 +208,47 @@ void project_stage(const GaussianCloud& cloud, const CameraF& cam, const Project
                    const Projected& out, ThreadPool& pool, ProjectCounts* counts) {
   const size_t n = cloud.size();
   std::atomic<uint64_t> visible{0}, depth{0}, invalid{0}, faint{0}, offscreen{0}, pairs{0};
-  pool.parallel_for(n, [&](size_t begin, size_t end, int) {
-    uint64_t c_vis = 0, c_depth = 0, c_inv = 0, c_faint = 0, c_off = 0, c_pairs = 0;
-    for (size_t g = begin; g < end; ++g) {
-      TileSplat& s = out.splats[g];
-      Fate fate = project_one(cloud, g, cam, params, &s);
-      uint32_t tiles = 0;
-      if (fate == Fate::kVisible) {
-        for_each_tile(s, cam, params.rule, [&](int, int) { ++tiles; });
-        if (tiles == 0) fate = Fate::kOffscreen;
-      }
-      out.tiles[g] = tiles;
-      if (tiles) std::memcpy(&out.depth_key[g], &s.z, 4);
-      c_pairs += tiles;
-      switch (fate) {
-        case Fate::kVisible: ++c_vis; break;
-        case Fate::kDepth: ++c_depth; break;
-        case Fate::kInvalid: ++c_inv; break;
-        case Fate::kFaint: ++c_faint; break;
-        case Fate::kOffscreen: ++c_off; break;
-      }
-    }
-    visible += c_vis;
-    depth += c_depth;
-    invalid += c_inv;
-    faint += c_faint;
-    offscreen += c_off;
-    pairs += c_pairs;
-  }, 4096);
+  pool.parallel_for(
+      n,
+      [&](size_t begin, size_t end, int) {
+        uint64_t c_vis = 0, c_depth = 0, c_inv = 0, c_faint = 0, c_off = 0, c_pairs = 0;
+        for (size_t g = begin; g < end; ++g) {
+          TileSplat& s = out.splats[g];
+          Fate fate = project_one(cloud, g, cam, params, &s);
+          uint32_t tiles = 0;
+          if (fate == Fate::kVisible) {
+            for_each_tile(s, cam, params.rule, [&](int, int) { ++tiles; });
+            if (tiles == 0) fate = Fate::kOffscreen;
+          }
+          out.tiles[g] = tiles;
+          if (tiles) std::memcpy(&out.depth_key[g], &s.z, 4);
+          c_pairs += tiles;
+          switch (fate) {
+            case Fate::kVisible:
+              ++c_vis;
+              break;
+            case Fate::kDepth:
+              ++c_depth;
+              break;
+            case Fate::kInvalid:
+              ++c_inv;
+              break;
+            case Fate::kFaint:
+              ++c_faint;
+              break;
+            case Fate::kOffscreen:
+              ++c_off;
+              break;
+          }
+        }
+        visible += c_vis;
+        depth += c_depth;
+        invalid += c_inv;
+        faint += c_faint;
+        offscreen += c_off;
+        pairs += c_pairs;
+      },
+      4096);
   counts->visible = visible;
   counts->culled_depth = depth;
   counts->culled_invalid = invalid;

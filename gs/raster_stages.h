@@ -39,7 +39,9 @@ class Arena {
     used_ = 0;
   }
   template <typename T>
-  static size_t carve_size(size_t n) { return (n * sizeof(T) + 63) & ~size_t(63); }
+  static size_t carve_size(size_t n) {
+    return (n * sizeof(T) + 63) & ~size_t(63);
+  }
   template <typename T>
   T* carve(size_t n) {
     auto base = reinterpret_cast<uintptr_t>(buffer_.get());
@@ -128,9 +130,8 @@ struct BlendTotals {
   uint64_t evals = 0, blended = 0;
 };
 // reference = true: the naive per-pixel scalar loop over the whole tile list (the baseline).
-void blend_stage(const Binned& bins, const CameraF& cam,
-                 const RasterKernels& kernels, bool reference, const BlendOutputs& out,
-                 ThreadPool& pool, BlendTotals* totals);
+void blend_stage(const Binned& bins, const CameraF& cam, const RasterKernels& kernels,
+                 bool reference, const BlendOutputs& out, ThreadPool& pool, BlendTotals* totals);
 
 // ---- Tile coverage, shared by project (counting) and bin (emitting) so both agree exactly. ----
 
@@ -159,12 +160,18 @@ inline int tile_of(float v, int count) {
 // clamped to [0, rows-1]; first > last when empty.
 inline void row_range(float lo, float hi, int rows, int* first, int* last) {
   const float a = lo - 0.5f, b = hi - 0.5f;  // ceil(a) .. floor(b)
-  if (!(a > 0.f)) *first = 0;
-  else if (a > float(rows)) *first = rows;
-  else *first = int(a) + (float(int(a)) < a);
-  if (!(b < float(rows - 1))) *last = rows - 1;
-  else if (b < 0.f) *last = -1;
-  else *last = int(b);
+  if (!(a > 0.f))
+    *first = 0;
+  else if (a > float(rows))
+    *first = rows;
+  else
+    *first = int(a) + (float(int(a)) < a);
+  if (!(b < float(rows - 1)))
+    *last = rows - 1;
+  else if (b < 0.f)
+    *last = -1;
+  else
+    *last = int(b);
 }
 
 // Calls fn(tx, ty) for every tile the Gaussian covers, rows of tiles top to bottom.

@@ -130,7 +130,9 @@ Status Rasterizer::render_into(const GaussianCloud& cloud, const Camera& camera,
   result.alpha.resize(pixels);
   result.depth_sum.resize(pixels);
   result.inv_depth_sum.resize(pixels);
-  BlendOutputs out{result.color.data(), result.alpha.data(), result.depth_sum.data(),
+  BlendOutputs out{result.color.data(),
+                   result.alpha.data(),
+                   result.depth_sum.data(),
                    result.inv_depth_sum.data(),
                    {options.background[0], options.background[1], options.background[2]}};
   const RasterKernels& kernels = raster_kernels();

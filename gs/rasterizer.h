@@ -28,10 +28,10 @@ enum class RasterMode {
 struct RenderOptions {
   RasterMode mode = RasterMode::kClassic;
   std::array<float, 3> background = {0.f, 0.f, 0.f};
-  int sh_degree_cap = 3;                 // evaluate at most this degree (<= the file's)
+  int sh_degree_cap = 3;  // evaluate at most this degree (<= the file's)
   float near_plane = 0.01f;
   float far_plane = 1e10f;
-  size_t max_tile_pairs = 1ull << 31;    // refuse (with an error) scenes needing more tile pairs
+  size_t max_tile_pairs = 1ull << 31;  // refuse (with an error) scenes needing more tile pairs
   // Benchmark baseline / second reference: bounding-box tile lists and a plain scalar per-pixel
   // loop over each tile's whole list (no ellipse culling, no row lists, no SIMD). Same output
   // up to float rounding.
@@ -40,13 +40,13 @@ struct RenderOptions {
 
 struct RenderStats {
   double ms_project = 0, ms_bin = 0, ms_blend = 0, ms_total = 0;
-  size_t visible = 0;        // Gaussians that survived projection
-  size_t culled_depth = 0;      // mean outside (near, far)
-  size_t culled_invalid = 0;    // NaN/Inf inputs, degenerate or non-finite covariance (det <= 0)
-  size_t culled_faint = 0;      // opacity (after the AA/mip factor) below 1/255
-  size_t culled_offscreen = 0;  // 1/255 ellipse entirely outside the image
-  const char* kernel = "";      // blend path used: scalar, avx2, avx512, naive
-  size_t tile_pairs = 0;     // (Gaussian, tile) pairs after culling
+  size_t visible = 0;            // Gaussians that survived projection
+  size_t culled_depth = 0;       // mean outside (near, far)
+  size_t culled_invalid = 0;     // NaN/Inf inputs, degenerate or non-finite covariance (det <= 0)
+  size_t culled_faint = 0;       // opacity (after the AA/mip factor) below 1/255
+  size_t culled_offscreen = 0;   // 1/255 ellipse entirely outside the image
+  const char* kernel = "";       // blend path used: scalar, avx2, avx512, naive
+  size_t tile_pairs = 0;         // (Gaussian, tile) pairs after culling
   double evals_per_pixel = 0;    // Gaussian-pixel evaluations per output pixel
   double blended_per_pixel = 0;  // evaluations that contributed
 };
@@ -85,9 +85,8 @@ class Rasterizer {
                               ThreadPool& pool = ThreadPool::global());
   // The same into an existing result, whose buffers are reused when the size matches (every
   // pixel of every output is overwritten). On error *out is left in an unspecified state.
-  Status render_into(const GaussianCloud& cloud, const Camera& camera,
-                     const RenderOptions& options, RenderResult* out,
-                     ThreadPool& pool = ThreadPool::global());
+  Status render_into(const GaussianCloud& cloud, const Camera& camera, const RenderOptions& options,
+                     RenderResult* out, ThreadPool& pool = ThreadPool::global());
 
  private:
   struct Workspace;

@@ -3,8 +3,8 @@
 // goldens in golden/raster/<scene>/expected-<camera>.safetensors.
 #include <algorithm>
 #include <catch2/catch.hpp>
-#include <cstdio>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <limits>
@@ -44,7 +44,9 @@ void add_gaussian(GaussianCloud& cloud, float x, float y, float z, float scale, 
   for (float c : rgb) cloud.sh.push_back((c - 0.5f) / kShC0);
 }
 
-size_t px(const RenderResult& r, int i, int j) { return size_t(i) * size_t(r.width) + size_t(j); }
+size_t px(const RenderResult& r, int i, int j) {
+  return size_t(i) * size_t(r.width) + size_t(j);
+}
 
 RenderResult render_ok(const GaussianCloud& cloud, const Camera& cam, const RenderOptions& o = {},
                        ThreadPool& pool = ThreadPool::global()) {
@@ -173,16 +175,16 @@ TEST_CASE("raster: invalid, hidden and faint Gaussians are culled and counted", 
   const Camera cam = test_camera();
   GaussianCloud cloud;
   const float nan = std::numeric_limits<float>::quiet_NaN();
-  add_gaussian(cloud, 0.f, 0.f, 4.f, 0.1f, 0.7f, {1.f, 0.f, 0.f});   // visible
-  add_gaussian(cloud, nan, 0.f, 4.f, 0.1f, 0.7f, {1.f, 0.f, 0.f});   // NaN position
+  add_gaussian(cloud, 0.f, 0.f, 4.f, 0.1f, 0.7f, {1.f, 0.f, 0.f});  // visible
+  add_gaussian(cloud, nan, 0.f, 4.f, 0.1f, 0.7f, {1.f, 0.f, 0.f});  // NaN position
   add_gaussian(cloud, 0.f, 0.f, 4.f, 0.1f, 0.7f, {1.f, 0.f, 0.f});
-  cloud.rotation[8] = 0.f;                                             // zero quaternion
+  cloud.rotation[8] = 0.f;  // zero quaternion
   add_gaussian(cloud, 0.f, 0.f, 4.f, std::numeric_limits<float>::infinity(), 0.7f, {1, 1, 1});
-  add_gaussian(cloud, 0.f, 0.f, -3.f, 0.1f, 0.7f, {1.f, 0.f, 0.f});  // behind the camera
-  add_gaussian(cloud, 0.f, 0.f, 0.01f, 0.1f, 0.7f, {1.f, 0.f, 0.f}); // at the near plane
-  add_gaussian(cloud, 0.f, 0.f, 4.f, 0.1f, 0.002f, {1.f, 0.f, 0.f}); // below 1/255
-  add_gaussian(cloud, 100.f, 0.f, 4.f, 0.1f, 0.7f, {1.f, 0.f, 0.f}); // far off screen
-  add_gaussian(cloud, 0.f, 0.f, 4.f, 1e6f, 0.7f, {0.f, 0.f, 1.f});   // huge: covers everything
+  add_gaussian(cloud, 0.f, 0.f, -3.f, 0.1f, 0.7f, {1.f, 0.f, 0.f});   // behind the camera
+  add_gaussian(cloud, 0.f, 0.f, 0.01f, 0.1f, 0.7f, {1.f, 0.f, 0.f});  // at the near plane
+  add_gaussian(cloud, 0.f, 0.f, 4.f, 0.1f, 0.002f, {1.f, 0.f, 0.f});  // below 1/255
+  add_gaussian(cloud, 100.f, 0.f, 4.f, 0.1f, 0.7f, {1.f, 0.f, 0.f});  // far off screen
+  add_gaussian(cloud, 0.f, 0.f, 4.f, 1e6f, 0.7f, {0.f, 0.f, 1.f});    // huge: covers everything
   RenderResult r = render_ok(cloud, cam);
   CHECK(r.stats.visible == 2);
   CHECK(r.stats.culled_invalid == 3);
@@ -251,7 +253,9 @@ GaussianCloud small_random_scene(const Camera& cam, size_t n, uint64_t seed) {
 void check_outputs_close(const RenderResult& a, const RenderResult& b, double bound,
                          const char* what) {
   const std::pair<const std::vector<float>*, const std::vector<float>*> outs[] = {
-      {&a.color, &b.color}, {&a.alpha, &b.alpha}, {&a.depth_sum, &b.depth_sum},
+      {&a.color, &b.color},
+      {&a.alpha, &b.alpha},
+      {&a.depth_sum, &b.depth_sum},
       {&a.inv_depth_sum, &b.inv_depth_sum}};
   const char* names[] = {"color", "alpha", "depth_sum", "inv_depth_sum"};
   for (int k = 0; k < 4; ++k) {
@@ -420,9 +424,10 @@ TEST_CASE("raster: gsplat goldens, every scene and camera, all four outputs", "[
         }
         const bool order_free = std::string(o.name) != "color";
         const double max_abs = order_free ? d.max_abs : max_tie;
-        std::printf("golden %s/%s %-13s max abs %.3g (own tie order %.3g, %zu elements differ "
-                    "between tie orders), PSNR %.1f dB\n",
-                    scene, cam.name.c_str(), o.name, max_abs, d.max_abs, tie_elems, d.psnr);
+        std::printf(
+            "golden %s/%s %-13s max abs %.3g (own tie order %.3g, %zu elements differ "
+            "between tie orders), PSNR %.1f dB\n",
+            scene, cam.name.c_str(), o.name, max_abs, d.max_abs, tie_elems, d.psnr);
         CHECK(max_abs <= 2e-3);
         if (order_free) CHECK(d.max_abs <= 2e-3);
         CHECK(d.psnr >= 60.0);

@@ -49,7 +49,8 @@ double cpu_seconds() {  // CPU time of the whole process (all threads)
 
 struct Medians {
   double project = 0, bin = 0, blend = 0, total = 0;
-  double cpu = 0;  // process CPU ms per frame: with 1 thread, what an idle machine's wall time would be
+  double cpu =
+      0;  // process CPU ms per frame: with 1 thread, what an idle machine's wall time would be
   RenderStats last;
 };
 
@@ -100,20 +101,31 @@ int run(int argc, char** argv) {
       }
       return argv[++i];
     };
-    if (a == "--sizes") sizes = parse_list(next());
-    else if (a == "--threads") threads = parse_list(next());
-    else if (a == "--reps") reps = std::atoi(next());
-    else if (a == "--baseline-reps") baseline_reps = std::atoi(next());
-    else if (a == "--width") width = std::atoi(next());
-    else if (a == "--height") height = std::atoi(next());
-    else if (a == "--focal") focal = std::atof(next());
-    else if (a == "--seed") seed = std::strtoull(next(), nullptr, 10);
-    else if (a == "--no-baseline") baseline = false;
-    else if (a == "--sh-cap") sh_cap = std::atoi(next());
+    if (a == "--sizes")
+      sizes = parse_list(next());
+    else if (a == "--threads")
+      threads = parse_list(next());
+    else if (a == "--reps")
+      reps = std::atoi(next());
+    else if (a == "--baseline-reps")
+      baseline_reps = std::atoi(next());
+    else if (a == "--width")
+      width = std::atoi(next());
+    else if (a == "--height")
+      height = std::atoi(next());
+    else if (a == "--focal")
+      focal = std::atof(next());
+    else if (a == "--seed")
+      seed = std::strtoull(next(), nullptr, 10);
+    else if (a == "--no-baseline")
+      baseline = false;
+    else if (a == "--sh-cap")
+      sh_cap = std::atoi(next());
     else if (a == "--mode") {
       const std::string m = next();
-      mode = m == "mip" ? RasterMode::kMip
-             : m == "antialiased" ? RasterMode::kAntialiased : RasterMode::kClassic;
+      mode = m == "mip"           ? RasterMode::kMip
+             : m == "antialiased" ? RasterMode::kAntialiased
+                                  : RasterMode::kClassic;
     } else {
       std::fprintf(stderr, "bench raster: unknown flag %s\n", a.c_str());
       return 2;
@@ -155,12 +167,15 @@ int run(int argc, char** argv) {
       std::fflush(stdout);
     }
   }
-  std::printf("(ms per frame, wall medians; cpu = process CPU ms per frame; ratio = naive wall / "
-              "fast wall; blend kernel %s)\n", kernel);
+  std::printf(
+      "(ms per frame, wall medians; cpu = process CPU ms per frame; ratio = naive wall / "
+      "fast wall; blend kernel %s)\n",
+      kernel);
   return 0;
 }
 
 const bool registered = bench::register_benchmark(
-    {"raster", "tile rasterizer ms/frame per stage, 100k-1M random Gaussians, vs naive tiled", run});
+    {"raster", "tile rasterizer ms/frame per stage, 100k-1M random Gaussians, vs naive tiled",
+     run});
 
 }  // namespace
