@@ -1,0 +1,41 @@
+// Run a network on tensors from a safetensors file and write its outputs (`macro nn-run`).
+//
+// The model folder's kind decides the inputs and outputs (detect_model_kind):
+//   taesd  (taesd_encoder.safetensors + taesd_decoder.safetensors)
+//          input.image [N,3,H,W] in [0,1]  ->  output.latent [N,4,ceil(H/8),ceil(W/8)],
+//                                               output.decoded [N,3,8h,8w] (decoder(latent), not clamped)
+//   unet / vae / difix (config.json UNet2DConditionModel / AutoencoderKL; a pipeline folder with
+//          model_index.json, unet/, vae/): see attention/nets/nn_run_difix.cpp
+// Inputs are validated before anything runs: only the listed names, the documented rank and
+// channel count, finite values (a NaN or infinity is refused naming the tensor and the element).
+// Float inputs of any float dtype (F32/F16/BF16/F64) are widened to fp32. Outputs are F32, written
+// atomically, with metadata {model, precision}.
+#pragma once
+
+#include <string>
+
+#include "attention/nets/taesd.h"
+#include "attention/runtime/status.h"
+#include "attention/runtime/thread_pool.h"
+
+namespace macro::nets {
+
+enum class ModelKind { kTaesd, kUNet, kVae, kDifix };
+const char* model_kind_name(ModelKind k);
+// Which network a folder holds; the error lists what was looked for.
+Result<ModelKind> detect_model_kind(const std::string& folder);
+
+struct NnRunOptions {
+  std::string model;   // folder
+  std::string inputs;  // safetensors with input.* tensors
+  std::string out;     // safetensors to write
+  Precision precision = Precision::kF32;
+  ThreadPool* pool = nullptr;
+};
+
+Status nn_run(const NnRunOptions& opt);
+
+// Every element finite? Error "<file>: tensor '<name>': element <i> is nan" otherwise.
+Status check_finite(const float* x, size_t n, const std::string& file, const std::string& name);
+
+}  // namespace macro::nets
