@@ -55,9 +55,12 @@ Lookup lookup(const std::vector<Camera>& cams, const std::string& query) {
 
 const char* camera_model_name(CameraModel model) {
   switch (model) {
-    case CameraModel::kPinhole: return "PINHOLE";
-    case CameraModel::kOpenCV: return "OPENCV";
-    case CameraModel::kOpenCVFisheye: return "OPENCV_FISHEYE";
+    case CameraModel::kPinhole:
+      return "PINHOLE";
+    case CameraModel::kOpenCV:
+      return "OPENCV";
+    case CameraModel::kOpenCVFisheye:
+      return "OPENCV_FISHEYE";
   }
   return "?";
 }
@@ -68,11 +71,16 @@ int camera_model_distortion_count(CameraModel model) {
 
 const char* camera_format_name(CameraFormat format) {
   switch (format) {
-    case CameraFormat::kJson: return "cameras JSON";
-    case CameraFormat::kColmapText: return "COLMAP text";
-    case CameraFormat::kColmapBinary: return "COLMAP binary";
-    case CameraFormat::kNerfstudio: return "nerfstudio transforms.json";
-    case CameraFormat::kCloseupSplit: return "DL3DV-Closeup split JSON";
+    case CameraFormat::kJson:
+      return "cameras JSON";
+    case CameraFormat::kColmapText:
+      return "COLMAP text";
+    case CameraFormat::kColmapBinary:
+      return "COLMAP binary";
+    case CameraFormat::kNerfstudio:
+      return "nerfstudio transforms.json";
+    case CameraFormat::kCloseupSplit:
+      return "DL3DV-Closeup split JSON";
   }
   return "?";
 }
@@ -153,7 +161,9 @@ Eigen::Matrix4d Camera::world_to_camera() const {
   return m;
 }
 
-Eigen::Matrix4d Camera::camera_to_world() const { return invert_rigid(world_to_camera()); }
+Eigen::Matrix4d Camera::camera_to_world() const {
+  return invert_rigid(world_to_camera());
+}
 
 void Camera::set_world_to_camera(const Eigen::Matrix4d& w2c) {
   R = w2c.topLeftCorner<3, 3>();
@@ -165,7 +175,9 @@ Eigen::Vector3d Camera::project(const Eigen::Vector3d& x_world) const {
   return {fx * xc.x() / xc.z() + cx, fy * xc.y() / xc.z() + cy, xc.z()};
 }
 
-int CameraSet::index_of(const std::string& name) const { return lookup(cameras, name).index; }
+int CameraSet::index_of(const std::string& name) const {
+  return lookup(cameras, name).index;
+}
 
 Result<Camera> CameraSet::find(const std::string& name) const {
   const Lookup l = lookup(cameras, name);
@@ -195,7 +207,7 @@ Eigen::Matrix3d rotation_from_quaternion_wxyz(double qw, double qx, double qy, d
   const double w = qw / n, x = qx / n, y = qy / n, z = qz / n;
   Eigen::Matrix3d r;
   r << 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),  //
-      2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),  //
+      2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),   //
       2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y);
   return r;
 }

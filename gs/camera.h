@@ -30,7 +30,8 @@ struct Camera {
   Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // world -> camera rotation
   Eigen::Vector3d t = Eigen::Vector3d::Zero();      // world -> camera translation
   CameraModel model = CameraModel::kPinhole;
-  std::vector<double> distortion;  // OPENCV: k1 k2 p1 p2 [k3...]; fisheye: k1..k4. Kept, not applied.
+  std::vector<double>
+      distortion;  // OPENCV: k1 k2 p1 p2 [k3...]; fisheye: k1..k4. Kept, not applied.
   // The image path exactly as the source stored it (nerfstudio file_path; COLMAP name and split
   // key, equal to `name` there). For nerfstudio `name` is its file name. find() accepts either.
   std::string file_path;
@@ -44,9 +45,9 @@ struct Camera {
   // field.
   Status validate() const;
 
-  Eigen::Matrix3d K() const;                 // [[fx,0,cx],[0,fy,cy],[0,0,1]]
-  Eigen::Matrix4d world_to_camera() const;   // [R t; 0 0 0 1]
-  Eigen::Matrix4d camera_to_world() const;   // its inverse (OpenCV axes)
+  Eigen::Matrix3d K() const;                             // [[fx,0,cx],[0,fy,cy],[0,0,1]]
+  Eigen::Matrix4d world_to_camera() const;               // [R t; 0 0 0 1]
+  Eigen::Matrix4d camera_to_world() const;               // its inverse (OpenCV axes)
   void set_world_to_camera(const Eigen::Matrix4d& w2c);  // takes R = w2c[0:3,0:3], t = w2c[0:3,3]
   // Pinhole projection of a world point, distortion ignored: (u, v) in pixels and camera depth z.
   Eigen::Vector3d project(const Eigen::Vector3d& x_world) const;
@@ -76,7 +77,8 @@ Eigen::Matrix4d opengl_c2w_from_opencv_w2c(const Eigen::Matrix4d& w2c_cv);
 // The inverse of a rigid transform [R t; 0 1].
 Eigen::Matrix4d invert_rigid(const Eigen::Matrix4d& m);
 
-// ---- Loading -------------------------------------------------------------------------------------
+// ---- Loading
+// -------------------------------------------------------------------------------------
 enum class CameraFormat { kJson, kColmapText, kColmapBinary, kNerfstudio, kCloseupSplit };
 const char* camera_format_name(CameraFormat format);
 
@@ -88,9 +90,9 @@ struct CameraLoadOptions {
 
 // Any supported camera file, detected by content: our JSON list (golden cameras.json), a COLMAP
 // sparse folder (cameras/images .txt or .bin), nerfstudio transforms.json, or a DL3DV-Closeup split
-// JSON (close-up poses + intrinsics). A folder is searched for, in order: COLMAP files in the folder,
-// sparse/0/, sparse/, colmap/sparse/0/, then transforms.json, cameras.json (docs/cameras.md).
-// Every camera is validated. `format`, if given, receives what was detected.
+// JSON (close-up poses + intrinsics). A folder is searched for, in order: COLMAP files in the
+// folder, sparse/0/, sparse/, colmap/sparse/0/, then transforms.json, cameras.json
+// (docs/cameras.md). Every camera is validated. `format`, if given, receives what was detected.
 Result<CameraSet> load_cameras(const std::string& path);
 Result<CameraSet> load_cameras(const std::string& path, const CameraLoadOptions& options,
                                CameraFormat* format = nullptr);
@@ -103,7 +105,8 @@ Result<CameraSet> load_colmap_text(const std::string& cameras_txt, const std::st
 Result<CameraSet> load_colmap_binary(const std::string& cameras_bin, const std::string& images_bin);
 Result<CameraSet> load_nerfstudio(const std::string& path, const CameraLoadOptions& options = {});
 
-// ---- DL3DV-Closeup split JSON (macro-method.md §7) ------------------------------------------------
+// ---- DL3DV-Closeup split JSON (macro-method.md §7)
+// ------------------------------------------------
 struct CloseupEvalPair {
   std::string training_frame;
   std::string closeup_frame;
@@ -111,10 +114,10 @@ struct CloseupEvalPair {
 };
 
 struct CloseupSplit {
-  std::string scene;                            // 64-hex scene id ("" if absent)
-  int data_factor = 0;                          // image downscale of the intrinsics (0 if absent)
-  std::vector<std::string> training_frames;     // "training_frames", or MobileClose "train_frames"
-  bool has_closeup_frames = false;              // MobileClose: frames removed from the ref pool
+  std::string scene;                         // 64-hex scene id ("" if absent)
+  int data_factor = 0;                       // image downscale of the intrinsics (0 if absent)
+  std::vector<std::string> training_frames;  // "training_frames", or MobileClose "train_frames"
+  bool has_closeup_frames = false;           // MobileClose: frames removed from the ref pool
   std::vector<std::string> closeup_frames;
   std::vector<CloseupEvalPair> closeup_eval_pairs;
   // One camera per `closeup_poses` entry, in file order, named by its key; the shared `intrinsics`
@@ -124,9 +127,10 @@ struct CloseupSplit {
 
 Result<CloseupSplit> load_closeup_split(const std::string& path);
 
-// ---- Writing (atomic) ------------------------------------------------------------------------------
-// Our JSON list: name, width, height, fx, fy, cx, cy, world_to_camera (4x4 row-major, OpenCV), and
-// for distorted cameras "model" and "distortion". Numbers are written to round-trip exactly.
+// ---- Writing (atomic)
+// ------------------------------------------------------------------------------ Our JSON list:
+// name, width, height, fx, fy, cx, cy, world_to_camera (4x4 row-major, OpenCV), and for distorted
+// cameras "model" and "distortion". Numbers are written to round-trip exactly.
 Status save_cameras_json(const CameraSet& set, const std::string& path);
 // COLMAP text model in `folder` (created if missing): cameras.txt (one camera per distinct
 // intrinsics), images.txt (empty 2D point lines), empty points3D.txt. Image names are the cameras'

@@ -52,7 +52,9 @@ const ColmapModelInfo* colmap_model_by_name(const std::string& name) {
   return nullptr;
 }
 
-std::string colmap_supported_models() { return "SIMPLE_PINHOLE, PINHOLE, OPENCV, OPENCV_FISHEYE"; }
+std::string colmap_supported_models() {
+  return "SIMPLE_PINHOLE, PINHOLE, OPENCV, OPENCV_FISHEYE";
+}
 
 Result<CameraSet> assemble_colmap(const std::vector<ColmapCameraRecord>& cameras,
                                   const std::vector<ColmapImageRecord>& images,
@@ -149,11 +151,14 @@ Result<CameraSet> load_colmap_sparse(const std::string& folder, CameraFormat* fo
     if (format) *format = CameraFormat::kColmapText;
     return load_colmap_text(dir + "cameras.txt", dir + "images.txt");
   }
-  if (cb || ct) return Status::error(folder + ": has " + (cb ? "cameras.bin" : "cameras.txt") +
-                                     " but no " + (cb ? "images.bin" : "images.txt"));
-  if (ib || it) return Status::error(folder + ": has " + (ib ? "images.bin" : "images.txt") +
-                                     " but no " + (ib ? "cameras.bin" : "cameras.txt"));
-  return Status::error(folder + ": no COLMAP model (expected cameras.bin + images.bin or "
+  if (cb || ct)
+    return Status::error(folder + ": has " + (cb ? "cameras.bin" : "cameras.txt") + " but no " +
+                         (cb ? "images.bin" : "images.txt"));
+  if (ib || it)
+    return Status::error(folder + ": has " + (ib ? "images.bin" : "images.txt") + " but no " +
+                         (ib ? "cameras.bin" : "cameras.txt"));
+  return Status::error(folder +
+                       ": no COLMAP model (expected cameras.bin + images.bin or "
                        "cameras.txt + images.txt)");
 }
 

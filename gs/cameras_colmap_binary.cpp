@@ -21,7 +21,8 @@ using detail::ColmapImageRecord;
 // Bounds-checked little-endian cursor over a whole file.
 class ByteReader {
  public:
-  ByteReader(const std::vector<uint8_t>& data, std::string path) : data_(data), path_(std::move(path)) {}
+  ByteReader(const std::vector<uint8_t>& data, std::string path)
+      : data_(data), path_(std::move(path)) {}
 
   uint64_t offset() const { return pos_; }
   uint64_t left() const { return data_.size() - pos_; }
@@ -65,7 +66,8 @@ class ByteReader {
 
 // Checks a count against the file: `count` records of at least `min_bytes` each must fit. `what`
 // starts with the file name.
-Status check_count(const ByteReader& r, uint64_t count, uint64_t min_bytes, const std::string& what) {
+Status check_count(const ByteReader& r, uint64_t count, uint64_t min_bytes,
+                   const std::string& what) {
   if (count <= r.left() / min_bytes) return Status::ok();
   return Status::error(what + " count " + std::to_string(count) + " at byte " +
                        std::to_string(r.offset()) + " needs at least " + std::to_string(min_bytes) +
@@ -82,7 +84,8 @@ Result<std::vector<ColmapCameraRecord>> parse_cameras_bin(const std::string& pat
   cams.reserve(count);
   for (uint64_t i = 0; i < count; ++i) {
     ColmapCameraRecord c;
-    c.where = path + ": camera #" + std::to_string(i) + " (byte " + std::to_string(r.offset()) + ")";
+    c.where =
+        path + ": camera #" + std::to_string(i) + " (byte " + std::to_string(r.offset()) + ")";
     MACRO_ASSIGN_OR_RETURN(uint32_t id, r.read<uint32_t>(c.where + " camera_id"));
     MACRO_ASSIGN_OR_RETURN(int32_t model_id, r.read<int32_t>(c.where + " model_id"));
     MACRO_ASSIGN_OR_RETURN(uint64_t w, r.read<uint64_t>(c.where + " width"));
@@ -92,9 +95,9 @@ Result<std::vector<ColmapCameraRecord>> parse_cameras_bin(const std::string& pat
     c.height = h > uint64_t(INT64_MAX) ? INT64_MAX : int64_t(h);
     c.model = detail::colmap_model_by_id(model_id);
     if (!c.model) {
-      return Status::error(c.where + ": camera " + std::to_string(id) + ": unknown camera model id " +
-                           std::to_string(model_id) + " (supported: " +
-                           detail::colmap_supported_models() + ")");
+      return Status::error(c.where + ": camera " + std::to_string(id) +
+                           ": unknown camera model id " + std::to_string(model_id) +
+                           " (supported: " + detail::colmap_supported_models() + ")");
     }
     if (!c.model->supported) {
       return Status::error(c.where + ": camera " + std::to_string(id) + ": camera model " +
@@ -104,7 +107,8 @@ Result<std::vector<ColmapCameraRecord>> parse_cameras_bin(const std::string& pat
     }
     c.params.resize(c.model->num_params);
     for (int k = 0; k < c.model->num_params; ++k) {
-      MACRO_ASSIGN_OR_RETURN(c.params[k], r.read<double>(c.where + " params[" + std::to_string(k) + "]"));
+      MACRO_ASSIGN_OR_RETURN(c.params[k],
+                             r.read<double>(c.where + " params[" + std::to_string(k) + "]"));
     }
     cams.push_back(std::move(c));
   }
@@ -124,7 +128,8 @@ Result<std::vector<ColmapImageRecord>> parse_images_bin(const std::string& path)
   images.reserve(count);
   for (uint64_t i = 0; i < count; ++i) {
     ColmapImageRecord im;
-    im.where = path + ": image #" + std::to_string(i) + " (byte " + std::to_string(r.offset()) + ")";
+    im.where =
+        path + ": image #" + std::to_string(i) + " (byte " + std::to_string(r.offset()) + ")";
     MACRO_ASSIGN_OR_RETURN(uint32_t id, r.read<uint32_t>(im.where + " image_id"));
     im.id = id;
     for (int k = 0; k < 4; ++k) {
@@ -150,11 +155,13 @@ Result<std::vector<ColmapImageRecord>> parse_images_bin(const std::string& path)
 
 }  // namespace
 
-Result<CameraSet> load_colmap_binary(const std::string& cameras_bin, const std::string& images_bin) {
+Result<CameraSet> load_colmap_binary(const std::string& cameras_bin,
+                                     const std::string& images_bin) {
   MACRO_ASSIGN_OR_RETURN(auto cams, parse_cameras_bin(cameras_bin));
   MACRO_ASSIGN_OR_RETURN(auto images, parse_images_bin(images_bin));
   const size_t slash = cameras_bin.find_last_of('/');
-  const std::string folder = slash == std::string::npos ? cameras_bin : cameras_bin.substr(0, slash);
+  const std::string folder =
+      slash == std::string::npos ? cameras_bin : cameras_bin.substr(0, slash);
   return detail::assemble_colmap(cams, images, cameras_bin, folder);
 }
 

@@ -33,7 +33,9 @@ std::vector<std::string_view> split_lines(std::string_view text) {
   return lines;
 }
 
-bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+bool is_space(char c) {
+  return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f';
+}
 
 std::string_view trim(std::string_view s) {
   while (!s.empty() && is_space(s.front())) s.remove_prefix(1);
@@ -141,7 +143,8 @@ Result<std::vector<ColmapImageRecord>> parse_images_txt(const std::string& path)
   MACRO_ASSIGN_OR_RETURN(std::string text, read_text_file(path));
   std::vector<ColmapImageRecord> images;
   const auto lines = split_lines(text);
-  static const char* kFields[] = {"IMAGE_ID", "QW", "QX", "QY", "QZ", "TX", "TY", "TZ", "CAMERA_ID"};
+  static const char* kFields[] = {"IMAGE_ID", "QW", "QX", "QY",       "QZ",
+                                  "TX",       "TY", "TZ", "CAMERA_ID"};
   for (size_t li = 0; li < lines.size(); ++li) {
     const std::string_view line = trim(lines[li]);
     if (line.empty() || line[0] == '#') continue;
@@ -149,19 +152,23 @@ Result<std::vector<ColmapImageRecord>> parse_images_txt(const std::string& path)
     std::string_view rest;
     const auto tok = tokens(line, 9, &rest);
     if (tok.size() < 9 || rest.empty()) {
-      return Status::error(where + ": expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, found '" +
+      return Status::error(where +
+                           ": expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, found '" +
                            std::string(line.substr(0, 80)) + "'");
     }
     ColmapImageRecord im;
     im.where = where;
     if (!parse_int(tok[0], &im.id)) return bad_token(where, kFields[0], tok[0], "an integer");
     for (int k = 0; k < 4; ++k) {
-      if (!parse_double(tok[1 + k], &im.q[k])) return bad_token(where, kFields[1 + k], tok[1 + k], "a number");
+      if (!parse_double(tok[1 + k], &im.q[k]))
+        return bad_token(where, kFields[1 + k], tok[1 + k], "a number");
     }
     for (int k = 0; k < 3; ++k) {
-      if (!parse_double(tok[5 + k], &im.t[k])) return bad_token(where, kFields[5 + k], tok[5 + k], "a number");
+      if (!parse_double(tok[5 + k], &im.t[k]))
+        return bad_token(where, kFields[5 + k], tok[5 + k], "a number");
     }
-    if (!parse_int(tok[8], &im.camera_id)) return bad_token(where, kFields[8], tok[8], "an integer");
+    if (!parse_int(tok[8], &im.camera_id))
+      return bad_token(where, kFields[8], tok[8], "an integer");
     im.name = std::string(rest);
     // The next line, whatever it holds, is this image's 2D points line.
     if (li + 1 < lines.size()) {
@@ -184,7 +191,8 @@ Result<CameraSet> load_colmap_text(const std::string& cameras_txt, const std::st
   MACRO_ASSIGN_OR_RETURN(auto cams, parse_cameras_txt(cameras_txt));
   MACRO_ASSIGN_OR_RETURN(auto images, parse_images_txt(images_txt));
   const size_t slash = cameras_txt.find_last_of('/');
-  const std::string folder = slash == std::string::npos ? cameras_txt : cameras_txt.substr(0, slash);
+  const std::string folder =
+      slash == std::string::npos ? cameras_txt : cameras_txt.substr(0, slash);
   return detail::assemble_colmap(cams, images, cameras_txt, folder);
 }
 

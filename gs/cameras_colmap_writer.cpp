@@ -20,7 +20,7 @@ std::string g17(double v) {
 
 // The COLMAP model name and parameter list of a camera.
 Result<std::pair<std::string, std::vector<double>>> colmap_params(const Camera& c,
-                                                                   const std::string& where) {
+                                                                  const std::string& where) {
   std::vector<double> p = {c.fx, c.fy, c.cx, c.cy};
   switch (c.model) {
     case CameraModel::kPinhole:
@@ -29,10 +29,9 @@ Result<std::pair<std::string, std::vector<double>>> colmap_params(const Camera& 
     case CameraModel::kOpenCVFisheye: {
       const bool fisheye = c.model == CameraModel::kOpenCVFisheye;
       if (c.distortion.size() != 4) {
-        return Status::error(where + ": camera '" + c.name + "': COLMAP " +
-                             (fisheye ? "OPENCV_FISHEYE" : "OPENCV") +
-                             " takes 4 distortion parameters, found " +
-                             std::to_string(c.distortion.size()));
+        return Status::error(
+            where + ": camera '" + c.name + "': COLMAP " + (fisheye ? "OPENCV_FISHEYE" : "OPENCV") +
+            " takes 4 distortion parameters, found " + std::to_string(c.distortion.size()));
       }
       p.insert(p.end(), c.distortion.begin(), c.distortion.end());
       return std::make_pair(std::string(fisheye ? "OPENCV_FISHEYE" : "OPENCV"), p);
@@ -90,14 +89,17 @@ Status save_colmap_text(const CameraSet& set, const std::string& folder) {
     append_fields(&images_txt, {std::to_string(it->second), c.name});
     images_txt.append("\n\n");  // the image line and its empty 2D points line
   }
-  cameras_txt.append("# Number of cameras: ").append(std::to_string(camera_ids.size())).append("\n");
+  cameras_txt.append("# Number of cameras: ")
+      .append(std::to_string(camera_ids.size()))
+      .append("\n");
   cameras_txt.append(camera_lines);
   MACRO_TRY(write_file_atomic(dir + "cameras.txt", cameras_txt));
   MACRO_TRY(write_file_atomic(dir + "images.txt", images_txt));
-  return write_file_atomic(dir + "points3D.txt",
-                           "# 3D point list with one line of data per point:\n"
-                           "#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n"
-                           "# Number of points: 0\n");
+  return write_file_atomic(
+      dir + "points3D.txt",
+      "# 3D point list with one line of data per point:\n"
+      "#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n"
+      "# Number of points: 0\n");
 }
 
 }  // namespace macro::gs

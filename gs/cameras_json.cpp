@@ -22,7 +22,8 @@ Result<CameraModel> model_from_name(const std::string& name, const std::string& 
 }
 
 Result<Camera> camera_from_json(const Json& e, const std::string& where0) {
-  if (!e.is_object()) return Status::error(where0 + ": expected an object, found " + detail::describe_json(e));
+  if (!e.is_object())
+    return Status::error(where0 + ": expected an object, found " + detail::describe_json(e));
   Camera c;
   MACRO_ASSIGN_OR_RETURN(c.name, detail::string_field(e, "name", where0));
   const std::string where = where0 + " '" + c.name + "'";
@@ -35,8 +36,9 @@ Result<Camera> camera_from_json(const Json& e, const std::string& where0) {
   if (!detail::has_field(e, "world_to_camera")) {
     return Status::error(where + ": missing field 'world_to_camera'");
   }
-  MACRO_ASSIGN_OR_RETURN(Eigen::Matrix4d w2c,
-                         detail::matrix_value(e["world_to_camera"], where + ": world_to_camera", false));
+  MACRO_ASSIGN_OR_RETURN(
+      Eigen::Matrix4d w2c,
+      detail::matrix_value(e["world_to_camera"], where + ": world_to_camera", false));
   c.set_world_to_camera(w2c);
   if (detail::has_field(e, "model")) {
     MACRO_ASSIGN_OR_RETURN(std::string model, detail::string_field(e, "model", where));
@@ -67,13 +69,15 @@ Result<Camera> camera_from_json(const Json& e, const std::string& where0) {
 Result<CameraSet> load_cameras_json(const std::string& path) {
   MACRO_ASSIGN_OR_RETURN(Json root, detail::parse_json_file(path));
   if (!root.is_array()) {
-    return Status::error(path + ": expected a list of cameras, found " + detail::describe_json(root));
+    return Status::error(path + ": expected a list of cameras, found " +
+                         detail::describe_json(root));
   }
   CameraSet set;
   set.source = path;
   set.cameras.reserve(root.size());
   for (size_t i = 0; i < root.size(); ++i) {
-    MACRO_ASSIGN_OR_RETURN(Camera c, camera_from_json(root[i], path + ": [" + std::to_string(i) + "]"));
+    MACRO_ASSIGN_OR_RETURN(Camera c,
+                           camera_from_json(root[i], path + ": [" + std::to_string(i) + "]"));
     MACRO_TRY(c.validate().with_context(path));
     set.cameras.push_back(std::move(c));
   }

@@ -46,7 +46,9 @@ std::string describe_json(const Json& v) {
   return "value";
 }
 
-bool has_field(const Json& obj, const char* key) { return obj.is_object() && obj.contains(key); }
+bool has_field(const Json& obj, const char* key) {
+  return obj.is_object() && obj.contains(key);
+}
 
 namespace {
 Status missing(const char* key, const std::string& where) {
@@ -59,7 +61,8 @@ Status wrong(const char* key, const char* expected, const Json& v, const std::st
 }  // namespace
 
 Result<double> number_field(const Json& obj, const char* key, const std::string& where) {
-  if (!obj.is_object()) return Status::error(where + ": expected an object, found " + describe_json(obj));
+  if (!obj.is_object())
+    return Status::error(where + ": expected an object, found " + describe_json(obj));
   auto it = obj.find(key);
   if (it == obj.end()) return missing(key, where);
   if (!it->is_number()) return wrong(key, "a number", *it, where);
@@ -82,7 +85,8 @@ Result<int> int_field(const Json& obj, const char* key, const std::string& where
 }
 
 Result<std::string> string_field(const Json& obj, const char* key, const std::string& where) {
-  if (!obj.is_object()) return Status::error(where + ": expected an object, found " + describe_json(obj));
+  if (!obj.is_object())
+    return Status::error(where + ": expected an object, found " + describe_json(obj));
   auto it = obj.find(key);
   if (it == obj.end()) return missing(key, where);
   if (!it->is_string()) return wrong(key, "a string", *it, where);
@@ -91,7 +95,8 @@ Result<std::string> string_field(const Json& obj, const char* key, const std::st
 
 Result<std::vector<std::string>> string_list_field(const Json& obj, const char* key,
                                                    const std::string& where) {
-  if (!obj.is_object()) return Status::error(where + ": expected an object, found " + describe_json(obj));
+  if (!obj.is_object())
+    return Status::error(where + ": expected an object, found " + describe_json(obj));
   auto it = obj.find(key);
   if (it == obj.end()) return missing(key, where);
   if (!it->is_array()) return wrong(key, "a list of strings", *it, where);
@@ -109,7 +114,8 @@ Result<std::vector<std::string>> string_list_field(const Json& obj, const char* 
 }
 
 Result<Eigen::Matrix4d> matrix_value(const Json& value, const std::string& what, bool allow_3x4) {
-  const char* expected = allow_3x4 ? "a 4x4 or 3x4 matrix (list of rows)" : "a 4x4 matrix (list of rows)";
+  const char* expected =
+      allow_3x4 ? "a 4x4 or 3x4 matrix (list of rows)" : "a 4x4 matrix (list of rows)";
   const size_t rows = value.is_array() ? value.size() : 0;
   if (!(rows == 4 || (allow_3x4 && rows == 3))) {
     return Status::error(what + ": expected " + expected + ", found " + describe_json(value));
@@ -133,7 +139,8 @@ Result<Eigen::Matrix4d> matrix_value(const Json& value, const std::string& what,
     const Eigen::RowVector4d last = m.row(3);
     if (!((last - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() <= 1e-6)) {
       char buf[128];
-      std::snprintf(buf, sizeof buf, "[%.9g, %.9g, %.9g, %.9g]", last(0), last(1), last(2), last(3));
+      std::snprintf(buf, sizeof buf, "[%.9g, %.9g, %.9g, %.9g]", last(0), last(1), last(2),
+                    last(3));
       return Status::error(what + ": last row is " + buf + ", expected [0, 0, 0, 1]");
     }
   }

@@ -41,13 +41,16 @@ Result<CameraSet> load_folder(const std::string& folder, const CameraLoadOptions
     if (format) *format = CameraFormat::kJson;
     return load_cameras_json(dir + "/cameras.json");
   }
-  return Status::error(folder + ": no cameras found (looked for a COLMAP model in ., sparse/0, "
+  return Status::error(folder +
+                       ": no cameras found (looked for a COLMAP model in ., sparse/0, "
                        "sparse, colmap/sparse/0, then transforms.json and cameras.json)");
 }
 
 }  // namespace
 
-Result<CameraSet> load_cameras(const std::string& path) { return load_cameras(path, {}, nullptr); }
+Result<CameraSet> load_cameras(const std::string& path) {
+  return load_cameras(path, {}, nullptr);
+}
 
 Result<CameraSet> load_cameras(const std::string& path, const CameraLoadOptions& options,
                                CameraFormat* format) {
@@ -55,8 +58,8 @@ Result<CameraSet> load_cameras(const std::string& path, const CameraLoadOptions&
   if (!file_exists(path)) return Status::error(path + ": no such file or folder");
 
   const std::string name = file_name_of(path);
-  for (const char* colmap : {"cameras.txt", "images.txt", "points3D.txt", "cameras.bin",
-                             "images.bin", "points3D.bin"}) {
+  for (const char* colmap :
+       {"cameras.txt", "images.txt", "points3D.txt", "cameras.bin", "images.bin", "points3D.bin"}) {
     if (name == colmap) return load_colmap_sparse(parent_dir(path), format);
   }
 
@@ -74,7 +77,8 @@ Result<CameraSet> load_cameras(const std::string& path, const CameraLoadOptions&
     if (format) *format = CameraFormat::kNerfstudio;
     return load_nerfstudio(path, options);
   }
-  return Status::error(path + ": not a camera file: expected a list of cameras, a nerfstudio object "
+  return Status::error(path +
+                       ": not a camera file: expected a list of cameras, a nerfstudio object "
                        "with 'frames' or a DL3DV-Closeup split with 'closeup_poses', found " +
                        detail::describe_json(root));
 }

@@ -66,13 +66,15 @@ const Json* lookup(const Json& frame, const Json& root, const char* key) {
   return nullptr;
 }
 
-Result<double> number(const Json& frame, const Json& root, const char* key, const std::string& where) {
+Result<double> number(const Json& frame, const Json& root, const char* key,
+                      const std::string& where) {
   if (frame.is_object() && frame.contains(key)) return detail::number_field(frame, key, where);
   return detail::number_field(root, key, where + " (top level)");
 }
 
 Result<CameraModel> parse_model(const std::string& name, const std::string& where) {
-  if (name == "PINHOLE" || name == "SIMPLE_PINHOLE" || name == "PERSPECTIVE") return CameraModel::kPinhole;
+  if (name == "PINHOLE" || name == "SIMPLE_PINHOLE" || name == "PERSPECTIVE")
+    return CameraModel::kPinhole;
   if (name == "OPENCV") return CameraModel::kOpenCV;
   if (name == "OPENCV_FISHEYE") return CameraModel::kOpenCVFisheye;
   return Status::error(where + ": field 'camera_model': camera model '" + name +
@@ -124,8 +126,8 @@ Result<Camera> frame_camera(const Json& frame, const Json& root, const std::stri
     MACRO_ASSIGN_OR_RETURN(double w, number(frame, root, "w", where));
     MACRO_ASSIGN_OR_RETURN(double h, number(frame, root, "h", where));
     if (!(w == std::floor(w) && h == std::floor(h) && std::abs(w) < 1e9 && std::abs(h) < 1e9)) {
-      return Status::error(where + ": fields 'w'/'h': expected integers, found " + std::to_string(w) +
-                           " x " + std::to_string(h));
+      return Status::error(where + ": fields 'w'/'h': expected integers, found " +
+                           std::to_string(w) + " x " + std::to_string(h));
     }
     c.width = int(w);
     c.height = int(h);
@@ -194,9 +196,11 @@ Result<Camera> frame_camera(const Json& frame, const Json& root, const std::stri
   }
 
   // Pose.
-  if (!frame.contains("transform_matrix")) return Status::error(where + ": missing field 'transform_matrix'");
-  MACRO_ASSIGN_OR_RETURN(Eigen::Matrix4d c2w,
-                         detail::matrix_value(frame["transform_matrix"], where + ": transform_matrix", true));
+  if (!frame.contains("transform_matrix"))
+    return Status::error(where + ": missing field 'transform_matrix'");
+  MACRO_ASSIGN_OR_RETURN(
+      Eigen::Matrix4d c2w,
+      detail::matrix_value(frame["transform_matrix"], where + ": transform_matrix", true));
   if (undo) {
     Eigen::Matrix4d p = Eigen::Matrix4d::Identity();
     p.topLeftCorner<3, 3>() = undo->q_t * c2w.topLeftCorner<3, 3>();
@@ -213,26 +217,29 @@ Result<Camera> frame_camera(const Json& frame, const Json& root, const std::stri
 Result<CameraSet> load_nerfstudio(const std::string& path, const CameraLoadOptions& options) {
   MACRO_ASSIGN_OR_RETURN(Json root, detail::parse_json_file(path));
   if (!root.is_object()) {
-    return Status::error(path + ": expected a transforms.json object, found " + detail::describe_json(root));
+    return Status::error(path + ": expected a transforms.json object, found " +
+                         detail::describe_json(root));
   }
   if (!root.contains("frames")) return Status::error(path + ": missing field 'frames'");
   const Json& frames = root["frames"];
   if (!frames.is_array()) {
-    return Status::error(path + ": field 'frames': expected a list, found " + detail::describe_json(frames));
+    return Status::error(path + ": field 'frames': expected a list, found " +
+                         detail::describe_json(frames));
   }
   WorldUndo undo;
   const bool has_undo = options.undo_applied_transform && root.contains("applied_transform");
   if (has_undo) {
-    MACRO_ASSIGN_OR_RETURN(undo, parse_applied_transform(root["applied_transform"],
-                                                         path + ": applied_transform"));
+    MACRO_ASSIGN_OR_RETURN(
+        undo, parse_applied_transform(root["applied_transform"], path + ": applied_transform"));
   }
   CameraSet set;
   set.source = path;
   set.cameras.reserve(frames.size());
   const std::string base = parent_dir(path);
   for (size_t i = 0; i < frames.size(); ++i) {
-    MACRO_ASSIGN_OR_RETURN(Camera c, frame_camera(frames[i], root, path + ": frames[" + std::to_string(i) + "]",
-                                                  base, has_undo ? &undo : nullptr));
+    MACRO_ASSIGN_OR_RETURN(
+        Camera c, frame_camera(frames[i], root, path + ": frames[" + std::to_string(i) + "]", base,
+                               has_undo ? &undo : nullptr));
     set.cameras.push_back(std::move(c));
   }
   return set;

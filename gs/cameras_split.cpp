@@ -18,7 +18,8 @@ Result<Camera> parse_intrinsics(const Json& root, const std::string& path) {
   if (!root.contains("intrinsics")) return Status::error(path + ": missing field 'intrinsics'");
   const Json& in = root["intrinsics"];
   const std::string where = path + ": intrinsics";
-  if (!in.is_object()) return Status::error(where + ": expected an object, found " + detail::describe_json(in));
+  if (!in.is_object())
+    return Status::error(where + ": expected an object, found " + detail::describe_json(in));
   Camera c;
   MACRO_ASSIGN_OR_RETURN(c.width, detail::int_field(in, "w", where));
   MACRO_ASSIGN_OR_RETURN(c.height, detail::int_field(in, "h", where));
@@ -26,7 +27,8 @@ Result<Camera> parse_intrinsics(const Json& root, const std::string& path) {
   MACRO_ASSIGN_OR_RETURN(c.fy, detail::number_field(in, "fl_y", where));
   MACRO_ASSIGN_OR_RETURN(c.cx, detail::number_field(in, "cx", where));
   MACRO_ASSIGN_OR_RETURN(c.cy, detail::number_field(in, "cy", where));
-  const bool any_k = in.contains("k1") || in.contains("k2") || in.contains("p1") || in.contains("p2");
+  const bool any_k =
+      in.contains("k1") || in.contains("k2") || in.contains("p1") || in.contains("p2");
   std::string model = any_k ? "OPENCV" : "PINHOLE";
   if (in.contains("camera_model")) {
     MACRO_ASSIGN_OR_RETURN(model, detail::string_field(in, "camera_model", where));
@@ -51,7 +53,8 @@ Result<Camera> parse_intrinsics(const Json& root, const std::string& path) {
 }
 
 Result<CloseupEvalPair> parse_pair(const Json& p, const std::string& where) {
-  if (!p.is_object()) return Status::error(where + ": expected an object, found " + detail::describe_json(p));
+  if (!p.is_object())
+    return Status::error(where + ": expected an object, found " + detail::describe_json(p));
   CloseupEvalPair pair;
   MACRO_ASSIGN_OR_RETURN(pair.training_frame, detail::string_field(p, "training_frame", where));
   MACRO_ASSIGN_OR_RETURN(pair.closeup_frame, detail::string_field(p, "closeup_frame", where));
@@ -78,13 +81,16 @@ Result<CloseupSplit> load_closeup_split(const std::string& path) {
     MACRO_ASSIGN_OR_RETURN(split.data_factor, detail::int_field(root, "data_factor", path));
   }
   if (root.contains("training_frames")) {
-    MACRO_ASSIGN_OR_RETURN(split.training_frames, detail::string_list_field(root, "training_frames", path));
+    MACRO_ASSIGN_OR_RETURN(split.training_frames,
+                           detail::string_list_field(root, "training_frames", path));
   } else if (root.contains("train_frames")) {
-    MACRO_ASSIGN_OR_RETURN(split.training_frames, detail::string_list_field(root, "train_frames", path));
+    MACRO_ASSIGN_OR_RETURN(split.training_frames,
+                           detail::string_list_field(root, "train_frames", path));
   }
   if (root.contains("closeup_frames")) {
     split.has_closeup_frames = true;
-    MACRO_ASSIGN_OR_RETURN(split.closeup_frames, detail::string_list_field(root, "closeup_frames", path));
+    MACRO_ASSIGN_OR_RETURN(split.closeup_frames,
+                           detail::string_list_field(root, "closeup_frames", path));
   }
   if (root.contains("closeup_eval_pairs")) {
     const Json& pairs = root["closeup_eval_pairs"];
@@ -93,8 +99,9 @@ Result<CloseupSplit> load_closeup_split(const std::string& path) {
                            detail::describe_json(pairs));
     }
     for (size_t i = 0; i < pairs.size(); ++i) {
-      MACRO_ASSIGN_OR_RETURN(CloseupEvalPair p,
-                             parse_pair(pairs[i], path + ": closeup_eval_pairs[" + std::to_string(i) + "]"));
+      MACRO_ASSIGN_OR_RETURN(
+          CloseupEvalPair p,
+          parse_pair(pairs[i], path + ": closeup_eval_pairs[" + std::to_string(i) + "]"));
       split.closeup_eval_pairs.push_back(std::move(p));
     }
   }
@@ -102,7 +109,8 @@ Result<CloseupSplit> load_closeup_split(const std::string& path) {
   MACRO_ASSIGN_OR_RETURN(Camera intr, parse_intrinsics(root, path));
   intr.name = "intrinsics";
   MACRO_TRY(intr.validate().with_context(path));
-  if (!root.contains("closeup_poses")) return Status::error(path + ": missing field 'closeup_poses'");
+  if (!root.contains("closeup_poses"))
+    return Status::error(path + ": missing field 'closeup_poses'");
   const Json& poses = root["closeup_poses"];
   if (!poses.is_object()) {
     return Status::error(path + ": field 'closeup_poses': expected an object {frame: 4x4}, found " +

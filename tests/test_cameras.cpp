@@ -52,7 +52,9 @@ template <typename T>
 std::string error_of(const Result<T>& r) {
   return r.is_ok() ? std::string("<no error>") : r.status().message();
 }
-std::string error_of(const Status& s) { return s.is_ok() ? std::string("<no error>") : s.message(); }
+std::string error_of(const Status& s) {
+  return s.is_ok() ? std::string("<no error>") : s.message();
+}
 
 using Catch::Matchers::Contains;
 
@@ -72,7 +74,8 @@ const Eigen::Vector3d kXfront(0.3, -0.2, 0.5), kXside(0.5, 0.3, -0.2);
 const Eigen::Vector2d kUVfront(kFx * 0.3 / 4.5 + kCx, kFy * -0.2 / 4.5 + kCy);
 const Eigen::Vector2d kUVside(kFx * 0.2 / 3.5 + kCx, kFy * -0.3 / 3.5 + kCy);
 
-const char* kIntrinsicsJson = R"("w": 640, "h": 480, "fl_x": 500, "fl_y": 510, "cx": 320.5, "cy": 240.25)";
+const char* kIntrinsicsJson =
+    R"("w": 640, "h": 480, "fl_x": 500, "fl_y": 510, "cx": 320.5, "cy": 240.25)";
 // OpenGL camera-to-world of the two cameras: [R^T | C] with columns 1 and 2 negated.
 const char* kFrontGL = "[[1,0,0,0],[0,-1,0,0],[0,0,-1,-4],[0,0,0,1]]";
 const char* kSideGL = "[[0,0,1,4],[0,1,0,0],[-1,0,0,0],[0,0,0,1]]";
@@ -104,7 +107,8 @@ void write_rig_colmap_text(const std::string& dir) {
 
 Bytes rig_cameras_bin(int32_t model_id = 1, uint64_t count = 1) {
   Bytes c;
-  c.put<uint64_t>(count).put<uint32_t>(1).put<int32_t>(model_id).put<uint64_t>(640).put<uint64_t>(480);
+  c.put<uint64_t>(count).put<uint32_t>(1).put<int32_t>(model_id).put<uint64_t>(640).put<uint64_t>(
+      480);
   for (double v : {kFx, kFy, kCx, kCy}) c.put<double>(v);
   return c;
 }
@@ -131,15 +135,18 @@ void write_rig_colmap_binary(const std::string& dir) {
 
 void write_rig_nerfstudio(const std::string& path) {
   write_text(path, std::string("{") + kIntrinsicsJson + R"(, "camera_model": "PINHOLE", "frames": [
-  {"file_path": "images/front.png", "transform_matrix": )" + kFrontGL + R"(},
-  {"file_path": "images/side.png", "transform_matrix": )" + kSideGL + R"(}]})");
+  {"file_path": "images/front.png", "transform_matrix": )" +
+                       kFrontGL + R"(},
+  {"file_path": "images/side.png", "transform_matrix": )" +
+                       kSideGL + R"(}]})");
 }
 
 void write_rig_split(const std::string& path) {
   write_text(path, std::string(R"({"scene": "abc", "data_factor": 4, "intrinsics": {)") +
                        kIntrinsicsJson + R"(, "camera_model": "PINHOLE"},
   "training_frames": ["t1.png"], "closeup_eval_pairs": [],
-  "closeup_poses": {"front.png": )" + kFrontGL + R"(, "side.png": )" + kSideGL + "}}");
+  "closeup_poses": {"front.png": )" +
+                       kFrontGL + R"(, "side.png": )" + kSideGL + "}}");
 }
 
 void check_rig(const CameraSet& set) {
@@ -203,7 +210,8 @@ Camera make_camera(const std::string& name, const Eigen::Matrix3d& R, const Eige
 
 }  // namespace
 
-// ---- Conventions ----------------------------------------------------------------------------------
+// ---- Conventions
+// ----------------------------------------------------------------------------------
 
 TEST_CASE("COLMAP quaternion to rotation, known answers and round trip", "[cameras]") {
   CHECK((rotation_from_quaternion_wxyz(1, 0, 0, 0) - Eigen::Matrix3d::Identity()).norm() < 1e-15);
@@ -213,7 +221,8 @@ TEST_CASE("COLMAP quaternion to rotation, known answers and round trip", "[camer
   rz << 0, -1, 0, 1, 0, 0, 0, 0, 1;
   CHECK((rotation_from_quaternion_wxyz(h, 0, 0, h) - rz).norm() < 1e-15);
   // 180 degrees about x.
-  CHECK((rotation_from_quaternion_wxyz(0, 1, 0, 0) - Eigen::Vector3d(1, -1, -1).asDiagonal().toDenseMatrix())
+  CHECK((rotation_from_quaternion_wxyz(0, 1, 0, 0) -
+         Eigen::Vector3d(1, -1, -1).asDiagonal().toDenseMatrix())
             .norm() < 1e-15);
   CHECK((rotation_from_quaternion_wxyz(0, h, 0, -h) - kRside).norm() < 1e-15);
   // -q is the same rotation; the inverse gives qw >= 0.
@@ -339,7 +348,8 @@ TEST_CASE("nerfstudio applied_transform: synthetic round trip to the COLMAP fram
   similarity.topRightCorner<3, 1>() = Eigen::Vector3d(0.5, -1, 2);
 
   const Eigen::Vector3d X(0.1, 0.2, 0.3);  // a COLMAP-world point
-  for (const auto& [A, rows] : {std::pair{current, 3}, std::pair{older, 3}, std::pair{similarity, 4}}) {
+  for (const auto& [A, rows] :
+       {std::pair{current, 3}, std::pair{older, 3}, std::pair{similarity, 4}}) {
     const double s = std::cbrt(A.topLeftCorner<3, 3>().determinant());
     const Eigen::Matrix3d Q = A.topLeftCorner<3, 3>() / s;
     std::string frames;
@@ -354,8 +364,8 @@ TEST_CASE("nerfstudio applied_transform: synthetic round trip to the COLMAP fram
     }
     const std::string path = tmp.file("transforms.json");
     write_text(path, R"({"w": 960, "h": 540, "fl_x": 420.49485042336295, "fl_y": 420.15307214892454,
-      "cx": 480.0, "cy": 270.0, "applied_transform": )" + matrix_json(A, rows) +
-                         R"(, "frames": [)" + frames + "]}");
+      "cx": 480.0, "cy": 270.0, "applied_transform": )" +
+                         matrix_json(A, rows) + R"(, "frames": [)" + frames + "]}");
     auto set = load_cameras(path);
     REQUIRE(error_of(set) == "<no error>");
     REQUIRE(set->cameras.size() == truth.size());
@@ -378,17 +388,21 @@ TEST_CASE("nerfstudio applied_transform: synthetic round trip to the COLMAP fram
   }
 }
 
-TEST_CASE("nerfstudio intrinsics: global, per frame, distortion, Blender camera_angle_x", "[cameras]") {
+TEST_CASE("nerfstudio intrinsics: global, per frame, distortion, Blender camera_angle_x",
+          "[cameras]") {
   test::TempDir tmp("cameras-nsi");
   const std::string gl = kFrontGL;
   write_text(tmp.file("a/transforms.json"), R"({
     "w": 640, "h": 480, "fl_x": 500, "fl_y": 510, "cx": 320.5, "cy": 240.25,
     "camera_model": "OPENCV", "k1": 0.1, "k2": -0.02, "p1": 0.003, "p2": -0.004,
     "frames": [
-      {"file_path": "./images/a.png", "transform_matrix": )" + gl + R"(},
-      {"file_path": "./images/b.png", "transform_matrix": )" + gl + R"(,
+      {"file_path": "./images/a.png", "transform_matrix": )" +
+                                                gl + R"(},
+      {"file_path": "./images/b.png", "transform_matrix": )" +
+                                                gl + R"(,
        "fl_x": 250, "fl_y": 255, "cx": 160.25, "cy": 120.125, "w": 320, "h": 240, "k1": 0.5},
-      {"file_path": "./fish/c.png", "transform_matrix": )" + gl + R"(,
+      {"file_path": "./fish/c.png", "transform_matrix": )" +
+                                                gl + R"(,
        "camera_model": "OPENCV_FISHEYE", "k1": 1, "k2": 2, "k3": 3, "k4": 4}]})");
   auto set = load_cameras(tmp.file("a"));
   REQUIRE(error_of(set) == "<no error>");
@@ -420,7 +434,8 @@ TEST_CASE("nerfstudio intrinsics: global, per frame, distortion, Blender camera_
   write_bytes(tmp.file("blender/train/r_0.png"), png);  // IHDR 800 x 600, big-endian
   write_text(tmp.file("blender/transforms_train.json"),
              R"({"camera_angle_x": 0.6911112070083618, "frames": [
-                 {"file_path": "./train/r_0", "rotation": 0.0, "transform_matrix": )" + gl + "}]}");
+                 {"file_path": "./train/r_0", "rotation": 0.0, "transform_matrix": )" +
+                 gl + "}]}");
   auto blender = load_cameras(tmp.file("blender/transforms_train.json"));
   REQUIRE(error_of(blender) == "<no error>");
   const Camera& r0 = blender->cameras[0];
@@ -449,7 +464,8 @@ TEST_CASE("DL3DV-Closeup split: fields and close-up cameras", "[cameras]") {
        "depth_ratio": 2.1497, "iou": 0.8105, "angle_deg": 12.6, "pair_score": 2.3693},
       {"training_frame": "frame_00101.png", "closeup_frame": "frame_00319.png",
        "depth_ratio": 2.3806, "iou": 0.726, "angle_deg": 47.9, "pair_score": 2.0286}],
-    "closeup_poses": {"frame_00351.png": )") + kSideGL + R"(, "frame_00319.png": )" + kFrontGL + "}}");
+    "closeup_poses": {"frame_00351.png": )") +
+                                         kSideGL + R"(, "frame_00319.png": )" + kFrontGL + "}}");
   auto split = load_closeup_split(tmp.file("split.json"));
   REQUIRE(error_of(split) == "<no error>");
   CHECK(split->scene == "093ef327b4e4f9d4");
@@ -479,7 +495,8 @@ TEST_CASE("DL3DV-Closeup split: fields and close-up cameras", "[cameras]") {
   // MobileClose spelling: train_frames, closeup_frames.
   write_text(tmp.file("mobile.json"), std::string(R"({"intrinsics": {"w": 1071, "h": 1428,
       "fl_x": 1000, "fl_y": 1000, "cx": 535.5, "cy": 714},
-    "train_frames": ["a.jpg"], "closeup_frames": ["z.jpg"], "closeup_poses": {"z.jpg": )") + kFrontGL + "}}");
+    "train_frames": ["a.jpg"], "closeup_frames": ["z.jpg"], "closeup_poses": {"z.jpg": )") +
+                                          kFrontGL + "}}");
   auto mobile = load_closeup_split(tmp.file("mobile.json"));
   REQUIRE(error_of(mobile) == "<no error>");
   CHECK(mobile->training_frames == std::vector<std::string>{"a.jpg"});
@@ -529,7 +546,8 @@ TEST_CASE("writers round-trip: our JSON and COLMAP text", "[cameras]") {
   CHECK(std::filesystem::exists(sparse + "/points3D.txt"));
   std::ifstream cams_txt(sparse + "/cameras.txt");
   int camera_lines = 0;
-  for (std::string line; std::getline(cams_txt, line);) camera_lines += !line.empty() && line[0] != '#';
+  for (std::string line; std::getline(cams_txt, line);)
+    camera_lines += !line.empty() && line[0] != '#';
   CHECK(camera_lines == 2);
   for (const auto& e : std::filesystem::directory_iterator(sparse)) {
     CHECK(e.path().filename().string().find(".tmp") == std::string::npos);
@@ -606,7 +624,9 @@ TEST_CASE("Camera::validate names the camera, the field and the value", "[camera
            {[&](Camera& k) { k.R(1, 1) = nan; }, {"cam7", "R(1,1) = nan"}},
            {[](Camera& k) { k.t[2] = INFINITY; }, {"cam7", "t[2] = inf"}},
            {[](Camera& k) { k.model = CameraModel::kOpenCV; }, {"cam7", "OPENCV needs 4"}},
-           {[&](Camera& k) { k.model = CameraModel::kOpenCV, k.distortion = {0, nan, 0, 0}; },
+           {[&](Camera& k) {
+              k.model = CameraModel::kOpenCV, k.distortion = {0, nan, 0, 0};
+            },
             {"cam7", "distortion[1] = nan"}},
        }) {
     Camera k = good;
@@ -621,8 +641,8 @@ TEST_CASE("CameraSet::find: names, paths, ambiguity, unknown names", "[cameras]"
   set.source = "scene/transforms.json";
   for (const char* p : {"images/a.png", "images/b.png", "train/r_0", "test/r_0", "images/c.png",
                         "images/d.png", "images/e.png"}) {
-    Camera c = make_camera(std::filesystem::path(p).filename().string(), Eigen::Matrix3d::Identity(),
-                           {0, 0, 1});
+    Camera c = make_camera(std::filesystem::path(p).filename().string(),
+                           Eigen::Matrix3d::Identity(), {0, 0, 1});
     c.file_path = p;
     set.cameras.push_back(c);
   }
@@ -655,11 +675,13 @@ TEST_CASE("bad input: missing files and folders, unknown content", "[cameras]") 
   CHECK_THAT(empty, Contains("empty: no cameras found"));
   CHECK_THAT(empty, Contains("sparse/0"));
   write_text(tmp.file("half/sparse/0/cameras.txt"), "1 PINHOLE 4 4 1 1 2 2\n");
-  CHECK_THAT(error_of(load_cameras(tmp.file("half"))), Contains("has cameras.txt but no images.txt"));
+  CHECK_THAT(error_of(load_cameras(tmp.file("half"))),
+             Contains("has cameras.txt but no images.txt"));
   write_text(tmp.file("other.json"), R"({"foo": 1})");
   CHECK_THAT(error_of(load_cameras(tmp.file("other.json"))), Contains("not a camera file"));
   write_text(tmp.file("notjson.txt"), "hello");
-  CHECK_THAT(error_of(load_cameras(tmp.file("notjson.txt"))), Contains("notjson.txt: malformed JSON"));
+  CHECK_THAT(error_of(load_cameras(tmp.file("notjson.txt"))),
+             Contains("notjson.txt: malformed JSON"));
   CHECK_THAT(error_of(load_colmap_binary(tmp.file("x/cameras.bin"), tmp.file("x/images.bin"))),
              Contains("cameras.bin"));
 }
@@ -675,7 +697,8 @@ TEST_CASE("bad input: malformed JSON reports file and byte", "[cameras]") {
   CHECK_THAT(nan, Contains("nan.json: malformed JSON at byte"));
   CHECK_THAT(nan, Contains("NaN/Infinity are not valid JSON"));
   write_text(tmp.file("trunc.json"), "{\"closeup_poses\": {\"a\": [[1,0");
-  CHECK_THAT(error_of(load_cameras(tmp.file("trunc.json"))), Contains("trunc.json: malformed JSON"));
+  CHECK_THAT(error_of(load_cameras(tmp.file("trunc.json"))),
+             Contains("trunc.json: malformed JSON"));
 }
 
 TEST_CASE("bad input: missing and mistyped fields name the field and the frame", "[cameras]") {
@@ -686,45 +709,63 @@ TEST_CASE("bad input: missing and mistyped fields name the field and the frame",
     std::vector<std::string> expect;
   };
   for (const Case& c : std::vector<Case>{
-           {"ours.json", R"([{"name": "cam3", "width": 4, "height": 4, "fy": 1, "cx": 2, "cy": 2,
+           {"ours.json",
+            R"([{"name": "cam3", "width": 4, "height": 4, "fy": 1, "cx": 2, "cy": 2,
               "world_to_camera": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}])",
             {"ours.json: [0] 'cam3': missing field 'fx'"}},
-           {"ours2.json", R"([{"name": "cam3", "width": "4", "height": 4, "fx": 1, "fy": 1, "cx": 2, "cy": 2}])",
+           {"ours2.json",
+            R"([{"name": "cam3", "width": "4", "height": 4, "fx": 1, "fy": 1, "cx": 2, "cy": 2}])",
             {"'cam3': field 'width': expected a number, found string \"4\""}},
-           {"ours3.json", R"([{"name": "cam3", "width": 4, "height": 4, "fx": 1, "fy": 1, "cx": 2, "cy": 2,
+           {"ours3.json",
+            R"([{"name": "cam3", "width": 4, "height": 4, "fx": 1, "fy": 1, "cx": 2, "cy": 2,
               "world_to_camera": [[1,0,0,0],[0,1,0,0],[0,0,1,0]]}])",
             {"'cam3': world_to_camera: expected a 4x4 matrix", "array of 3"}},
-           {"ours4.json", R"([{"name": "cam3", "width": 4, "height": 4, "fx": 1, "fy": 1, "cx": 2, "cy": 2,
+           {"ours4.json",
+            R"([{"name": "cam3", "width": 4, "height": 4, "fx": 1, "fy": 1, "cx": 2, "cy": 2,
               "world_to_camera": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,1,1]]}])",
             {"'cam3': world_to_camera: last row is [0, 0, 1, 1]"}},
-           {"ours5.json", R"([{"name": "cam3", "width": 4, "height": 4, "fx": 1, "fy": 1, "cx": 2, "cy": 2,
+           {"ours5.json",
+            R"([{"name": "cam3", "width": 4, "height": 4, "fx": 1, "fy": 1, "cx": 2, "cy": 2,
               "world_to_camera": [[1,0,0,0],[0,1,0.5,0],[0,0,1,0],[0,0,0,1]]}])",
             {"ours5.json: camera 'cam3': rotation is not orthonormal"}},
-           {"ns.json", R"({"w": 4, "h": 4, "fl_y": 2, "cx": 2, "cy": 2, "frames": [
-              {"file_path": "x/a.png", "fl_x": 2, "transform_matrix": )" + gl + R"(},
-              {"file_path": "x/b.png", "transform_matrix": )" + gl + "}]}",
+           {"ns.json",
+            R"({"w": 4, "h": 4, "fl_y": 2, "cx": 2, "cy": 2, "frames": [
+              {"file_path": "x/a.png", "fl_x": 2, "transform_matrix": )" +
+                gl + R"(},
+              {"file_path": "x/b.png", "transform_matrix": )" +
+                gl + "}]}",
             {"ns.json: frames[1] 'x/b.png': missing field 'fl_x'"}},
-           {"ns2.json", R"({"w": 4, "h": 4, "fl_x": 2, "fl_y": 2, "frames": [{"file_path": "x/a.png"}]})",
+           {"ns2.json",
+            R"({"w": 4, "h": 4, "fl_x": 2, "fl_y": 2, "frames": [{"file_path": "x/a.png"}]})",
             {"frames[0] 'x/a.png': missing field 'transform_matrix'"}},
-           {"ns3.json", R"({"w": 4, "h": 4, "fl_x": 2, "fl_y": 2, "frames": [{"transform_matrix": )" + gl + "}]}",
+           {"ns3.json",
+            R"({"w": 4, "h": 4, "fl_x": 2, "fl_y": 2, "frames": [{"transform_matrix": )" + gl +
+                "}]}",
             {"ns3.json: frames[0]: missing field 'file_path'"}},
-           {"ns4.json", R"({"fl_x": 2, "fl_y": 2, "frames": [{"file_path": "x/a.png", "transform_matrix": )" + gl + "}]}",
+           {"ns4.json",
+            R"({"fl_x": 2, "fl_y": 2, "frames": [{"file_path": "x/a.png", "transform_matrix": )" +
+                gl + "}]}",
             {"frames[0] 'x/a.png': missing fields 'w' and 'h'"}},
-           {"ns5.json", R"({"w": 4, "h": 4, "fl_x": 2, "fl_y": 2, "frames": [
+           {"ns5.json",
+            R"({"w": 4, "h": 4, "fl_x": 2, "fl_y": 2, "frames": [
               {"file_path": "x/a.png", "transform_matrix": [[1,0,0],[0,1,0],[0,0,1]]}]})",
             {"frames[0] 'x/a.png': transform_matrix: row 0: expected 4 numbers, found array of 3"}},
-           {"split.json", R"({"intrinsics": {"w": 960, "h": 540, "fl_x": 1, "cx": 1, "cy": 1},
+           {"split.json",
+            R"({"intrinsics": {"w": 960, "h": 540, "fl_x": 1, "cx": 1, "cy": 1},
               "closeup_poses": {}})",
             {"split.json: intrinsics: missing field 'fl_y'"}},
-           {"split2.json", R"({"intrinsics": {"w": 960, "h": 540, "fl_x": 1, "fl_y": 1, "cx": 1, "cy": 1},
+           {"split2.json",
+            R"({"intrinsics": {"w": 960, "h": 540, "fl_x": 1, "fl_y": 1, "cx": 1, "cy": 1},
               "closeup_poses": {"f1.png": [[1,0,0,0]]}})",
             {"split2.json: closeup_poses['f1.png']: expected a 4x4 matrix"}},
-           {"split3.json", R"({"intrinsics": {"w": 960, "h": 540, "fl_x": 1, "fl_y": 1, "cx": 1, "cy": 1},
+           {"split3.json",
+            R"({"intrinsics": {"w": 960, "h": 540, "fl_x": 1, "fl_y": 1, "cx": 1, "cy": 1},
               "closeup_eval_pairs": [{"training_frame": "a", "closeup_frame": "b", "depth_ratio": 2,
               "angle_deg": 1, "pair_score": 1}], "closeup_poses": {}})",
             {"split3.json: closeup_eval_pairs[0] ('b'): missing field 'iou'"}},
            {"split4.json", R"({"closeup_poses": {}})", {"split4.json: missing field 'intrinsics'"}},
-           {"split5.json", R"({"intrinsics": {"w": 960, "h": 540, "fl_x": 0, "fl_y": 1, "cx": 1, "cy": 1},
+           {"split5.json",
+            R"({"intrinsics": {"w": 960, "h": 540, "fl_x": 0, "fl_y": 1, "cx": 1, "cy": 1},
               "closeup_poses": {}})",
             {"split5.json: camera 'intrinsics': fx = 0"}},
        }) {
@@ -735,7 +776,8 @@ TEST_CASE("bad input: missing and mistyped fields name the field and the frame",
   }
 }
 
-TEST_CASE("bad input: focal length, rotation, NaN, models, camera ids in COLMAP text", "[cameras]") {
+TEST_CASE("bad input: focal length, rotation, NaN, models, camera ids in COLMAP text",
+          "[cameras]") {
   test::TempDir tmp("cameras-colmap-bad");
   const std::string img_front = "3 1 0 0 0 0 0 4 1 front.png\n\n";
   struct Case {
@@ -746,23 +788,32 @@ TEST_CASE("bad input: focal length, rotation, NaN, models, camera ids in COLMAP 
            {"1 PINHOLE 640 480 0 510 320 240\n", img_front, {"camera 'front.png': fx = 0"}},
            {"1 SIMPLE_PINHOLE 640 480 -5 320 240\n", img_front, {"camera 'front.png': fx = -5"}},
            {"1 PINHOLE 640 0 5 5 320 240\n", img_front, {"size 640x0"}},
-           {"1 PINHOLE 640 480 5 5 320 240\n", "3 1 0 0 0 nan 0 4 1 front.png\n\n",
+           {"1 PINHOLE 640 480 5 5 320 240\n",
+            "3 1 0 0 0 nan 0 4 1 front.png\n\n",
             {"images.txt line 1", "camera 'front.png': t[0] = nan"}},
-           {"1 PINHOLE 640 480 5 5 320 240\n", "3 2 0 0 0 0 0 4 1 front.png\n\n",
+           {"1 PINHOLE 640 480 5 5 320 240\n",
+            "3 2 0 0 0 0 0 4 1 front.png\n\n",
             {"images.txt line 1 (image 3 'front.png'): quaternion", "norm 2"}},
-           {"1 RADIAL 640 480 5 320 240 0.1 0.2\n", img_front,
+           {"1 RADIAL 640 480 5 320 240 0.1 0.2\n",
+            img_front,
             {"cameras.txt line 1: camera 1: camera model RADIAL is not supported", "OPENCV"}},
            {"1 FANCY 640 480 5 320 240\n", img_front, {"unknown camera model 'FANCY'"}},
            {"1 PINHOLE 640 480 5 5 320\n", img_front, {"PINHOLE expects 4 parameters, found 3"}},
-           {"1 PINHOLE 640 480 5 5 320 abc\n", img_front, {"cameras.txt line 1: PARAMS[3]: expected a number, found 'abc'"}},
+           {"1 PINHOLE 640 480 5 5 320 abc\n",
+            img_front,
+            {"cameras.txt line 1: PARAMS[3]: expected a number, found 'abc'"}},
            {"1 PINHOLE 640 480 5 5 320 240\n2 PINHOLE 640 480 5 5 320 240\n",
             "3 1 0 0 0 0 0 4 7 front.png\n\n",
-            {"images.txt line 1 (image 3 'front.png'): camera id 7 is not in", "cameras.txt (its ids: 1, 2)"}},
-           {"1 PINHOLE 640 480 5 5 320 240\n", "3 1 0 0 0 0 0 4 1 a.png\n4 1 0 0 0 0 0 4 1 b.png\n",
+            {"images.txt line 1 (image 3 'front.png'): camera id 7 is not in",
+             "cameras.txt (its ids: 1, 2)"}},
+           {"1 PINHOLE 640 480 5 5 320 240\n",
+            "3 1 0 0 0 0 0 4 1 a.png\n4 1 0 0 0 0 0 4 1 b.png\n",
             {"images.txt line 2: expected the 2D points line of image 3 'a.png'"}},
-           {"1 PINHOLE 640 480 5 5 320 240\n", "3 1 0 0 0 0 0 4 1\n\n",
+           {"1 PINHOLE 640 480 5 5 320 240\n",
+            "3 1 0 0 0 0 0 4 1\n\n",
             {"images.txt line 1: expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME"}},
-           {"1 PINHOLE 640 480 5 5 320 240\n1 PINHOLE 640 480 5 5 320 240\n", img_front,
+           {"1 PINHOLE 640 480 5 5 320 240\n1 PINHOLE 640 480 5 5 320 240\n",
+            img_front,
             {"camera id 1 appears twice"}},
        }) {
     INFO(c.cameras << c.images);
@@ -774,14 +825,18 @@ TEST_CASE("bad input: focal length, rotation, NaN, models, camera ids in COLMAP 
   // Non-rigid rotation and unknown model in nerfstudio.
   write_text(tmp.file("ns.json"), R"({"w": 4, "h": 4, "fl_x": 2, "fl_y": 2, "frames": [
       {"file_path": "a.png", "transform_matrix": [[2,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]})");
-  CHECK_THAT(error_of(load_cameras(tmp.file("ns.json"))), Contains("camera 'a.png': rotation is not orthonormal"));
-  write_text(tmp.file("ns2.json"), R"({"w": 4, "h": 4, "fl_x": 2, "fl_y": 2, "camera_model": "EQUIRECTANGULAR",
+  CHECK_THAT(error_of(load_cameras(tmp.file("ns.json"))),
+             Contains("camera 'a.png': rotation is not orthonormal"));
+  write_text(tmp.file("ns2.json"),
+             R"({"w": 4, "h": 4, "fl_x": 2, "fl_y": 2, "camera_model": "EQUIRECTANGULAR",
       "frames": [{"file_path": "a.png", "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]})");
   CHECK_THAT(error_of(load_cameras(tmp.file("ns2.json"))),
-             Contains("frames[0] 'a.png': field 'camera_model': camera model 'EQUIRECTANGULAR' is not supported"));
+             Contains("frames[0] 'a.png': field 'camera_model': camera model 'EQUIRECTANGULAR' is "
+                      "not supported"));
   write_text(tmp.file("ns3.json"), R"({"w": 4, "h": 4, "fl_x": 2, "fl_y": 2,
       "applied_transform": [[1,0,0,0],[0,2,0,0],[0,0,1,0]], "frames": []})");
-  CHECK_THAT(error_of(load_cameras(tmp.file("ns3.json"))), Contains("applied_transform: not a similarity"));
+  CHECK_THAT(error_of(load_cameras(tmp.file("ns3.json"))),
+             Contains("applied_transform: not a similarity"));
 }
 
 TEST_CASE("bad input: COLMAP binary truncated, lying counts, unknown models and ids", "[cameras]") {
@@ -793,13 +848,15 @@ TEST_CASE("bad input: COLMAP binary truncated, lying counts, unknown models and 
 
   // Every truncation of either file fails with a message naming the file, never crashes.
   for (size_t n = 0; n < cams.b.size(); ++n) {
-    write_bytes(dir + "/cameras.bin", std::vector<uint8_t>(cams.b.begin(), cams.b.begin() + long(n)));
+    write_bytes(dir + "/cameras.bin",
+                std::vector<uint8_t>(cams.b.begin(), cams.b.begin() + long(n)));
     const std::string msg = error_of(load_cameras(dir));
     CHECK_THAT(msg, Contains("cameras.bin"));
   }
   write_bytes(dir + "/cameras.bin", cams.b);
   for (size_t n = 0; n < imgs.b.size(); ++n) {
-    write_bytes(dir + "/images.bin", std::vector<uint8_t>(imgs.b.begin(), imgs.b.begin() + long(n)));
+    write_bytes(dir + "/images.bin",
+                std::vector<uint8_t>(imgs.b.begin(), imgs.b.begin() + long(n)));
     const std::string msg = error_of(load_cameras(dir));
     CHECK_THAT(msg, Contains("images.bin"));
   }
@@ -809,7 +866,8 @@ TEST_CASE("bad input: COLMAP binary truncated, lying counts, unknown models and 
   CHECK_THAT(error_of(load_cameras(dir)), Contains("camera count 1152921504606846976"));
   write_bytes(dir + "/cameras.bin", cams.b);
   write_bytes(dir + "/images.bin", rig_images_bin(1, uint64_t(-1) / 2).b);
-  CHECK_THAT(error_of(load_cameras(dir)), Contains("'side.png' points2D count 9223372036854775807"));
+  CHECK_THAT(error_of(load_cameras(dir)),
+             Contains("'side.png' points2D count 9223372036854775807"));
   Bytes many = rig_images_bin();
   const uint64_t huge = uint64_t(1) << 62;
   std::memcpy(many.b.data(), &huge, 8);
