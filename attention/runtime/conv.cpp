@@ -1,8 +1,12 @@
 // conv2d as an implicit GEMM over the shared GEMM driver (gemm.h): the packed weights are the A
 // operand ([Cout, Cin*KH*KW] in MR-row panels), and the B panels (NR output pixels x a K block) are
 // gathered straight from the NCHW input by pack_im2col below, tile by tile, into the driver's
-// per-thread buffers. Stride-1 rows are copied as runs; padding is written as zeros. With bf16
-// weights the panels are rounded to bf16 k pairs while gathering (fp32 accumulation and output).
+// per-thread buffers. Stride-1 rows are copied as runs; padding is written as zeros.
+//
+// bf16 weights: K is ordered (dy, dx, ci) with Cin padded to even, so a bf16 k pair is two
+// neighbouring channels under the same tap. The input is converted once per call into channel-pair
+// planes xp[Cin2/2][H][W] of 32-bit words (even channel in the low half) and the pair panels are
+// then gathered exactly like the fp32 ones, one 32-bit word per pixel.
 #include "attention/runtime/conv.h"
 
 #include <algorithm>
@@ -15,7 +19,9 @@ namespace {
 
 struct Im2colCtx {
   const Conv2dShape* s;
-  const float* x;  // one image [Cin, H, W]
+  const float* x;        // fp32: one image [Cin, H, W]
+  const uint32_t* xp;    // bf16: one image's channel-pair planes [Cin2/2, H, W]
+  int64_t cin2;          // bf16: Cin rounded up to even
   int64_t oh, ow;
 };
 
@@ -38,38 +44,38 @@ int make_segments(const Im2colCtx& c, int64_t px0, int count, Segment* segs) {
   return nseg;
 }
 
-// One im2col row: the input values under tap (ci, dy, dx) for the panel's pixels; w floats, zeros
-// for padding and for pixels past `count`.
-void fill_row(const Im2colCtx& c, const Segment* segs, int nseg, int count, int w, int64_t ci,
-              int64_t dy, int64_t dx, float* out_row) {
+// One im2col row: the input plane's values under tap (dy, dx) for the panel's pixels; w values,
+// zeros for padding and for pixels past `count`. T is float (fp32) or uint32_t (bf16 pair words).
+template <typename T>
+void fill_row(const Im2colCtx& c, const Segment* segs, int nseg, int count, int w, const T* plane,
+              int64_t dy, int64_t dx, T* out_row) {
   const Conv2dShape& s = *c.s;
   const int64_t H = s.h, W = s.w;
   const int stride = s.stride;
-  const float* xc = c.x + ci * H * W;
   for (int g = 0; g < nseg; ++g) {
     const Segment& sg = segs[g];
-    float* out = out_row + sg.col;
+    T* out = out_row + sg.col;
     const int64_t iy = sg.oy * stride + dy - s.pad_top;
     if (iy < 0 || iy >= H) {
-      std::memset(out, 0, sizeof(float) * sg.len);
+      std::memset(out, 0, sizeof(T) * sg.len);
       continue;
     }
-    const float* row = xc + iy * W;
+    const T* row = plane + iy * W;
     const int64_t ix0 = sg.ox * stride + dx - s.pad_left;
     if (stride == 1) {
       const int64_t lo = std::clamp<int64_t>(-ix0, 0, sg.len);
       const int64_t hi = std::clamp<int64_t>(W - ix0, lo, sg.len);
-      for (int64_t i = 0; i < lo; ++i) out[i] = 0.0f;
-      std::memcpy(out + lo, row + ix0 + lo, sizeof(float) * size_t(hi - lo));
-      for (int64_t i = hi; i < sg.len; ++i) out[i] = 0.0f;
+      for (int64_t i = 0; i < lo; ++i) out[i] = T(0);
+      std::memcpy(out + lo, row + ix0 + lo, sizeof(T) * size_t(hi - lo));
+      for (int64_t i = hi; i < sg.len; ++i) out[i] = T(0);
     } else {
       for (int i = 0; i < sg.len; ++i) {
         const int64_t ix = ix0 + int64_t(i) * stride;
-        out[i] = (ix >= 0 && ix < W) ? row[ix] : 0.0f;
+        out[i] = (ix >= 0 && ix < W) ? row[ix] : T(0);
       }
     }
   }
-  if (count < w) std::memset(out_row + count, 0, sizeof(float) * size_t(w - count));
+  if (count < w) std::memset(out_row + count, 0, sizeof(T) * size_t(w - count));
 }
 
 // Nearest-even bf16 of two floats as one pair word (low half = even k); branch-free, NaN quiet.
@@ -88,51 +94,50 @@ void pack_im2col(const void* ctx, const GemmKernel& kern, bool is_a, int64_t r0,
   const int w = kern.nr;
   MACRO_CHECK(w <= 64);
   const int64_t kcp = detail::round_up(kc, kern.k_align);
-  const int64_t khw = int64_t(s.kh) * s.kw;
-  const bool f32 = kern.layout == PackLayout::kF32;
+  const int64_t HW = s.h * s.w;
   Segment segs[64];
-  alignas(64) float pair_rows[2][64];
   const int64_t panels = (rows + w - 1) / w;
   for (int64_t p = 0; p < panels; ++p) {
     const int64_t px0 = r0 + p * w;
     const int count = int(std::min<int64_t>(w, r0 + rows - px0));
     const int nseg = make_segments(c, px0, count, segs);
-    int64_t ci = k0 / khw, rem = k0 % khw;
-    int64_t dy = rem / s.kw, dx = rem % s.kw;
-    auto next_tap = [&] {
-      if (++dx == s.kw) {
-        dx = 0;
-        if (++dy == s.kh) {
-          dy = 0;
-          ++ci;
-        }
-      }
-    };
-    if (f32) {
+    if (kern.layout == PackLayout::kF32) {
+      // k = (ci, dy, dx)
+      const int64_t khw = int64_t(s.kh) * s.kw;
+      int64_t ci = k0 / khw, rem = k0 % khw;
+      int64_t dy = rem / s.kw, dx = rem % s.kw;
       float* d = static_cast<float*>(dst_v) + p * kcp * w;
       for (int64_t k = 0; k < kcp; ++k) {
         if (k >= kc) {
           std::memset(d + k * w, 0, sizeof(float) * w);
           continue;
         }
-        fill_row(c, segs, nseg, count, w, ci, dy, dx, d + k * w);
-        next_tap();
-      }
-    } else {
-      // bf16 k pairs ([kcp/2][w][2]): build the two fp32 rows, then round and interleave.
-      uint32_t* d = static_cast<uint32_t*>(dst_v) + p * (kcp / 2) * w;
-      for (int64_t q = 0; q < kcp / 2; ++q) {
-        for (int h = 0; h < 2; ++h) {
-          if (2 * q + h < kc) {
-            fill_row(c, segs, nseg, count, w, ci, dy, dx, pair_rows[h]);
-            next_tap();
-          } else {
-            std::memset(pair_rows[h], 0, sizeof(float) * w);
+        fill_row<float>(c, segs, nseg, count, w, c.x + ci * HW, dy, dx, d + k * w);
+        if (++dx == s.kw) {
+          dx = 0;
+          if (++dy == s.kh) {
+            dy = 0;
+            ++ci;
           }
         }
-        uint32_t* dq = d + q * w;
-        for (int j = 0; j < w; ++j)
-          dq[j] = bf16_bits(pair_rows[0][j]) | (bf16_bits(pair_rows[1][j]) << 16);
+      }
+    } else {
+      // k = (dy, dx, ci) with Cin2 even; k0 and kc are even, pair q covers channels 2cp, 2cp+1.
+      const int64_t pairs_per_tap = c.cin2 / 2;
+      int64_t q0 = k0 / 2;
+      int64_t tap = q0 / pairs_per_tap, cp = q0 % pairs_per_tap;
+      uint32_t* d = static_cast<uint32_t*>(dst_v) + p * (kcp / 2) * w;
+      for (int64_t q = 0; q < kcp / 2; ++q) {
+        if (2 * q >= kc) {
+          std::memset(d + q * w, 0, sizeof(uint32_t) * w);
+          continue;
+        }
+        fill_row<uint32_t>(c, segs, nseg, count, w, c.xp + cp * HW, tap / s.kw, tap % s.kw,
+                           d + q * w);
+        if (++cp == pairs_per_tap) {
+          cp = 0;
+          ++tap;
+        }
       }
     }
   }
@@ -147,8 +152,21 @@ ConvWeights ConvWeights::pack(const float* w, const float* bias, int64_t c_out, 
   cw.c_in_ = c_in;
   cw.kh_ = kh;
   cw.kw_ = kw;
-  const int64_t K = c_in * kh * kw;
-  cw.packed_ = PackedWeights::pack_as_a(w, c_out, K, K, type, isa);
+  if (type == WeightType::kF32) {
+    const int64_t K = c_in * kh * kw;
+    cw.packed_ = PackedWeights::pack_as_a(w, c_out, K, K, type, isa);
+  } else {
+    // Reorder to [Cout][KH][KW][Cin2] (Cin2 = Cin rounded up to even, zero weights for the pad).
+    const int64_t cin2 = (c_in + 1) / 2 * 2, K = int64_t(kh) * kw * cin2;
+    std::vector<float> wr(size_t(c_out * K), 0.0f);
+    for (int64_t co = 0; co < c_out; ++co)
+      for (int64_t ci = 0; ci < c_in; ++ci)
+        for (int dy = 0; dy < kh; ++dy)
+          for (int dx = 0; dx < kw; ++dx)
+            wr[size_t(co * K + (dy * kw + dx) * cin2 + ci)] =
+                w[((co * c_in + ci) * kh + dy) * kw + dx];
+    cw.packed_ = PackedWeights::pack_as_a(wr.data(), c_out, K, K, type, isa);
+  }
   if (bias) cw.bias_.assign(bias, bias + c_out);
   return cw;
 }
@@ -161,10 +179,32 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
   const int64_t oh = s.out_h(), ow = s.out_w();
   if (oh <= 0 || ow <= 0 || s.n <= 0 || s.c_out <= 0) return;
   const GemmKernel& kern = w.packed().kernel();
-  const int64_t K = s.c_in * s.kh * s.kw;
-  const int64_t npix = oh * ow;
+  const bool bf16 = w.type() == WeightType::kBf16;
+  const int64_t cin2 = (s.c_in + 1) / 2 * 2;
+  const int64_t K = bf16 ? cin2 * s.kh * s.kw : s.c_in * s.kh * s.kw;
+  const int64_t npix = oh * ow, HW = s.h * s.w;
+  std::vector<uint32_t> xp;  // bf16: channel-pair planes of one image, allocated once per call
+  if (bf16) xp.resize(size_t(cin2 / 2 * HW));
   for (int64_t b = 0; b < s.n; ++b) {
-    Im2colCtx ctx{&s, x + b * s.c_in * s.h * s.w, oh, ow};
+    const float* xb = x + b * s.c_in * HW;
+    if (bf16) {
+      auto convert = [&](size_t p0, size_t p1, int) {
+        for (size_t cp = p0; cp < p1; ++cp) {
+          const int64_t c0 = 2 * int64_t(cp), c1 = c0 + 1;
+          const float* x0 = xb + c0 * HW;
+          const float* x1 = c1 < s.c_in ? xb + c1 * HW : nullptr;
+          uint32_t* dst = xp.data() + cp * HW;
+          if (x1) {
+            for (int64_t i = 0; i < HW; ++i) dst[i] = bf16_bits(x0[i]) | (bf16_bits(x1[i]) << 16);
+          } else {
+            for (int64_t i = 0; i < HW; ++i) dst[i] = bf16_bits(x0[i]);
+          }
+        }
+      };
+      if (pool) pool->parallel_for(size_t(cin2 / 2), convert, 1);
+      else convert(0, size_t(cin2 / 2), 0);
+    }
+    Im2colCtx ctx{&s, xb, xp.data(), cin2, oh, ow};
     detail::Operand oa{nullptr, nullptr, w.packed().panels(), w.packed().k_padded()};
     detail::Operand ob{pack_im2col, &ctx, nullptr, 0};
     detail::DriverShape ds;
