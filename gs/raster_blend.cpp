@@ -79,9 +79,12 @@ void build_rows_scalar(const RowCullBatch& batch, int n, const RowCullTile& tile
 }
 
 const RasterKernels& raster_kernels_for(Isa isa) {
-  static const RasterKernels scalar{"scalar", blend_row_scalar, build_rows_scalar};
-  static const RasterKernels avx2{"avx2", blend_row_avx2, build_rows_scalar};
-  static const RasterKernels avx512{"avx512", blend_row_avx512, build_rows_avx512};
+  static const RasterKernels scalar{"scalar", blend_row_scalar, build_rows_scalar,
+                                    project_geometry_scalar};
+  static const RasterKernels avx2{"avx2", blend_row_avx2, build_rows_scalar,
+                                  project_geometry_scalar};
+  static const RasterKernels avx512{"avx512", blend_row_avx512, build_rows_avx512,
+                                    project_geometry_avx512};
   switch (isa) {
     case Isa::kScalar:
       return scalar;

@@ -5,6 +5,9 @@
 // -W(maybe-)uninitialized on every inlined use; the warnings are about the header, not this code.
 #pragma GCC diagnostic ignored "-Wuninitialized"
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+// FMAs are written out where wanted; keep the row builder's separate multiplies and adds as the
+// scalar twin has them.
+#pragma GCC optimize("fp-contract=off")
 #include <immintrin.h>
 
 #include "gs/raster_kernels.h"

@@ -17,12 +17,25 @@
 // skipped by the exact per-pixel test, so the two builders give identical images.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 
 #include "attention/runtime/cpu.h"
 #include "gs/constants.h"
 
 namespace macro::gs::raster {
+
+// The camera in float, as the stages use it.
+struct CameraF {
+  float R[9];  // world -> camera rotation, row-major
+  float t[3];
+  float center[3];  // camera position in world space (for SH directions)
+  float fx, fy, cx, cy;
+  int width, height;
+  int tiles_x, tiles_y;
+  // gsplat's Jacobian clamp: tx/tz in [-lim_x_neg, lim_x_pos], ty/tz likewise.
+  float lim_x_pos, lim_x_neg, lim_y_pos, lim_y_neg;
+};
 
 // One Gaussian as the blend loop reads it: one 64-byte record, so a tile's gather of a Gaussian
 // touches a single cache line.
@@ -81,10 +94,30 @@ struct RowCullTile {
 using BuildRowsFn = void (*)(const RowCullBatch& batch, int n, const RowCullTile& tile,
                              uint32_t (*rows)[kRowListStride], int* counts);
 
+// Projection of Gaussians [begin, end) without colour (the geometry of raster_project.cpp:
+// camera transform, 2D covariance, conic, AA/mip factor, cutoff ellipse, culling). Writes every
+// TileSplat field but r, g, bl for the visible ones and fate[g - begin] for all.
+enum : uint8_t { kFateVisible, kFateDepth, kFateInvalid, kFateFaint, kFateOffscreen };
+inline constexpr size_t kProjectBlock = 256;
+inline constexpr int kModeClassic = 0, kModeAntialiased = 1,
+                     kModeMip = 2;  // the generic loop's block (fate buffer size)
+struct ProjectInput {
+  const float* position;  // [N,3]
+  const float* scale;     // [N,3]
+  const float* rotation;  // [N,4]
+  const float* opacity;   // [N]
+  const CameraF* cam;
+  int mode;  // kModeClassic / kModeAntialiased / kModeMip (RasterMode's values)
+  float near_plane, far_plane;
+};
+using ProjectGeometryFn = void (*)(const ProjectInput& in, size_t begin, size_t end, TileSplat* out,
+                                   uint8_t* fate);
+
 struct RasterKernels {
   const char* name;
   BlendRowFn blend_row;
   BuildRowsFn build_rows;
+  ProjectGeometryFn project_geometry;
 };
 
 // The table for a path; unsupported paths fall back to the best lower one the build has.
@@ -102,6 +135,10 @@ void blend_row_avx2(const TileSplat* splats, const uint32_t* idx, int n, float p
                     RowAccum* acc, BlendCounters* counters);
 void blend_row_avx512(const TileSplat* splats, const uint32_t* idx, int n, float px0, float py,
                       RowAccum* acc, BlendCounters* counters);
+void project_geometry_scalar(const ProjectInput& in, size_t begin, size_t end, TileSplat* out,
+                             uint8_t* fate);
+void project_geometry_avx512(const ProjectInput& in, size_t begin, size_t end, TileSplat* out,
+                             uint8_t* fate);
 void build_rows_scalar(const RowCullBatch& batch, int n, const RowCullTile& tile,
                        uint32_t (*rows)[kRowListStride], int* counts);
 void build_rows_avx512(const RowCullBatch& batch, int n, const RowCullTile& tile,

@@ -15,6 +15,9 @@
 #include "gs/raster_stages.h"
 
 namespace macro::gs::raster {
+static_assert(int(RasterMode::kClassic) == kModeClassic &&
+              int(RasterMode::kAntialiased) == kModeAntialiased &&
+              int(RasterMode::kMip) == kModeMip);
 namespace {
 
 // SH basis constants (Inria / gsplat sh_utils).
@@ -70,14 +73,20 @@ inline bool finite3(const float* v) {
   return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
 }
 
-enum class Fate { kVisible, kDepth, kInvalid, kFaint, kOffscreen };
+enum Fate : uint8_t {
+  kVisible = kFateVisible,
+  kDepth = kFateDepth,
+  kInvalid = kFateInvalid,
+  kFaint = kFateFaint,
+  kOffscreen = kFateOffscreen
+};
 
-Fate project_one(const GaussianCloud& cloud, size_t g, const CameraF& cam,
-                 const ProjectParams& params, TileSplat* s) {
-  const float* p = &cloud.position[3 * g];
-  const float* sc = &cloud.scale[3 * g];
-  const float* q = &cloud.rotation[4 * g];
-  float opacity = cloud.opacity[g];
+Fate geometry_one(const ProjectInput& in, size_t g, TileSplat* s) {
+  const CameraF& cam = *in.cam;
+  const float* p = &in.position[3 * g];
+  const float* sc = &in.scale[3 * g];
+  const float* q = &in.rotation[4 * g];
+  float opacity = in.opacity[g];
   if (!finite3(p) || !finite3(sc) || !finite3(q) || !std::isfinite(q[3]) || !std::isfinite(opacity))
     return Fate::kInvalid;
 
@@ -86,7 +95,7 @@ Fate project_one(const GaussianCloud& cloud, size_t g, const CameraF& cam,
   const float tx = R[0] * p[0] + R[1] * p[1] + R[2] * p[2] + cam.t[0];
   const float ty = R[3] * p[0] + R[4] * p[1] + R[5] * p[2] + cam.t[1];
   const float tz = R[6] * p[0] + R[7] * p[1] + R[8] * p[2] + cam.t[2];
-  if (!(tz > params.near_plane && tz < params.far_plane)) return Fate::kDepth;
+  if (!(tz > in.near_plane && tz < in.far_plane)) return Fate::kDepth;
 
   // Rotation of the Gaussian (normalised quaternion w, x, y, z) times its scales: M = R_q S.
   const float qn = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
@@ -120,16 +129,16 @@ Fate project_one(const GaussianCloud& cloud, size_t g, const CameraF& cam,
   float sxy = A[0] * A[3] + A[1] * A[4] + A[2] * A[5];
   float syy = A[3] * A[3] + A[4] * A[4] + A[5] * A[5];
   const float det0 = sxx * syy - sxy * sxy;
-  const float eps = params.mode == RasterMode::kMip ? kMipKernelSize : kEps2d;
+  const float eps = in.mode == kModeMip ? kMipKernelSize : kEps2d;
   sxx += eps;
   syy += eps;
   const float det = sxx * syy - sxy * sxy;
   if (!(det > 0.f) || !std::isfinite(det) || !std::isfinite(sxx) || !std::isfinite(syy))
     return Fate::kInvalid;
 
-  if (params.mode == RasterMode::kAntialiased) {
+  if (in.mode == kModeAntialiased) {
     opacity *= std::sqrt(std::max(kAaCompFloor, det0 / det));
-  } else if (params.mode == RasterMode::kMip) {
+  } else if (in.mode == kModeMip) {
     const float d0 = std::max(kMipDetEps, det0), d1 = std::max(kMipDetEps, det);
     float coef = std::sqrt(d0 / (d1 + kMipDetEps) + kMipDetEps);
     if (d0 <= kMipDetEps || d1 <= kMipDetEps) coef = 0.f;
@@ -164,21 +173,32 @@ Fate project_one(const GaussianCloud& cloud, size_t g, const CameraF& cam,
       s->y + s->ext_y < 0.5f || s->y - s->ext_y > float(cam.height) - 0.5f)
     return Fate::kOffscreen;
 
-  // Colour.
+  return Fate::kVisible;
+}
+
+// Colour of a visible Gaussian; false if it is not finite.
+bool colour_one(const GaussianCloud& cloud, size_t g, const CameraF& cam, int sh_degree,
+                TileSplat* s) {
+  const float* p = &cloud.position[3 * g];
   float dir[3] = {p[0] - cam.center[0], p[1] - cam.center[1], p[2] - cam.center[2]};
   const float dn = std::sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
   const float inv = dn > 0.f ? 1.f / dn : 0.f;
   float rgb[3];
   const size_t K = size_t(cloud.sh_coeffs());
-  eval_sh(&cloud.sh[g * K * 3], params.sh_degree, dir[0] * inv, dir[1] * inv, dir[2] * inv, rgb);
-  if (!finite3(rgb)) return Fate::kInvalid;
+  eval_sh(&cloud.sh[g * K * 3], sh_degree, dir[0] * inv, dir[1] * inv, dir[2] * inv, rgb);
+  if (!finite3(rgb)) return false;
   s->r = std::max(0.f, rgb[0] + kShOffset);
   s->g = std::max(0.f, rgb[1] + kShOffset);
   s->bl = std::max(0.f, rgb[2] + kShOffset);
-  return Fate::kVisible;
+  return true;
 }
 
 }  // namespace
+
+void project_geometry_scalar(const ProjectInput& in, size_t begin, size_t end, TileSplat* out,
+                             uint8_t* fate) {
+  for (size_t g = begin; g < end; ++g) fate[g - begin] = geometry_one(in, g, &out[g]);
+}
 
 CameraF make_camera_f(const Camera& camera) {
   CameraF c{};
@@ -205,40 +225,39 @@ CameraF make_camera_f(const Camera& camera) {
 }
 
 void project_stage(const GaussianCloud& cloud, const CameraF& cam, const ProjectParams& params,
-                   const Projected& out, ThreadPool& pool, ProjectCounts* counts) {
+                   const RasterKernels& kernels, const Projected& out, ThreadPool& pool,
+                   ProjectCounts* counts) {
   const size_t n = cloud.size();
+  const ProjectInput in{
+      cloud.position.data(), cloud.scale.data(), cloud.rotation.data(), cloud.opacity.data(), &cam,
+      int(params.mode),      params.near_plane,  params.far_plane};
   std::atomic<uint64_t> visible{0}, depth{0}, invalid{0}, faint{0}, offscreen{0}, pairs{0};
   pool.parallel_for(
       n,
       [&](size_t begin, size_t end, int) {
         uint64_t c_vis = 0, c_depth = 0, c_inv = 0, c_faint = 0, c_off = 0, c_pairs = 0;
-        for (size_t g = begin; g < end; ++g) {
-          TileSplat& s = out.splats[g];
-          Fate fate = project_one(cloud, g, cam, params, &s);
-          uint32_t tiles = 0;
-          if (fate == Fate::kVisible) {
-            for_each_tile(s, cam, params.rule, [&](int, int) { ++tiles; });
-            if (tiles == 0) fate = Fate::kOffscreen;
-          }
-          out.tiles[g] = tiles;
-          if (tiles) std::memcpy(&out.depth_key[g], &s.z, 4);
-          c_pairs += tiles;
-          switch (fate) {
-            case Fate::kVisible:
-              ++c_vis;
-              break;
-            case Fate::kDepth:
-              ++c_depth;
-              break;
-            case Fate::kInvalid:
-              ++c_inv;
-              break;
-            case Fate::kFaint:
-              ++c_faint;
-              break;
-            case Fate::kOffscreen:
-              ++c_off;
-              break;
+        uint8_t fates[kProjectBlock];
+        for (size_t b = begin; b < end; b += kProjectBlock) {
+          const size_t e = std::min(end, b + kProjectBlock);
+          kernels.project_geometry(in, b, e, out.splats, fates);
+          for (size_t g = b; g < e; ++g) {
+            TileSplat& s = out.splats[g];
+            uint8_t fate = fates[g - b];
+            if (fate == kFateVisible && !colour_one(cloud, g, cam, params.sh_degree, &s))
+              fate = kFateInvalid;
+            uint32_t tiles = 0;
+            if (fate == kFateVisible) {
+              for_each_tile(s, cam, params.rule, [&](int, int) { ++tiles; });
+              if (tiles == 0) fate = kFateOffscreen;
+            }
+            out.tiles[g] = tiles;
+            if (tiles) std::memcpy(&out.depth_key[g], &s.z, 4);
+            c_pairs += tiles;
+            c_vis += fate == kFateVisible;
+            c_depth += fate == kFateDepth;
+            c_inv += fate == kFateInvalid;
+            c_faint += fate == kFateFaint;
+            c_off += fate == kFateOffscreen;
           }
         }
         visible += c_vis;

@@ -58,17 +58,6 @@ class Arena {
   size_t capacity_ = 0, used_ = 0;
 };
 
-// The camera in float, as the stages use it.
-struct CameraF {
-  float R[9];  // world -> camera rotation, row-major
-  float t[3];
-  float center[3];  // camera position in world space (for SH directions)
-  float fx, fy, cx, cy;
-  int width, height;
-  int tiles_x, tiles_y;
-  // gsplat's Jacobian clamp: tx/tz in [-lim_x_neg, lim_x_pos], ty/tz likewise.
-  float lim_x_pos, lim_x_neg, lim_y_pos, lim_y_neg;
-};
 CameraF make_camera_f(const Camera& camera);
 
 // Tile coverage rule.
@@ -102,7 +91,8 @@ struct ProjectCounts {
 };
 
 void project_stage(const GaussianCloud& cloud, const CameraF& cam, const ProjectParams& params,
-                   const Projected& out, ThreadPool& pool, ProjectCounts* counts);
+                   const RasterKernels& kernels, const Projected& out, ThreadPool& pool,
+                   ProjectCounts* counts);
 
 // Outputs of bin.
 struct Binned {

@@ -99,8 +99,9 @@ Status Rasterizer::render_into(const GaussianCloud& cloud, const Camera& camera,
   proj.splats = ws_->project.carve<TileSplat>(n);
   proj.tiles = ws_->project.carve<uint32_t>(n);
   proj.depth_key = ws_->project.carve<uint32_t>(n);
+  const RasterKernels& kernels = raster_kernels();
   ProjectCounts counts;
-  project_stage(cloud, cam, params, proj, pool, &counts);
+  project_stage(cloud, cam, params, kernels, proj, pool, &counts);
   result.stats.ms_project = ms_since(t_start);
   result.stats.visible = counts.visible;
   result.stats.culled_depth = counts.culled_depth;
@@ -135,7 +136,6 @@ Status Rasterizer::render_into(const GaussianCloud& cloud, const Camera& camera,
                    result.depth_sum.data(),
                    result.inv_depth_sum.data(),
                    {options.background[0], options.background[1], options.background[2]}};
-  const RasterKernels& kernels = raster_kernels();
   BlendTotals totals;
   blend_stage(bins, cam, kernels, options.naive_baseline, out, pool, &totals);
   result.stats.ms_blend = ms_since(t_blend);
