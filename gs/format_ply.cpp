@@ -176,52 +176,70 @@ Result<GaussianCloud> decode_ply(const ply::Header& header, const uint8_t* data,
   cloud.trained_antialiased = comment_says_antialiased(header.comments);
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const size_t n_cols = columns.size();
-  std::vector<uint8_t> bad(ply::ElementRows::kBlockRows);
 
-  MACRO_TRY(rows.for_each_block(columns, [&](size_t first, size_t n, const float* const* col) {
+  // One Gaussian from its column values v[c] (c indexes `columns`).
+  auto emit = [&](size_t i, const float* v) {
     // Any non-finite raw value marks the Gaussian (dropped by the sanitize pass).
-    std::fill(bad.begin(), bad.begin() + static_cast<long>(n), uint8_t{0});
-    for (size_t c = 0; c < n_cols; ++c)
-      for (size_t r = 0; r < n; ++r) bad[r] |= !std::isfinite(col[c][r]);
-    for (size_t r = 0; r < n; ++r) {
-      const size_t i = first + r;
-      float* p = &cloud.position[i * 3];
-      float* s = &cloud.scale[i * 3];
-      float* q = &cloud.rotation[i * 4];
-      float* sh = &cloud.sh[i * K * 3];
-      for (int a = 0; a < 3; ++a) p[a] = col[c_pos[a]][r];
-      float o;
-      if (point_cloud) {
-        for (int c = 0; c < 3; ++c) sh[c] = (col[c_dc[c]][r] / colour_div - 0.5f) / kShC0;
-        o = c_opacity >= 0 ? sigmoid(col[c_opacity][r]) : kPointCloudOpacity;
-        for (int a = 0; a < 3; ++a) s[a] = c_scale[0] >= 0 ? std::exp(col[c_scale[a]][r]) : 0.f;
-        if (c_rot[0] >= 0) {
-          for (int a = 0; a < 4; ++a) q[a] = col[c_rot[a]][r];
-        } else {
-          q[0] = 1.f;
-        }
+    bool bad = false;
+    for (size_t c = 0; c < n_cols; ++c) bad |= !std::isfinite(v[c]);
+    float* p = &cloud.position[i * 3];
+    float* s = &cloud.scale[i * 3];
+    float* q = &cloud.rotation[i * 4];
+    float* sh = &cloud.sh[i * K * 3];
+    for (int a = 0; a < 3; ++a) p[a] = v[c_pos[a]];
+    float o;
+    if (point_cloud) {
+      for (int c = 0; c < 3; ++c) sh[c] = (v[c_dc[c]] / colour_div - 0.5f) / kShC0;
+      o = c_opacity >= 0 ? sigmoid(v[c_opacity]) : kPointCloudOpacity;
+      for (int a = 0; a < 3; ++a) s[a] = c_scale[0] >= 0 ? std::exp(v[c_scale[a]]) : 0.f;
+      if (c_rot[0] >= 0) {
+        for (int a = 0; a < 4; ++a) q[a] = v[c_rot[a]];
       } else {
-        for (int c = 0; c < 3; ++c) sh[c] = col[c_dc[c]][r];
-        o = sigmoid(col[c_opacity][r]);
-        for (int a = 0; a < 3; ++a) s[a] = std::exp(col[c_scale[a]][r]);
-        for (int a = 0; a < 4; ++a) q[a] = col[c_rot[a]][r];
+        q[0] = 1.f;
       }
-      if (c_filter >= 0) {
-        // Mip-Splatting 3D filter: s' = sqrt(s^2 + f^2), o' = o * sqrt(prod s^2 / prod s'^2).
-        const float f2 = col[c_filter][r] * col[c_filter][r];
-        double ratio = 1.0;
-        for (int a = 0; a < 3; ++a) {
-          const double s2 = double(s[a]) * s[a];
-          const double t2 = s2 + f2;
-          ratio *= t2 > 0 ? s2 / t2 : 1.0;
-          s[a] = static_cast<float>(std::sqrt(t2));
-        }
-        o = static_cast<float>(o * std::sqrt(ratio));
-      }
-      for (size_t j = 3; j < K * 3; ++j) sh[j] = col[c_rest0 + static_cast<int>(j) - 3][r];
-      cloud.opacity[i] = bad[r] ? nan : o;
+    } else {
+      for (int c = 0; c < 3; ++c) sh[c] = v[c_dc[c]];
+      o = sigmoid(v[c_opacity]);
+      for (int a = 0; a < 3; ++a) s[a] = std::exp(v[c_scale[a]]);
+      for (int a = 0; a < 4; ++a) q[a] = v[c_rot[a]];
     }
-  }));
+    if (c_filter >= 0) {
+      // Mip-Splatting 3D filter: s' = sqrt(s^2 + f^2), o' = o * sqrt(prod s^2 / prod s'^2).
+      const double f2 = double(v[c_filter]) * v[c_filter];
+      double ratio = 1.0;
+      for (int a = 0; a < 3; ++a) {
+        const double s2 = double(s[a]) * s[a];
+        const double t2 = s2 + f2;
+        ratio *= t2 > 0 ? s2 / t2 : 1.0;
+        s[a] = static_cast<float>(std::sqrt(t2));
+      }
+      o = static_cast<float>(o * std::sqrt(ratio));
+    }
+    std::copy(v + c_rest0, v + c_rest0 + (K - 1) * 3, sh + 3);
+    cloud.opacity[i] = bad ? nan : o;
+  };
+
+  bool all_float = !rows.variable_rows && !rows.swap_bytes;
+  for (int prop : columns) all_float &= rows.stored_type[static_cast<size_t>(prop)] == ply::Type::kFloat32;
+  std::vector<float> v(n_cols);
+  if (all_float) {
+    // The common layout (every used property a little-endian float): straight from each row.
+    std::vector<size_t> offset(n_cols);
+    for (size_t c = 0; c < n_cols; ++c) offset[c] = rows.stored_offset[static_cast<size_t>(columns[c])];
+    const uint8_t* row = rows.begin;
+    for (size_t i = 0; i < N; ++i, row += rows.stride) {
+      for (size_t c = 0; c < n_cols; ++c) std::memcpy(&v[c], row + offset[c], 4);
+      emit(i, v.data());
+    }
+  } else {
+    // Any other types or byte order: typed column gathers per block of rows.
+    MACRO_TRY(rows.for_each_block(columns, [&](size_t first, size_t n, const float* const* col) {
+      for (size_t r = 0; r < n; ++r) {
+        for (size_t c = 0; c < n_cols; ++c) v[c] = col[c][r];
+        emit(first + r, v.data());
+      }
+    }));
+  }
 
   if (point_cloud && c_scale[0] < 0 && N > 0) {
     // Isotropic default: half the spacing of N points spread over the bounding box's surface.

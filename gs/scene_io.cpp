@@ -2,6 +2,11 @@
 // one sanitize pass every loaded cloud goes through (the bad-value policy in scene_io.h).
 #include "gs/scene_io.h"
 
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -140,6 +145,29 @@ Result<GaussianCloud> load_scene_from_memory(const uint8_t* data, size_t size,
 
 Result<GaussianCloud> load_scene(const std::string& path, const LoadLimits& limits,
                                  LoadReport* report) {
+  // Map the file read-only: no copy and no fresh pages for a 250 MB .ply. Anything that cannot be
+  // mapped (a pipe, an empty file) goes through read_file, which names the problem.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  struct stat st {};
+  if (fd >= 0 && ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && st.st_size > 0) {
+    const uint64_t size = static_cast<uint64_t>(st.st_size);
+    if (size > limits.max_file_bytes) {
+      ::close(fd);
+      return Status::error(path + ": file of " + std::to_string(size) + " bytes exceeds the limit "
+                           "of " + std::to_string(limits.max_file_bytes) + " bytes");
+    }
+    void* map = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
+    ::close(fd);
+    if (map != MAP_FAILED) {
+      ::madvise(map, size, MADV_SEQUENTIAL);
+      auto cloud = load_scene_from_memory(static_cast<const uint8_t*>(map), size, path, limits,
+                                          report);
+      ::munmap(map, size);
+      return cloud;
+    }
+  } else if (fd >= 0) {
+    ::close(fd);
+  }
   MACRO_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, read_file(path, limits.max_file_bytes));
   return load_scene_from_memory(bytes.data(), bytes.size(), path, limits, report);
 }

@@ -528,7 +528,7 @@ TEST_CASE("formats: compressed .ply decodes the documented bit layout", "[format
     CHECK(r->scale[i * 3 + 0] == Approx(std::exp(ch[6])).epsilon(1e-5));
     CHECK(r->scale[i * 3 + 1] == Approx(std::exp(ch[10])).epsilon(1e-5));
     CHECK(r->scale[i * 3 + 2] == Approx(std::exp(ch[8] + (ch[11] - ch[8]) * (1024.f / 2047.f))).epsilon(1e-5));
-    const float rgb[3] = {ch[12] + (ch[15] - ch[12]) * 1.f, ch[13] + (ch[16] - ch[13]) * 0.f,
+    const double rgb[3] = {ch[12] + (ch[15] - ch[12]) * 1.f, ch[13] + (ch[16] - ch[13]) * 0.f,
                           ch[14] + (ch[17] - ch[14]) * 0.2f};
     for (size_t c = 0; c < 3; ++c)
       CHECK(0.5f + kShC0 * r->sh[i * 4 * 3 + c] == Approx(rgb[c]).margin(1e-5));
