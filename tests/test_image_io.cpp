@@ -306,3 +306,32 @@ TEST_CASE("colour map runs dark to bright and clamps", "[render][image_io]") {
     prev = b;
   }
 }
+
+TEST_CASE("mutated and cut PNGs give an image or an error, never a crash", "[render][image_io]") {
+  Image img(23, 17, 3);
+  for (size_t k = 0; k < img.data.size(); ++k) img.data[k] = float((k * 7919) % 251) / 255.f;
+  auto good = encode_png(img);
+  REQUIRE(good);
+  uint64_t state = 12345;
+  auto next = [&]() {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return uint32_t(state >> 33);
+  };
+  size_t decoded = 0, refused = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    std::vector<uint8_t> bytes = *good;
+    const int flips = 1 + int(next() % 4);
+    for (int f = 0; f < flips; ++f) bytes[next() % bytes.size()] = uint8_t(next());
+    if (trial % 3 == 0) bytes.resize(next() % bytes.size());
+    auto r = decode_image(bytes.data(), bytes.size(), "mutated.png");
+    if (r) {
+      ++decoded;
+      CHECK(r->data.size() == r->pixels() * 3);
+    } else {
+      ++refused;
+      CHECK(r.status().message().find("mutated.png") != std::string::npos);
+    }
+  }
+  CHECK(decoded + refused == 400);
+  CHECK(refused > 0);
+}
