@@ -25,7 +25,8 @@ struct Shape {
   int64_t m, n, k;
 };
 const Shape kShapes[] = {{1, 1, 1},    {1, 17, 3},    {13, 1, 29},  {15, 33, 31},  {29, 65, 257},
-                         {97, 100, 600}, {200, 37, 513}, {31, 257, 7}, {3, 64, 700}, {43, 129, 64}};
+                         {97, 100, 600}, {200, 37, 513}, {31, 257, 7}, {3, 64, 700}, {43, 129, 64},
+                         {601, 45, 70}};  // M >= 3 row blocks: B packed once per call
 
 std::vector<Isa> supported_isas() {
   std::vector<Isa> v;

@@ -421,6 +421,24 @@ void gemm_any(const GemmKernel& kern, int64_t M, int64_t N, int64_t K, const voi
               const GemmParams& p, ThreadPool* pool) {
   // A as S[m][k]: row-major A is "not transposed"; B as S[n][k]: trans_b B ([N, K]) is row-major S.
   MatrixSrc ma{A, a_bf16, lda, p.trans_a, M, K};
+  // With many row blocks, pack B once for the whole call instead of once per row block.
+  const int64_t row_blocks = (M + kern.mr * std::max(1, 192 / kern.mr) - 1) /
+                             (kern.mr * std::max(1, 192 / kern.mr));
+  if (row_blocks >= 3 && (!b_bf16 || p.trans_b) && N >= 1 && K >= 1) {
+    const WeightType t = kern.layout == PackLayout::kF32 ? WeightType::kF32 : WeightType::kBf16;
+    const Isa isa = kernels().isa;
+    PackedWeights pw =
+        b_bf16 ? PackedWeights::pack(static_cast<const uint16_t*>(B), N, K, ldb, isa)
+        : p.trans_b ? PackedWeights::pack(static_cast<const float*>(B), N, K, ldb, t, isa)
+                    : PackedWeights::pack_kn(static_cast<const float*>(B), K, N, ldb, t, isa);
+    if (&pw.kernel() == &kern) {
+      detail::Operand oa{pack_matrix, &ma, nullptr, 0};
+      detail::Operand ob{nullptr, nullptr, pw.panels(), pw.k_padded()};
+      detail::DriverShape s{M, N, K, C, ldc, 0, 0};
+      detail::run_gemm(kern, s, oa, ob, p, pool);
+      return;
+    }
+  }
   MatrixSrc mb{B, b_bf16, ldb, !p.trans_b, N, K};
   detail::Operand oa{pack_matrix, &ma, nullptr, 0};
   detail::Operand ob{pack_matrix, &mb, nullptr, 0};
