@@ -209,6 +209,22 @@ TEST_CASE("gemm_packed: Linear y = x W^T + b, fp32 and bf16 weights, every path"
         REQUIRE(max_rel_err(y, ref16, s.m, s.n, s.n) <= 1e-5);
         if (s.k >= 29) REQUIRE(rel_l2(y, ref) <= 1e-2);
       }
+      {
+        // x given transposed ([K, M], channel-major activations), fp32 and bf16 weights.
+        std::vector<float> xt(size_t(s.k * s.m));
+        for (int64_t i = 0; i < s.m; ++i)
+          for (int64_t k = 0; k < s.k; ++k) xt[size_t(k * s.m + i)] = x[size_t(i * s.k + k)];
+        GemmParams pt = p;
+        pt.trans_a = true;
+        for (WeightType t : {WeightType::kF32, WeightType::kBf16}) {
+          PackedWeights pw = PackedWeights::pack(W.data(), s.n, s.k, s.k, t);
+          std::vector<float> y(size_t(s.m * s.n));
+          gemm_packed(s.m, xt.data(), s.m, pw, y.data(), s.n, pt);
+          RefArgs rt = ra;
+          rt.round_bf16 = t == WeightType::kBf16;
+          REQUIRE(max_rel_err(y, reference(rt), s.m, s.n, s.n) <= 1e-5);
+        }
+      }
     }
   }
 }
