@@ -32,8 +32,8 @@ int run_nn_run(std::vector<std::string> argv) {
   return 0;
 }
 
-const bool registered =
-    register_command({"nn-run", "run a network folder (TAESD, ...) on safetensors inputs", run_nn_run});
+const bool registered = register_command(
+    {"nn-run", "run a network folder (TAESD, ...) on safetensors inputs", run_nn_run});
 
 }  // namespace
 }  // namespace macro::cli

@@ -10,7 +10,9 @@ using namespace macro;
 
 namespace {
 
-std::string model_dir() { return test::source_dir() + "/data/weights/taesd"; }
+std::string model_dir() {
+  return test::source_dir() + "/data/weights/taesd";
+}
 
 int run_nn(const std::string& inputs, const std::string& out, const std::string& extra,
            const std::string& log) {
@@ -30,7 +32,8 @@ TEST_CASE("nn-run taesd: the binary reproduces the golden case", "[nets][taesd][
   auto image = g->read_f32("input.image", {1, 3, 256, 256});
   REQUIRE(image.is_ok());
   const std::string in = dir.file("in.safetensors"), out = dir.file("out.safetensors");
-  REQUIRE(write_safetensors(in, {{"input.image", DType::kF32, {1, 3, 256, 256}, image->data()}}).is_ok());
+  REQUIRE(write_safetensors(in, {{"input.image", DType::kF32, {1, 3, 256, 256}, image->data()}})
+              .is_ok());
   REQUIRE(run_nn(in, out, "", dir.file("log.txt")) == 0);
   auto o = SafeTensors::open(out);
   REQUIRE(o.is_ok());
@@ -73,10 +76,12 @@ TEST_CASE("nn-run taesd: bad inputs are refused naming the tensor", "[nets][taes
   expect_refusal({{"input.image", DType::kF32, {2, 3, 16, 16}, nan_img.data()}},
                  "'input.image': element 777 is NaN");
   std::vector<int32_t> ints(img.size());
-  expect_refusal({{"input.image", DType::kI32, {2, 3, 16, 16}, ints.data()}}, "expected a float dtype");
+  expect_refusal({{"input.image", DType::kI32, {2, 3, 16, 16}, ints.data()}},
+                 "expected a float dtype");
   // Unknown precision and missing flags are usage errors with the flag named.
   const std::string in = dir.file("ok.safetensors");
-  REQUIRE(write_safetensors(in, {{"input.image", DType::kF32, {2, 3, 16, 16}, img.data()}}).is_ok());
+  REQUIRE(
+      write_safetensors(in, {{"input.image", DType::kF32, {2, 3, 16, 16}, img.data()}}).is_ok());
   CHECK(run_nn(in, out, "--precision fp8", log) == 1);
   CHECK(read_text_file(log)->find("--precision") != std::string::npos);
   // Batch of two small images in bf16 runs and has the right shapes.

@@ -36,7 +36,8 @@ double max_rel(const std::vector<float>& a, const std::vector<float>& b, double 
       continue;
     }
     if (a[i] == b[i]) continue;  // also equal infinities
-    m = std::max(m, std::abs(double(a[i]) - double(b[i])) / std::max(std::abs(double(b[i])), floor));
+    m = std::max(m,
+                 std::abs(double(a[i]) - double(b[i])) / std::max(std::abs(double(b[i])), floor));
   }
   return m;
 }
@@ -68,8 +69,8 @@ void against_scalar(const std::string& what, double bound, double floor,
 // Inputs with awkward values: tails (odd sizes), zeros, large magnitudes, exact ties.
 std::vector<float> act_inputs() {
   std::vector<float> x = random_vec(1000 + 13, -12.0f, 12.0f, 1);
-  for (float v : {0.0f, -0.0f, 1e-8f, -1e-8f, 0.624f, 0.626f, -0.625f, 20.0f, -20.0f, 88.0f,
-                  -88.0f, 100.0f, -100.0f, -30.0f, 3.4e38f, -3.4e38f})
+  for (float v : {0.0f, -0.0f, 1e-8f, -1e-8f, 0.624f, 0.626f, -0.625f, 20.0f, -20.0f, 88.0f, -88.0f,
+                  100.0f, -100.0f, -30.0f, 3.4e38f, -3.4e38f})
     x.push_back(v);
   return x;
 }
@@ -163,8 +164,8 @@ TEST_CASE("ops: nearest upsample x2 and to an explicit size", "[runtime][ops]") 
   // [1, 1, 2, 3] -> x2 -> [1, 1, 4, 6]
   std::vector<float> s = {1, 2, 3, 4, 5, 6}, d(24);
   upsample_nearest(d.data(), s.data(), 1, 2, 3, 4, 6, nullptr);
-  CHECK(d == std::vector<float>{1, 1, 2, 2, 3, 3, 1, 1, 2, 2, 3, 3,
-                                4, 4, 5, 5, 6, 6, 4, 4, 5, 5, 6, 6});
+  CHECK(d ==
+        std::vector<float>{1, 1, 2, 2, 3, 3, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 4, 4, 5, 5, 6, 6});
   // 3 -> 5 columns, 2 -> 3 rows: src = floor(dst * in / out): cols 0,0,1,1,2; rows 0,0,1.
   std::vector<float> s2 = {1, 2, 3, 4, 5, 6}, d2(15);
   upsample_nearest(d2.data(), s2.data(), 1, 2, 3, 3, 5, nullptr);

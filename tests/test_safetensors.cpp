@@ -31,7 +31,9 @@ std::string open_error(const std::string& path) {
   return r.status().message();
 }
 
-bool has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+bool has(const std::string& s, const std::string& part) {
+  return s.find(part) != std::string::npos;
+}
 
 }  // namespace
 
@@ -93,7 +95,8 @@ TEST_CASE("safetensors: round trip of every dtype", "[runtime][safetensors]") {
   std::vector<float> f32 = {1.5f, -2.25f, 0.0f, 3.0e-8f, 65504.0f, -1e30f};
   std::vector<double> f64 = {1.0 / 3.0, -7.5};
   std::vector<uint16_t> f16, bf16;
-  for (float v : {1.0f, -0.5f, 6.1035156e-05f, 5.9604645e-08f, 65504.0f, 0.0f}) f16.push_back(f32_to_f16(v));
+  for (float v : {1.0f, -0.5f, 6.1035156e-05f, 5.9604645e-08f, 65504.0f, 0.0f})
+    f16.push_back(f32_to_f16(v));
   for (float v : {1.0f, -0.5f, 3.0e38f, 1.0e-38f}) bf16.push_back(f32_to_bf16(v));
   std::vector<int32_t> i32 = {-5, 7, 1 << 20};
   std::vector<int64_t> i64 = {-(int64_t(1) << 40), 3};
@@ -101,16 +104,11 @@ TEST_CASE("safetensors: round trip of every dtype", "[runtime][safetensors]") {
   std::vector<int8_t> i8 = {-128, 127};
   std::vector<uint8_t> bools = {0, 1, 1};
   std::vector<TensorToWrite> ts = {
-      {"a.f32", DType::kF32, {2, 3}, f32.data()},
-      {"b.f64", DType::kF64, {2}, f64.data()},
-      {"c.f16", DType::kF16, {6}, f16.data()},
-      {"d.bf16", DType::kBF16, {2, 2}, bf16.data()},
-      {"e.i32", DType::kI32, {3}, i32.data()},
-      {"f.i64", DType::kI64, {2}, i64.data()},
-      {"g.u8", DType::kU8, {3, 1}, u8.data()},
-      {"h.i8", DType::kI8, {2}, i8.data()},
-      {"i.bool", DType::kBool, {3}, bools.data()},
-      {"j.empty", DType::kF32, {0, 4}, nullptr},
+      {"a.f32", DType::kF32, {2, 3}, f32.data()},  {"b.f64", DType::kF64, {2}, f64.data()},
+      {"c.f16", DType::kF16, {6}, f16.data()},     {"d.bf16", DType::kBF16, {2, 2}, bf16.data()},
+      {"e.i32", DType::kI32, {3}, i32.data()},     {"f.i64", DType::kI64, {2}, i64.data()},
+      {"g.u8", DType::kU8, {3, 1}, u8.data()},     {"h.i8", DType::kI8, {2}, i8.data()},
+      {"i.bool", DType::kBool, {3}, bools.data()}, {"j.empty", DType::kF32, {0, 4}, nullptr},
       {"k.scalar", DType::kF32, {}, f32.data()},
   };
   REQUIRE(write_safetensors(path, ts, {{"format", "pt"}, {"note", "x y"}}).is_ok());
@@ -150,7 +148,8 @@ TEST_CASE("safetensors: round trip of every dtype", "[runtime][safetensors]") {
   REQUIRE(*st->read_f32("k.scalar") == std::vector<float>{1.5f});
 
   // Writer refuses duplicates.
-  std::vector<TensorToWrite> dup = {{"x", DType::kF32, {1}, f32.data()}, {"x", DType::kF32, {1}, f32.data()}};
+  std::vector<TensorToWrite> dup = {{"x", DType::kF32, {1}, f32.data()},
+                                    {"x", DType::kF32, {1}, f32.data()}};
   Status s = write_safetensors(dir.file("dup.safetensors"), dup);
   REQUIRE_FALSE(s.is_ok());
   REQUIRE(has(s.message(), "'x'"));
@@ -160,8 +159,7 @@ TEST_CASE("safetensors: round trip of every dtype", "[runtime][safetensors]") {
 TEST_CASE("safetensors: hostile files are refused with file and tensor named",
           "[runtime][safetensors]") {
   test::TempDir dir("st-bad");
-  const std::string ok_header =
-      R"({"w":{"dtype":"F32","shape":[2,2],"data_offsets":[0,16]}})";
+  const std::string ok_header = R"({"w":{"dtype":"F32","shape":[2,2],"data_offsets":[0,16]}})";
   const std::string data16(16, '\0');
   auto f = [&](const std::string& n) { return dir.file(n); };
 
@@ -245,9 +243,10 @@ TEST_CASE("safetensors: hostile files are refused with file and tensor named",
     write_raw(f("rev.safetensors"), R"({"w":{"dtype":"F32","shape":[0],"data_offsets":[16,0]}})",
               data16);
     REQUIRE(has(open_error(f("rev.safetensors")), "end before begin"));
-    write_raw(f("huge.safetensors"),
-              R"({"w":{"dtype":"F32","shape":[4],"data_offsets":[18446744073709551600,18446744073709551615]}})",
-              data16);
+    write_raw(
+        f("huge.safetensors"),
+        R"({"w":{"dtype":"F32","shape":[4],"data_offsets":[18446744073709551600,18446744073709551615]}})",
+        data16);
     REQUIRE(has(open_error(f("huge.safetensors")), "'w'"));
   }
   SECTION("duplicate names") {
@@ -321,9 +320,9 @@ TEST_CASE("half: bf16/f16 conversions round to nearest even and widen exactly",
   REQUIRE(f32_to_f16(0x1p-25f) == 0x0000);  // tie between 0 and the smallest subnormal
   REQUIRE(f32_to_f16(0x1.8p-25f) == 0x0001);
   REQUIRE(f32_to_f16(-0x1p-24f) == 0x8001);
-  REQUIRE(f32_to_bf16(1.0f + 0x1p-8f) == 0x3f80);           // tie -> even
-  REQUIRE(f32_to_bf16(1.0f + 3 * 0x1p-8f) == 0x3f82);       // tie -> even (up)
+  REQUIRE(f32_to_bf16(1.0f + 0x1p-8f) == 0x3f80);      // tie -> even
+  REQUIRE(f32_to_bf16(1.0f + 3 * 0x1p-8f) == 0x3f82);  // tie -> even (up)
   REQUIRE(f32_to_bf16(1.0f + 0x1p-8f + 0x1p-20f) == 0x3f81);
-  REQUIRE(f32_to_bf16(3.4e38f) == 0x7f80);                  // overflow to inf
+  REQUIRE(f32_to_bf16(3.4e38f) == 0x7f80);  // overflow to inf
   REQUIRE(std::isnan(bf16_to_f32(f32_to_bf16(NAN))));
 }

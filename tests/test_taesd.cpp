@@ -14,7 +14,9 @@ using namespace macro::nets;
 
 namespace {
 
-std::string weights_dir() { return test::source_dir() + "/data/weights/taesd"; }
+std::string weights_dir() {
+  return test::source_dir() + "/data/weights/taesd";
+}
 
 struct Case {
   std::vector<float> image, latent, decoded;
@@ -34,7 +36,8 @@ Case load_case(const std::string& name) {
 }  // namespace
 
 TEST_CASE("taesd: shipped weights equal the shared copy", "[nets][taesd]") {
-  for (const char* f : {"taesd_encoder.safetensors", "taesd_decoder.safetensors", "LICENSE.taesd.txt"}) {
+  for (const char* f :
+       {"taesd_encoder.safetensors", "taesd_decoder.safetensors", "LICENSE.taesd.txt"}) {
     auto a = read_file(weights_dir() + "/" + f);
     auto b = read_file(test::shared_dir() + "/weights/taesd/" + f);
     REQUIRE(a.is_ok());

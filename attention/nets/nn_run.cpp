@@ -12,10 +12,14 @@ namespace macro::nets {
 
 const char* model_kind_name(ModelKind k) {
   switch (k) {
-    case ModelKind::kTaesd: return "taesd";
-    case ModelKind::kUNet: return "unet";
-    case ModelKind::kVae: return "vae";
-    case ModelKind::kDifix: return "difix";
+    case ModelKind::kTaesd:
+      return "taesd";
+    case ModelKind::kUNet:
+      return "unet";
+    case ModelKind::kVae:
+      return "vae";
+    case ModelKind::kDifix:
+      return "difix";
   }
   return "?";
 }
@@ -28,8 +32,10 @@ Result<ModelKind> detect_model_kind(const std::string& folder) {
     MACRO_ASSIGN_OR_RETURN(std::string cls, config_class_name(folder + "/config.json"));
     if (cls == "UNet2DConditionModel") return ModelKind::kUNet;
     if (cls == "AutoencoderKL") return ModelKind::kVae;
-    return Status::error(folder + "/config.json: field '_class_name': expected "
-                         "UNet2DConditionModel or AutoencoderKL, found '" + cls + "'");
+    return Status::error(folder +
+                         "/config.json: field '_class_name': expected "
+                         "UNet2DConditionModel or AutoencoderKL, found '" +
+                         cls + "'");
   }
   return Status::error(folder +
                        ": unknown model folder (looked for taesd_encoder.safetensors / "
@@ -56,8 +62,8 @@ Result<Tensor> read_input(const SafeTensors& f, const std::string& name, int ran
     return Status::error(f.path() + ": tensor '" + name + "': expected a float dtype, found " +
                          dtype_name(e->dtype));
   if (int(e->shape.size()) != rank)
-    return Status::error(f.path() + ": tensor '" + name + "': expected rank " + std::to_string(rank) +
-                         ", found shape " + shape_to_string(e->shape));
+    return Status::error(f.path() + ": tensor '" + name + "': expected rank " +
+                         std::to_string(rank) + ", found shape " + shape_to_string(e->shape));
   Tensor t = Tensor::f32(e->shape);
   MACRO_TRY(convert_to_f32(*e, t.f32(), size_t(t.numel())).with_context(f.path()));
   MACRO_TRY(check_finite(t.f32(), size_t(t.numel()), f.path(), name));
@@ -83,15 +89,15 @@ Status run_taesd(const NnRunOptions& opt, const SafeTensors& in) {
                          shape_to_string(image.shape()));
   MACRO_ASSIGN_OR_RETURN(Taesd taesd, Taesd::load(opt.model, opt.precision));
   if (!taesd.has_encoder() || !taesd.has_decoder())
-    return Status::error(opt.model + ": a taesd run needs both taesd_encoder.safetensors and "
+    return Status::error(opt.model +
+                         ": a taesd run needs both taesd_encoder.safetensors and "
                          "taesd_decoder.safetensors");
   MACRO_ASSIGN_OR_RETURN(Tensor latent, taesd.encode(image, opt.pool, in.path() + ": input.image"));
   MACRO_ASSIGN_OR_RETURN(Tensor decoded, taesd.decode(latent, opt.pool, "output.latent"));
-  return write_safetensors(
-      opt.out,
-      {{"output.latent", DType::kF32, latent.shape(), latent.f32()},
-       {"output.decoded", DType::kF32, decoded.shape(), decoded.f32()}},
-      {{"model", "taesd"}, {"precision", precision_name(opt.precision)}});
+  return write_safetensors(opt.out,
+                           {{"output.latent", DType::kF32, latent.shape(), latent.f32()},
+                            {"output.decoded", DType::kF32, decoded.shape(), decoded.f32()}},
+                           {{"model", "taesd"}, {"precision", precision_name(opt.precision)}});
 }
 
 }  // namespace
@@ -100,10 +106,14 @@ Status nn_run(const NnRunOptions& opt) {
   MACRO_ASSIGN_OR_RETURN(ModelKind kind, detect_model_kind(opt.model));
   MACRO_ASSIGN_OR_RETURN(SafeTensors in, SafeTensors::open(opt.inputs));
   switch (kind) {
-    case ModelKind::kTaesd: return run_taesd(opt, in);
-    case ModelKind::kUNet: return nn_run_unet(opt, in);
-    case ModelKind::kVae: return nn_run_vae(opt, in);
-    case ModelKind::kDifix: return nn_run_difix(opt, in);
+    case ModelKind::kTaesd:
+      return run_taesd(opt, in);
+    case ModelKind::kUNet:
+      return nn_run_unet(opt, in);
+    case ModelKind::kVae:
+      return nn_run_vae(opt, in);
+    case ModelKind::kDifix:
+      return nn_run_difix(opt, in);
   }
   return Status::error("internal: unhandled model kind");
 }

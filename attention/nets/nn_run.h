@@ -3,7 +3,8 @@
 // The model folder's kind decides the inputs and outputs (detect_model_kind):
 //   taesd  (taesd_encoder.safetensors + taesd_decoder.safetensors)
 //          input.image [N,3,H,W] in [0,1]  ->  output.latent [N,4,ceil(H/8),ceil(W/8)],
-//                                               output.decoded [N,3,8h,8w] (decoder(latent), not clamped)
+//                                               output.decoded [N,3,8h,8w] (decoder(latent), not
+//                                               clamped)
 //   unet / vae / difix (config.json UNet2DConditionModel / AutoencoderKL; a pipeline folder with
 //          model_index.json, unet/, vae/): see attention/nets/nn_run_difix.cpp
 // Inputs are validated before anything runs: only the listed names, the documented rank and

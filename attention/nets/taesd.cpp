@@ -48,9 +48,9 @@ void visit_conv(const std::string& name, TaesdConv& c, const TaesdNet::Visitor& 
 }
 
 void pack_conv(TaesdConv& c, Precision precision) {
-  c.packed = ConvWeights::pack(c.weight.data(), c.has_bias ? c.bias.data() : nullptr, c.c_out,
-                               c.c_in, 3, 3,
-                               precision == Precision::kBf16 ? WeightType::kBf16 : WeightType::kF32);
+  c.packed =
+      ConvWeights::pack(c.weight.data(), c.has_bias ? c.bias.data() : nullptr, c.c_out, c.c_in, 3,
+                        3, precision == Precision::kBf16 ? WeightType::kBf16 : WeightType::kF32);
   std::vector<float>().swap(c.weight);  // the packed copy is all forward() reads
 }
 
@@ -74,7 +74,9 @@ Result<Precision> parse_precision(const std::string& name) {
   return Status::error("precision: expected fp32 or bf16, found '" + name + "'");
 }
 
-const char* precision_name(Precision p) { return p == Precision::kF32 ? "fp32" : "bf16"; }
+const char* precision_name(Precision p) {
+  return p == Precision::kF32 ? "fp32" : "bf16";
+}
 
 // ---- layout ------------------------------------------------------------------------------------
 
@@ -85,8 +87,8 @@ TaesdNet TaesdNet::encoder_layout(int latent_channels) {
   n.downscale = 8;
   auto& L = n.layers;
   L.push_back(conv_layer(3, kHidden, 1, true));  // 0
-  L.push_back(block_layer());                     // 1
-  for (int stage = 0; stage < 3; ++stage) {       // 2, 6, 10: conv s2 then 3 blocks
+  L.push_back(block_layer());                    // 1
+  for (int stage = 0; stage < 3; ++stage) {      // 2, 6, 10: conv s2 then 3 blocks
     L.push_back(conv_layer(kHidden, kHidden, 2, false));
     for (int b = 0; b < 3; ++b) L.push_back(block_layer());
   }
@@ -100,10 +102,10 @@ TaesdNet TaesdNet::decoder_layout(int latent_channels) {
   n.c_out = 3;
   n.upscale = 8;
   auto& L = n.layers;
-  L.push_back(simple_layer(TaesdLayerKind::kClamp));            // 0
-  L.push_back(conv_layer(latent_channels, kHidden, 1, true));   // 1
-  L.push_back(simple_layer(TaesdLayerKind::kRelu));             // 2
-  for (int stage = 0; stage < 3; ++stage) {                     // 3-5 | 6 up, 7 conv | ...
+  L.push_back(simple_layer(TaesdLayerKind::kClamp));           // 0
+  L.push_back(conv_layer(latent_channels, kHidden, 1, true));  // 1
+  L.push_back(simple_layer(TaesdLayerKind::kRelu));            // 2
+  for (int stage = 0; stage < 3; ++stage) {                    // 3-5 | 6 up, 7 conv | ...
     for (int b = 0; b < 3; ++b) L.push_back(block_layer());
     L.push_back(simple_layer(TaesdLayerKind::kUpsample));
     L.push_back(conv_layer(kHidden, kHidden, 1, false));
@@ -121,7 +123,8 @@ void TaesdNet::visit(const std::string& prefix, const Visitor& fn) {
     const std::string name = prefix + std::to_string(i);
     if (l.kind == TaesdLayerKind::kConv) visit_conv(name, l.conv, fn);
     if (l.kind == TaesdLayerKind::kBlock)
-      for (int j = 0; j < 3; ++j) visit_conv(name + ".conv." + std::to_string(2 * j), l.block.conv[j], fn);
+      for (int j = 0; j < 3; ++j)
+        visit_conv(name + ".conv." + std::to_string(2 * j), l.block.conv[j], fn);
   }
 }
 
@@ -132,7 +135,8 @@ Status TaesdNet::load(const SafeTensors& file, const std::string& prefix, Precis
     used.insert(name);
     const TensorEntry* e = file.find(name);
     if (!e) {
-      problems.push_back("missing tensor '" + name + "' (expected shape " + shape_to_string(shape) + ")");
+      problems.push_back("missing tensor '" + name + "' (expected shape " + shape_to_string(shape) +
+                         ")");
       return;
     }
     if (e->shape != shape) {
@@ -191,7 +195,8 @@ void TaesdNet::forward(const TensorView& x, float* y, Arena& arena, ThreadPool* 
   const int64_t N = x.dim(0);
   const int64_t max_elems = int64_t((scratch_bytes(x.shape_vec()) / 3) / sizeof(float));
   const size_t mark = arena.mark();
-  float* buf[3] = {arena.alloc_f32(max_elems), arena.alloc_f32(max_elems), arena.alloc_f32(max_elems)};
+  float* buf[3] = {arena.alloc_f32(max_elems), arena.alloc_f32(max_elems),
+                   arena.alloc_f32(max_elems)};
   const float* cur = x.f32();
   int cur_idx = -1;  // -1: the caller's input
   int64_t C = c_in, H = x.dim(2), W = x.dim(3);
@@ -221,7 +226,8 @@ void TaesdNet::forward(const TensorView& x, float* y, Arena& arena, ThreadPool* 
         const int d = other(cur_idx);
         float* dst = last ? y : buf[d];
         run_conv(l.conv, cur, H, W, dst, nullptr);
-        const Conv2dShape s = Conv2dShape::make(N, l.conv.c_in, H, W, l.conv.c_out, 3, l.conv.stride, 1);
+        const Conv2dShape s =
+            Conv2dShape::make(N, l.conv.c_in, H, W, l.conv.c_out, 3, l.conv.stride, 1);
         C = l.conv.c_out, H = s.out_h(), W = s.out_w();
         cur = dst, cur_idx = last ? -1 : d;
         break;
@@ -323,19 +329,23 @@ Result<Taesd> Taesd::load(const std::string& folder, Precision precision) {
         (void)convert_to_f32(*e, st.data(), st.size());
       });
       if (!missing.empty())
-        return Status::error(diffusers + ": missing or mis-shaped tensor '" + missing.front() + "'" +
-                             (missing.size() > 1 ? " and " + std::to_string(missing.size() - 1) + " more" : ""));
+        return Status::error(
+            diffusers + ": missing or mis-shaped tensor '" + missing.front() + "'" +
+            (missing.size() > 1 ? " and " + std::to_string(missing.size() - 1) + " more" : ""));
       net->pack(precision);
     }
     return t;
   }
-  return Status::error(folder + ": not a TAESD folder (expected taesd_encoder.safetensors and "
-                       "taesd_decoder.safetensors, or diffusers' diffusion_pytorch_model.safetensors)");
+  return Status::error(
+      folder +
+      ": not a TAESD folder (expected taesd_encoder.safetensors and "
+      "taesd_decoder.safetensors, or diffusers' diffusion_pytorch_model.safetensors)");
 }
 
 namespace {
 
-Result<Tensor> run_net(const TaesdNet& net, const TensorView& x, ThreadPool* pool, const std::string& what, const char* expected) {
+Result<Tensor> run_net(const TaesdNet& net, const TensorView& x, ThreadPool* pool,
+                       const std::string& what, const char* expected) {
   if (net.layers.empty()) return Status::error(what + ": this TAESD folder has no " + expected);
   if (x.dtype != DType::kF32 || x.rank != 4 || x.dim(1) != net.c_in || x.dim(0) < 1 ||
       x.dim(2) < 1 || x.dim(3) < 1 || !x.is_contiguous())
@@ -354,11 +364,13 @@ Result<Tensor> run_net(const TaesdNet& net, const TensorView& x, ThreadPool* poo
 
 }  // namespace
 
-Result<Tensor> Taesd::encode(const TensorView& image, ThreadPool* pool, const std::string& what) const {
+Result<Tensor> Taesd::encode(const TensorView& image, ThreadPool* pool,
+                             const std::string& what) const {
   return run_net(encoder_, image, pool, what, "encoder");
 }
 
-Result<Tensor> Taesd::decode(const TensorView& latent, ThreadPool* pool, const std::string& what) const {
+Result<Tensor> Taesd::decode(const TensorView& latent, ThreadPool* pool,
+                             const std::string& what) const {
   return run_net(decoder_, latent, pool, what, "decoder");
 }
 

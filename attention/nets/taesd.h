@@ -72,8 +72,8 @@ struct TaesdNet {
   static TaesdNet decoder_layout(int latent_channels = 4);
 
   // Every parameter as (checkpoint name, shape, storage).
-  using Visitor = std::function<void(const std::string& name, const Shape& shape,
-                                     std::vector<float>& storage)>;
+  using Visitor =
+      std::function<void(const std::string& name, const Shape& shape, std::vector<float>& storage)>;
   void visit(const std::string& prefix, const Visitor& fn);
 
   // Load from an open checkpoint (names under `prefix`), checking every name and shape, then pack.
@@ -98,7 +98,8 @@ class Taesd {
   static std::string default_folder();
   static bool is_taesd_folder(const std::string& folder);
 
-  // image [N,3,H,W] in [0,1] -> latent [N,4,ceil(H/8),ceil(W/8)]. Errors name `what` on a bad shape.
+  // image [N,3,H,W] in [0,1] -> latent [N,4,ceil(H/8),ceil(W/8)]. Errors name `what` on a bad
+  // shape.
   Result<Tensor> encode(const TensorView& image, ThreadPool* pool,
                         const std::string& what = "image") const;
   // latent [N,4,h,w] -> image [N,3,8h,8w], not clamped.

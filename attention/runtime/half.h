@@ -21,7 +21,9 @@ inline float bits_float(uint32_t u) {
   return f;
 }
 
-inline float bf16_to_f32(uint16_t h) { return bits_float(uint32_t(h) << 16); }
+inline float bf16_to_f32(uint16_t h) {
+  return bits_float(uint32_t(h) << 16);
+}
 
 inline uint16_t f32_to_bf16(float f) {
   uint32_t u = float_bits(f);
@@ -54,9 +56,9 @@ inline uint16_t f32_to_f16(float f) {
   if (a < 0x38800000u) {
     // Result is subnormal (or zero): value = a_float, quantum 2^-24.
     if (a < 0x33000000u) return sign;  // < 2^-25: rounds to 0 (2^-25 exactly ties to even 0)
-    uint32_t exp = a >> 23;           // 102..112
+    uint32_t exp = a >> 23;            // 102..112
     uint32_t man = (a & 0x7fffffu) | 0x800000u;
-    uint32_t shift = 126u - exp;      // so that man >> shift is in units of 2^-24
+    uint32_t shift = 126u - exp;  // so that man >> shift is in units of 2^-24
     uint32_t q = man >> shift;
     uint32_t rem = man & ((1u << shift) - 1u);
     uint32_t half = 1u << (shift - 1u);

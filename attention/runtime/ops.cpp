@@ -9,16 +9,22 @@
 
 namespace macro {
 
-// ---- scalar reference primitives -----------------------------------------------------------------
+// ---- scalar reference primitives
+// -----------------------------------------------------------------
 namespace {
 
 inline float act_scalar(float x, Act act) {
   switch (act) {
-    case Act::kNone: return x;
-    case Act::kSilu: return x / (1.0f + std::exp(-x));
-    case Act::kRelu: return x > 0.0f ? x : 0.0f;
-    case Act::kGelu: return 0.5f * x * (1.0f + std::erf(x * 0.70710678118654752f));
-    case Act::kTanh: return std::tanh(x);
+    case Act::kNone:
+      return x;
+    case Act::kSilu:
+      return x / (1.0f + std::exp(-x));
+    case Act::kRelu:
+      return x > 0.0f ? x : 0.0f;
+    case Act::kGelu:
+      return 0.5f * x * (1.0f + std::erf(x * 0.70710678118654752f));
+    case Act::kTanh:
+      return std::tanh(x);
   }
   return x;
 }
@@ -120,7 +126,9 @@ const OpsKernels& ops_kernels_for(Isa isa) {
   return tables[static_cast<int>(isa)];
 }
 
-const OpsKernels& ops_kernels() { return ops_kernels_for(active_isa()); }
+const OpsKernels& ops_kernels() {
+  return ops_kernels_for(active_isa());
+}
 
 // ---- normalisation -----------------------------------------------------------------------------
 
@@ -167,14 +175,16 @@ void layer_norm(float* dst, const float* src, const float* gamma, const float* b
 
 void activation(float* dst, const float* src, int64_t n, Act act, ThreadPool* pool) {
   const OpsKernels& k = ops_kernels();
-  run_range(pool, n, kElemGrain, [&](int64_t b, int64_t e) { k.act(dst + b, src + b, e - b, act); });
+  run_range(pool, n, kElemGrain,
+            [&](int64_t b, int64_t e) { k.act(dst + b, src + b, e - b, act); });
 }
 
 void geglu(float* dst, const float* src, int64_t m, int64_t d, ThreadPool* pool) {
   const OpsKernels& k = ops_kernels();
   run_range(pool, m, std::max<int64_t>(1, kElemGrain / std::max<int64_t>(d, 1)),
             [&](int64_t b, int64_t e) {
-              for (int64_t r = b; r < e; ++r) k.geglu(dst + r * d, src + r * 2 * d, src + r * 2 * d + d, d);
+              for (int64_t r = b; r < e; ++r)
+                k.geglu(dst + r * d, src + r * 2 * d, src + r * 2 * d + d, d);
             });
 }
 
@@ -221,8 +231,7 @@ void timestep_embedding(float* dst, const float* t, int64_t count,
   for (int64_t r = 0; r < count; ++r) {
     float* row = dst + r * p.dim;
     for (int i = 0; i < half; ++i) {
-      const float exponent =
-          -std::log(p.max_period) * float(i) / (float(half) - p.freq_shift);
+      const float exponent = -std::log(p.max_period) * float(i) / (float(half) - p.freq_shift);
       const float a = p.scale * (t[r] * std::exp(exponent));
       const float s = std::sin(a), c = std::cos(a);
       row[i] = p.flip_sin_to_cos ? c : s;
@@ -242,8 +251,9 @@ void add(float* dst, const float* a, const float* b, int64_t n, ThreadPool* pool
 
 void scale(float* dst, const float* src, float s, int64_t n, ThreadPool* pool) {
   const OpsKernels& k = ops_kernels();
-  run_range(pool, n, kElemGrain,
-            [&](int64_t b, int64_t e) { k.affine_act(dst + b, src + b, e - b, 0.0, s, 0.0f, Act::kNone); });
+  run_range(pool, n, kElemGrain, [&](int64_t b, int64_t e) {
+    k.affine_act(dst + b, src + b, e - b, 0.0, s, 0.0f, Act::kNone);
+  });
 }
 
 void axpby(float* dst, float alpha, const float* x, float beta, const float* y, int64_t n,

@@ -13,7 +13,8 @@
 // in tests/test_ops.cpp (a few ulp relative for exp/SiLU/softmax, ~2e-7 relative for GELU).
 //
 // Numerics (difix-spec section 5): GroupNorm/LayerNorm statistics are accumulated in double per
-// block (two passes: mean, then centred variance), biased variance, y = (x - mean) / sqrt(var + eps)
+// block (two passes: mean, then centred variance), biased variance, y = (x - mean) / sqrt(var +
+// eps)
 // * gamma + beta. GELU is the exact erf form. GEGLU takes the FIRST half of the projection as the
 // value and the SECOND half as the gate. Softmax subtracts the row max.
 #pragma once
@@ -80,10 +81,10 @@ void timestep_embedding(float* dst, const float* t, int64_t count,
 
 // ---- elementwise -------------------------------------------------------------------------------
 
-void add(float* dst, const float* a, const float* b, int64_t n, ThreadPool* pool);      // a + b
-void scale(float* dst, const float* src, float s, int64_t n, ThreadPool* pool);         // s * x
+void add(float* dst, const float* a, const float* b, int64_t n, ThreadPool* pool);  // a + b
+void scale(float* dst, const float* src, float s, int64_t n, ThreadPool* pool);     // s * x
 void axpby(float* dst, float alpha, const float* x, float beta, const float* y, int64_t n,
-           ThreadPool* pool);                                                            // ax+by
+           ThreadPool* pool);  // ax+by
 // dst [M, D] = src [M, D] + row [D] (bias over the last dim).
 void add_row_broadcast(float* dst, const float* src, const float* row, int64_t m, int64_t d,
                        ThreadPool* pool);

@@ -28,12 +28,16 @@ inline __m256 exp8(__m256 x) {
   const __m256i ni = _mm256_cvtps_epi32(n);
   const __m256i n1 = _mm256_srai_epi32(ni, 1);
   const __m256i n2 = _mm256_sub_epi32(ni, n1);
-  const __m256 s1 = _mm256_castsi256_ps(_mm256_slli_epi32(_mm256_add_epi32(n1, _mm256_set1_epi32(127)), 23));
-  const __m256 s2 = _mm256_castsi256_ps(_mm256_slli_epi32(_mm256_add_epi32(n2, _mm256_set1_epi32(127)), 23));
+  const __m256 s1 =
+      _mm256_castsi256_ps(_mm256_slli_epi32(_mm256_add_epi32(n1, _mm256_set1_epi32(127)), 23));
+  const __m256 s2 =
+      _mm256_castsi256_ps(_mm256_slli_epi32(_mm256_add_epi32(n2, _mm256_set1_epi32(127)), 23));
   return _mm256_mul_ps(_mm256_mul_ps(y, s1), s2);
 }
 
-inline __m256 abs8(__m256 x) { return _mm256_andnot_ps(_mm256_set1_ps(-0.0f), x); }
+inline __m256 abs8(__m256 x) {
+  return _mm256_andnot_ps(_mm256_set1_ps(-0.0f), x);
+}
 
 inline __m256 silu8(__m256 x) {
   const __m256 one = _mm256_set1_ps(1.0f);
@@ -78,11 +82,16 @@ inline __m256 tanh8(__m256 x) {
 
 inline __m256 apply_act(__m256 v, Act act) {
   switch (act) {
-    case Act::kNone: return v;
-    case Act::kSilu: return silu8(v);
-    case Act::kRelu: return _mm256_max_ps(v, _mm256_setzero_ps());
-    case Act::kGelu: return gelu8(v);
-    case Act::kTanh: return tanh8(v);
+    case Act::kNone:
+      return v;
+    case Act::kSilu:
+      return silu8(v);
+    case Act::kRelu:
+      return _mm256_max_ps(v, _mm256_setzero_ps());
+    case Act::kGelu:
+      return gelu8(v);
+    case Act::kTanh:
+      return tanh8(v);
   }
   return v;
 }
@@ -91,7 +100,9 @@ inline __m256 apply_act(__m256 v, Act act) {
 template <typename Body>
 void for_each8(float* dst, const float* a, const float* b, int64_t n, Body body) {
   int64_t i = 0;
-  for (; i + 8 <= n; i += 8) _mm256_storeu_ps(dst + i, body(_mm256_loadu_ps(a + i), b ? _mm256_loadu_ps(b + i) : _mm256_setzero_ps()));
+  for (; i + 8 <= n; i += 8)
+    _mm256_storeu_ps(
+        dst + i, body(_mm256_loadu_ps(a + i), b ? _mm256_loadu_ps(b + i) : _mm256_setzero_ps()));
   if (i < n) {
     alignas(32) float ta[8] = {}, tb[8] = {}, td[8];
     const size_t rem = size_t(n - i);
@@ -155,7 +166,8 @@ double sum256(const float* x, int64_t n) {
     const int64_t e = std::min<int64_t>(n, b + 1024);
     __m256 acc = _mm256_setzero_ps();
     int64_t i = b;
-    for (; i + 8 <= e; i += 8) acc = _mm256_add_ps(acc, _mm256_sub_ps(_mm256_loadu_ps(x + i), shift));
+    for (; i + 8 <= e; i += 8)
+      acc = _mm256_add_ps(acc, _mm256_sub_ps(_mm256_loadu_ps(x + i), shift));
     total += hsum8(acc);
     for (; i < e; ++i) total += double(x[i]) - double(s0);
   }

@@ -84,7 +84,8 @@ inline __m512 tanh16(__m512 x) {
   const __m512 e = exp16(_mm512_add_ps(ax, ax));
   __m512 big = _mm512_sub_ps(one, _mm512_div_ps(_mm512_set1_ps(2.0f), _mm512_add_ps(e, one)));
   // copy the sign of x
-  const __m512i sign = _mm512_and_si512(_mm512_castps_si512(x), _mm512_set1_epi32(int(0x80000000u)));
+  const __m512i sign =
+      _mm512_and_si512(_mm512_castps_si512(x), _mm512_set1_epi32(int(0x80000000u)));
   big = _mm512_castsi512_ps(_mm512_or_si512(_mm512_castps_si512(big), sign));
   const __mmask16 is_small = _mm512_cmp_ps_mask(ax, _mm512_set1_ps(0.625f), _CMP_LT_OQ);
   return _mm512_mask_blend_ps(is_small, big, small);
@@ -92,11 +93,16 @@ inline __m512 tanh16(__m512 x) {
 
 inline __m512 apply_act(__m512 v, Act act) {
   switch (act) {
-    case Act::kNone: return v;
-    case Act::kSilu: return silu16(v);
-    case Act::kRelu: return _mm512_max_ps(v, _mm512_setzero_ps());
-    case Act::kGelu: return gelu16(v);
-    case Act::kTanh: return tanh16(v);
+    case Act::kNone:
+      return v;
+    case Act::kSilu:
+      return silu16(v);
+    case Act::kRelu:
+      return _mm512_max_ps(v, _mm512_setzero_ps());
+    case Act::kGelu:
+      return gelu16(v);
+    case Act::kTanh:
+      return tanh16(v);
   }
   return v;
 }
@@ -111,11 +117,21 @@ void act_loop(float* dst, const float* src, int64_t n) {
 
 void act512(float* dst, const float* src, int64_t n, Act act) {
   switch (act) {
-    case Act::kNone: act_loop<Act::kNone>(dst, src, n); break;
-    case Act::kSilu: act_loop<Act::kSilu>(dst, src, n); break;
-    case Act::kRelu: act_loop<Act::kRelu>(dst, src, n); break;
-    case Act::kGelu: act_loop<Act::kGelu>(dst, src, n); break;
-    case Act::kTanh: act_loop<Act::kTanh>(dst, src, n); break;
+    case Act::kNone:
+      act_loop<Act::kNone>(dst, src, n);
+      break;
+    case Act::kSilu:
+      act_loop<Act::kSilu>(dst, src, n);
+      break;
+    case Act::kRelu:
+      act_loop<Act::kRelu>(dst, src, n);
+      break;
+    case Act::kGelu:
+      act_loop<Act::kGelu>(dst, src, n);
+      break;
+    case Act::kTanh:
+      act_loop<Act::kTanh>(dst, src, n);
+      break;
   }
 }
 
@@ -134,11 +150,21 @@ void affine_loop(float* dst, const float* src, int64_t n, double mean, float a, 
 void affine_act512(float* dst, const float* src, int64_t n, double mean, float a, float b,
                    Act act) {
   switch (act) {
-    case Act::kNone: affine_loop<Act::kNone>(dst, src, n, mean, a, b); break;
-    case Act::kSilu: affine_loop<Act::kSilu>(dst, src, n, mean, a, b); break;
-    case Act::kRelu: affine_loop<Act::kRelu>(dst, src, n, mean, a, b); break;
-    case Act::kGelu: affine_loop<Act::kGelu>(dst, src, n, mean, a, b); break;
-    case Act::kTanh: affine_loop<Act::kTanh>(dst, src, n, mean, a, b); break;
+    case Act::kNone:
+      affine_loop<Act::kNone>(dst, src, n, mean, a, b);
+      break;
+    case Act::kSilu:
+      affine_loop<Act::kSilu>(dst, src, n, mean, a, b);
+      break;
+    case Act::kRelu:
+      affine_loop<Act::kRelu>(dst, src, n, mean, a, b);
+      break;
+    case Act::kGelu:
+      affine_loop<Act::kGelu>(dst, src, n, mean, a, b);
+      break;
+    case Act::kTanh:
+      affine_loop<Act::kTanh>(dst, src, n, mean, a, b);
+      break;
   }
 }
 
@@ -176,7 +202,8 @@ double sum512(const float* x, int64_t n) {
     }
     const __m512 acc = _mm512_add_ps(acc0, acc1);
     const __m512d lo = _mm512_cvtps_pd(_mm512_castps512_ps256(acc));
-    const __m512d hi = _mm512_cvtps_pd(_mm256_castpd_ps(_mm512_extractf64x4_pd(_mm512_castps_pd(acc), 1)));
+    const __m512d hi =
+        _mm512_cvtps_pd(_mm256_castpd_ps(_mm512_extractf64x4_pd(_mm512_castps_pd(acc), 1)));
     total += _mm512_reduce_add_pd(_mm512_add_pd(lo, hi));
   }
   return total + double(n) * double(x[0]);
@@ -231,7 +258,8 @@ void softmax512(float* dst, const float* src, int64_t n, float scale) {
 void geglu512(float* dst, const float* v, const float* g, int64_t n) {
   for (int64_t i = 0; i < n; i += 16) {
     const __mmask16 m = tail_mask(n - i);
-    const __m512 y = _mm512_mul_ps(_mm512_maskz_loadu_ps(m, v + i), gelu16(_mm512_maskz_loadu_ps(m, g + i)));
+    const __m512 y =
+        _mm512_mul_ps(_mm512_maskz_loadu_ps(m, v + i), gelu16(_mm512_maskz_loadu_ps(m, g + i)));
     _mm512_mask_storeu_ps(dst + i, m, y);
   }
 }

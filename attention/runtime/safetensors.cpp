@@ -26,9 +26,13 @@ using json = nlohmann::json;
 constexpr uint64_t kMaxHeaderBytes = 100ull << 20;
 constexpr uint64_t kMaxIndexBytes = 64ull << 20;
 
-std::string errno_text() { return std::strerror(errno); }
+std::string errno_text() {
+  return std::strerror(errno);
+}
 
-bool mul_overflow(uint64_t a, uint64_t b, uint64_t* out) { return __builtin_mul_overflow(a, b, out); }
+bool mul_overflow(uint64_t a, uint64_t b, uint64_t* out) {
+  return __builtin_mul_overflow(a, b, out);
+}
 
 // Parse JSON text, refusing duplicate keys at any depth (nlohmann would keep one silently).
 // Returns the parsed value or an error message (without the file name).
@@ -37,7 +41,9 @@ Result<json> parse_json_strict(const std::string& text) {
   std::string duplicate;
   auto cb = [&](int /*depth*/, json::parse_event_t event, json& parsed) -> bool {
     switch (event) {
-      case json::parse_event_t::object_start: keys.emplace_back(); break;
+      case json::parse_event_t::object_start:
+        keys.emplace_back();
+        break;
       case json::parse_event_t::object_end:
         if (!keys.empty()) keys.pop_back();
         break;
@@ -47,7 +53,8 @@ Result<json> parse_json_strict(const std::string& text) {
           if (!keys.back().insert(k).second && duplicate.empty()) duplicate = k;
         }
         break;
-      default: break;
+      default:
+        break;
     }
     return true;
   };
@@ -77,37 +84,56 @@ std::string dir_of(const std::string& path) {
 }
 
 bool ends_with(const std::string& s, const std::string& suffix) {
-  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+  return s.size() >= suffix.size() &&
+         s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
 }  // namespace
 
 const char* dtype_name(DType dtype) {
   switch (dtype) {
-    case DType::kF32: return "F32";
-    case DType::kF16: return "F16";
-    case DType::kBF16: return "BF16";
-    case DType::kI32: return "I32";
-    case DType::kI64: return "I64";
-    case DType::kU8: return "U8";
-    case DType::kI8: return "I8";
-    case DType::kBool: return "BOOL";
-    case DType::kF64: return "F64";
+    case DType::kF32:
+      return "F32";
+    case DType::kF16:
+      return "F16";
+    case DType::kBF16:
+      return "BF16";
+    case DType::kI32:
+      return "I32";
+    case DType::kI64:
+      return "I64";
+    case DType::kU8:
+      return "U8";
+    case DType::kI8:
+      return "I8";
+    case DType::kBool:
+      return "BOOL";
+    case DType::kF64:
+      return "F64";
   }
   return "?";
 }
 
 size_t dtype_size(DType dtype) {
   switch (dtype) {
-    case DType::kF32: return 4;
-    case DType::kF16: return 2;
-    case DType::kBF16: return 2;
-    case DType::kI32: return 4;
-    case DType::kI64: return 8;
-    case DType::kU8: return 1;
-    case DType::kI8: return 1;
-    case DType::kBool: return 1;
-    case DType::kF64: return 8;
+    case DType::kF32:
+      return 4;
+    case DType::kF16:
+      return 2;
+    case DType::kBF16:
+      return 2;
+    case DType::kI32:
+      return 4;
+    case DType::kI64:
+      return 8;
+    case DType::kU8:
+      return 1;
+    case DType::kI8:
+      return 1;
+    case DType::kBool:
+      return 1;
+    case DType::kF64:
+      return 8;
   }
   return 0;
 }
@@ -144,7 +170,9 @@ std::vector<std::string> SafeTensors::names() const {
   return out;
 }
 
-bool SafeTensors::contains(const std::string& name) const { return tensors_.count(name) != 0; }
+bool SafeTensors::contains(const std::string& name) const {
+  return tensors_.count(name) != 0;
+}
 
 const TensorEntry* SafeTensors::find(const std::string& name) const {
   auto it = tensors_.find(name);
@@ -214,14 +242,15 @@ Result<SafeTensors> SafeTensors::open(const std::string& path) {
                              std::string(v.type_name()));
       for (auto m = v.begin(); m != v.end(); ++m) {
         if (!m.value().is_string())
-          return Status::error(path + ": __metadata__ '" + m.key() + "': expected a string, found " +
-                               std::string(m.value().type_name()));
+          return Status::error(path + ": __metadata__ '" + m.key() +
+                               "': expected a string, found " + std::string(m.value().type_name()));
         st_out.metadata_[m.key()] = m.value().get<std::string>();
       }
       continue;
     }
     const std::string where = path + ": tensor '" + name + "'";
-    if (!v.is_object()) return Status::error(where + ": expected an object, found " + v.type_name());
+    if (!v.is_object())
+      return Status::error(where + ": expected an object, found " + v.type_name());
     for (auto f = v.begin(); f != v.end(); ++f)
       if (f.key() != "dtype" && f.key() != "shape" && f.key() != "data_offsets")
         return Status::error(where + ": unexpected field '" + f.key() + "'");
@@ -231,7 +260,8 @@ Result<SafeTensors> SafeTensors::open(const std::string& path) {
     if (!dt) return dt.status().with_context(where);
     if (!v.contains("shape") || !v["shape"].is_array())
       return Status::error(where + ": field 'shape': expected an array of non-negative integers");
-    if (!v.contains("data_offsets") || !v["data_offsets"].is_array() || v["data_offsets"].size() != 2)
+    if (!v.contains("data_offsets") || !v["data_offsets"].is_array() ||
+        v["data_offsets"].size() != 2)
       return Status::error(where + ": field 'data_offsets': expected [begin, end]");
 
     TensorEntry e;
@@ -252,14 +282,13 @@ Result<SafeTensors> SafeTensors::open(const std::string& path) {
       return Status::error(where + ": shape " + v["shape"].dump() + " overflows 64 bits");
     const json& off = v["data_offsets"];
     if (!off[0].is_number_unsigned() || !off[1].is_number_unsigned())
-      return Status::error(where + ": field 'data_offsets': expected non-negative integers, found " +
-                           off.dump());
+      return Status::error(
+          where + ": field 'data_offsets': expected non-negative integers, found " + off.dump());
     uint64_t b = off[0].get<uint64_t>(), en = off[1].get<uint64_t>();
-    if (en < b)
-      return Status::error(where + ": data_offsets " + off.dump() + ": end before begin");
+    if (en < b) return Status::error(where + ": data_offsets " + off.dump() + ": end before begin");
     if (en > data_bytes)
-      return Status::error(where + ": data_offsets " + off.dump() + " outside the data section of " +
-                           std::to_string(data_bytes) + " bytes");
+      return Status::error(where + ": data_offsets " + off.dump() +
+                           " outside the data section of " + std::to_string(data_bytes) + " bytes");
     if (en - b != nbytes)
       return Status::error(where + ": shape " + shape_text(e.shape) + " of " + dtype_name(e.dtype) +
                            " needs " + std::to_string(nbytes) + " bytes, data_offsets " +
@@ -267,7 +296,8 @@ Result<SafeTensors> SafeTensors::open(const std::string& path) {
     e.data = data + b;
     e.bytes = static_cast<size_t>(nbytes);
     auto ins = st_out.tensors_.emplace(name, std::move(e));
-    if (!ins.second) return Status::error(where + ": duplicate name");  // parse_json_strict caught it
+    if (!ins.second)
+      return Status::error(where + ": duplicate name");  // parse_json_strict caught it
     if (en > b) ranges.push_back({b, en, &ins.first->first});
   }
   std::sort(ranges.begin(), ranges.end(),
@@ -307,7 +337,8 @@ Result<SafeTensors> SafeTensors::open_checkpoint(const std::string& path) {
   out.path_ = path;
   if (index.contains("metadata") && index["metadata"].is_object())
     for (auto m = index["metadata"].begin(); m != index["metadata"].end(); ++m)
-      out.metadata_[m.key()] = m.value().is_string() ? m.value().get<std::string>() : m.value().dump();
+      out.metadata_[m.key()] =
+          m.value().is_string() ? m.value().get<std::string>() : m.value().dump();
   for (auto& [shard, names] : by_shard) {
     const std::string shard_path = dir + "/" + shard;
     if (!file_exists(shard_path))
@@ -348,7 +379,9 @@ Status convert_to_f32(const TensorEntry& e, float* dst, size_t n) {
                          " elements, found " + std::to_string(e.bytes / es));
   const uint8_t* p = e.data;
   switch (e.dtype) {
-    case DType::kF32: std::memcpy(dst, p, n * 4); break;
+    case DType::kF32:
+      std::memcpy(dst, p, n * 4);
+      break;
     case DType::kF64:
       for (size_t i = 0; i < n; ++i) {
         double v;
@@ -418,7 +451,8 @@ Status write_safetensors(const std::string& path, const std::vector<TensorToWrit
     uint64_t numel = 1;
     json shape = json::array();
     for (int64_t d : t.shape) {
-      if (d < 0) return Status::error(where + ": negative dimension in shape " + shape_text(t.shape));
+      if (d < 0)
+        return Status::error(where + ": negative dimension in shape " + shape_text(t.shape));
       if (mul_overflow(numel, uint64_t(d), &numel))
         return Status::error(where + ": shape " + shape_text(t.shape) + " overflows");
       shape.push_back(d);

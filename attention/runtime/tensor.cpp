@@ -132,7 +132,9 @@ void* aligned_zeroed(size_t bytes) {
 }
 }  // namespace
 
-void Tensor::Free::operator()(void* p) const { std::free(p); }
+void Tensor::Free::operator()(void* p) const {
+  std::free(p);
+}
 
 Tensor::Tensor(DType dtype, const Shape& shape) {
   size_t bytes = static_cast<size_t>(shape_numel(shape)) * dtype_size(dtype);
@@ -156,7 +158,9 @@ Tensor Tensor::clone() const {
 
 // ---- Arena -------------------------------------------------------------------------------------
 
-void Arena::Free::operator()(uint8_t* p) const { std::free(p); }
+void Arena::Free::operator()(uint8_t* p) const {
+  std::free(p);
+}
 
 void Arena::reserve(size_t capacity_bytes) {
   MACRO_CHECK(used_ == 0);

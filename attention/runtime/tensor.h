@@ -69,7 +69,9 @@ struct TensorView {
   float* f32() const;
   uint16_t* u16() const;  // BF16 or F16 storage
   template <typename T>
-  T* as() const { return static_cast<T*>(data); }
+  T* as() const {
+    return static_cast<T*>(data);
+  }
   // Element offset of an index tuple (rank entries).
   int64_t offset(std::initializer_list<int64_t> idx) const;
   std::string describe() const;  // "F32[1,64,32,32]"
@@ -129,7 +131,9 @@ class Arena {
   size_t peak() const { return peak_; }
   size_t capacity() const { return capacity_; }
   // Bytes alloc() takes for a request (rounded up to the alignment): for sizing arenas.
-  static size_t footprint(size_t bytes) { return (bytes + kTensorAlign - 1) / kTensorAlign * kTensorAlign; }
+  static size_t footprint(size_t bytes) {
+    return (bytes + kTensorAlign - 1) / kTensorAlign * kTensorAlign;
+  }
 
  private:
   struct Free {
