@@ -45,7 +45,8 @@ void blend_row_avx512(const TileSplat* splats, const uint32_t* idx, int n, float
   const __m512 max_alpha = _mm512_set1_ps(kMaxAlpha), min_alpha = _mm512_set1_ps(kMinAlpha);
   const __m512 t_stop = _mm512_set1_ps(kTransmittanceStop), one = _mm512_set1_ps(1.f);
   const __m512 zero = _mm512_setzero_ps();
-  uint64_t evals = 0, blended = 0;
+  // Per-lane counters (exact up to 2^24 per call: n <= kBlendBatch), summed once at the end.
+  __m512 lane_evals = zero, lane_blended = zero;
   for (int i = 0; i < n; ++i) {
     const TileSplat& s = splats[idx[i]];
     const float dy = s.y - py;
@@ -60,8 +61,8 @@ void blend_row_avx512(const TileSplat* splats, const uint32_t* idx, int n, float
     const __m512 next_t = _mm512_mul_ps(T, _mm512_sub_ps(one, alpha));
     const __mmask16 stop = _mm512_mask_cmp_ps_mask(valid, next_t, t_stop, _CMP_LE_OQ);
     const __mmask16 blend = valid & static_cast<__mmask16>(~stop);
-    evals += static_cast<uint64_t>(__builtin_popcount(active));
-    blended += static_cast<uint64_t>(__builtin_popcount(blend));
+    lane_evals = _mm512_mask_add_ps(lane_evals, active, lane_evals, one);
+    lane_blended = _mm512_mask_add_ps(lane_blended, blend, lane_blended, one);
     const __m512 w = _mm512_mul_ps(alpha, T);
     cr = _mm512_mask3_fmadd_ps(w, _mm512_set1_ps(s.r), cr, blend);
     cg = _mm512_mask3_fmadd_ps(w, _mm512_set1_ps(s.g), cg, blend);
@@ -79,8 +80,8 @@ void blend_row_avx512(const TileSplat* splats, const uint32_t* idx, int n, float
   _mm512_store_ps(acc->depth, cd);
   _mm512_store_ps(acc->inv_depth, ci);
   acc->active = active;
-  counters->evals += evals;
-  counters->blended += blended;
+  counters->evals += static_cast<uint64_t>(_mm512_reduce_add_ps(lane_evals));
+  counters->blended += static_cast<uint64_t>(_mm512_reduce_add_ps(lane_blended));
 }
 
 void build_rows_avx512(const RowCullBatch& batch, int n, const RowCullTile& tile,

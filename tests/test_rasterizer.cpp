@@ -298,6 +298,8 @@ TEST_CASE("raster: SIMD kernels match the scalar twin", "[raster][simd]") {
       INFO(m.name << " " << isa_name(isa) << " color psnr " << dc.psnr);
       CHECK(dc.psnr >= 90.0);
       CHECK(r.stats.tile_pairs == ref.stats.tile_pairs);
+      CHECK(r.stats.evals_per_pixel == ref.stats.evals_per_pixel);
+      CHECK(r.stats.blended_per_pixel == Approx(ref.stats.blended_per_pixel).epsilon(1e-6));
     }
   }
   REQUIRE(set_isa(before).is_ok());
@@ -375,6 +377,29 @@ GaussianCloud reversed(const GaussianCloud& c) {
 // inv_depth_sum do not depend on that order and are held to the bound everywhere; colour is held
 // to the bound against the nearer of the two tie orders per pixel (ids ascending / descending),
 // and its PSNR against our own order must still be >= 60 dB.
+TEST_CASE("raster: render_into reuses buffers without stale state", "[raster]") {
+  const Camera cam = bench_camera(200, 150, 150.0);
+  const GaussianCloud big = small_random_scene(cam, 20000, 5);
+  GaussianCloud small;
+  add_gaussian(small, 0.f, 0.f, 4.f, 0.1f, 0.7f, {1.f, 0.f, 0.f});
+  Rasterizer rasterizer;
+  RenderResult frame;
+  REQUIRE(rasterizer.render_into(big, cam, {}, &frame).is_ok());
+  REQUIRE(rasterizer.render_into(small, cam, {}, &frame).is_ok());  // fewer Gaussians, same size
+  RenderResult fresh = render_ok(small, cam);
+  CHECK(frame.color == fresh.color);
+  CHECK(frame.alpha == fresh.alpha);
+  CHECK(frame.depth_sum == fresh.depth_sum);
+  CHECK(frame.inv_depth_sum == fresh.inv_depth_sum);
+  CHECK(frame.stats.visible == 1);
+  // An error leaves a clear message and the rasterizer usable.
+  Camera bad = cam;
+  bad.height = -1;
+  CHECK_FALSE(rasterizer.render_into(small, bad, {}, &frame).is_ok());
+  REQUIRE(rasterizer.render_into(big, cam, {}, &frame).is_ok());
+  CHECK(frame.stats.visible > 1000);
+}
+
 TEST_CASE("raster: gsplat goldens, every scene and camera, all four outputs", "[raster][golden]") {
   namespace fs = std::filesystem;
   const std::string root = test::golden_dir() + "/raster";
