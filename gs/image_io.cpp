@@ -66,6 +66,9 @@ unsigned char* zlib_compress_for_stb(unsigned char* data, int data_len, int* out
 namespace macro::gs {
 namespace {
 
+constexpr uint64_t kMaxDeflateRatio = 1100;  // deflate's limit is ~1032:1
+constexpr uint64_t kMaxOtherRatio = 8192;    // JPEG/BMP/TGA decoded bytes per file byte
+
 std::string dims(uint64_t w, uint64_t h) { return std::to_string(w) + "x" + std::to_string(h); }
 
 Status check_size(const std::string& name, int64_t w, int64_t h, const ImageLimits& limits) {
@@ -95,12 +98,24 @@ Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string&
   // PNG: the size from IHDR first, so an absurd size gets our limit message (stb's own cap says
   // only "too large").
   static constexpr uint8_t kPngMagic[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-  if (size >= 24 && std::memcmp(bytes, kPngMagic, 8) == 0 && std::memcmp(bytes + 12, "IHDR", 4) == 0) {
+  bool is_png = false;
+  if (size >= 26 && std::memcmp(bytes, kPngMagic, 8) == 0 && std::memcmp(bytes + 12, "IHDR", 4) == 0) {
     auto be32 = [&](size_t at) {
       return (uint32_t(bytes[at]) << 24) | (uint32_t(bytes[at + 1]) << 16) |
              (uint32_t(bytes[at + 2]) << 8) | uint32_t(bytes[at + 3]);
     };
-    MACRO_TRY(check_size(name, be32(16), be32(20), limits));
+    const uint32_t pw = be32(16), ph = be32(20);
+    MACRO_TRY(check_size(name, pw, ph, limits));
+    // Raw (filtered, uncompressed) bytes from bit depth and colour type; deflate expands at most
+    // ~1032x, so a file much smaller than raw / 1032 is truncated or lies about its size.
+    const uint32_t depth = bytes[24], type = bytes[25];
+    const uint32_t samples = type == 2 ? 3 : type == 4 ? 2 : type == 6 ? 4 : 1;
+    const uint64_t raw = uint64_t(ph) * (1 + (uint64_t(pw) * samples * std::max(depth, 1u) + 7) / 8);
+    if (raw > kMaxDeflateRatio * uint64_t(size) + 4096) {
+      return Status::error(name + ": header says " + dims(pw, ph) + " but the file has only " +
+                           std::to_string(size) + " bytes: truncated or corrupt");
+    }
+    is_png = true;
   }
   int w = 0, h = 0, comp = 0;
   if (!stbi_info_from_memory(bytes, len, &w, &h, &comp)) {
@@ -109,6 +124,13 @@ Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string&
                          ")");
   }
   MACRO_TRY(check_size(name, w, h, limits));
+  // A header may lie about the size, and the decoder allocates from it. PNG was checked above
+  // against its raw size; other formats get a loose bound (a flat JPEG compresses a few hundred
+  // to one).
+  if (!is_png && uint64_t(w) * uint64_t(h) * uint64_t(comp) > kMaxOtherRatio * uint64_t(size) + 4096) {
+    return Status::error(name + ": header says " + dims(w, h) + " but the file has only " +
+                         std::to_string(size) + " bytes: truncated or corrupt");
+  }
   if (comp < 1 || comp > 4) {
     return Status::error(name + ": expected 1 to 4 channels, found " + std::to_string(comp));
   }

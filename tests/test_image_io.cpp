@@ -212,6 +212,22 @@ TEST_CASE("broken images are errors naming the file", "[render][image_io]") {
     CHECK(named(r.status(), "huge.png"));
     CHECK(r.status().message().find("limit") != std::string::npos);
   }
+  SECTION("a size the file cannot hold is refused before allocating") {
+    // 8000 x 8000 RGB is under the pixel limit, but 192 MB of pixels cannot come from 60 bytes.
+    std::vector<uint8_t> out = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    std::vector<uint8_t> ihdr;
+    put_be32(ihdr, 8000);
+    put_be32(ihdr, 8000);
+    ihdr.insert(ihdr.end(), {8, 2, 0, 0, 0});
+    put_chunk(out, "IHDR", ihdr);
+    put_chunk(out, "IDAT", {0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01});
+    put_chunk(out, "IEND", {});
+    write_bytes(dir.file("liar.png"), out);
+    auto r = read_image(dir.file("liar.png"));
+    REQUIRE_FALSE(r);
+    CHECK(named(r.status(), "liar.png"));
+    CHECK(r.status().message().find("truncated") != std::string::npos);
+  }
   SECTION("a caller's pixel limit") {
     ImageLimits small;
     small.max_pixels = 100;
