@@ -332,7 +332,8 @@ Result<std::vector<ElementRows>> locate_elements(const Header& header, const uin
       rows.stride = 8 * scalars;
       rows.table.resize(static_cast<size_t>(e.count) * scalars);
       double* dst = rows.table.data();
-      for (uint64_t r = 0; r < e.count; ++r) {
+      // An element without properties has empty rows: nothing to read, however large its count.
+      for (uint64_t r = 0; np > 0 && r < e.count; ++r) {
         for (size_t k = 0; k < np; ++k) {
           const Property& p = e.properties[k];
           std::string_view tok;

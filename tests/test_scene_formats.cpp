@@ -700,6 +700,17 @@ TEST_CASE("formats: bad .ply input fails with messages naming the file and the f
     std::string shortened = t.substr(0, t.size() - 40);
     CHECK_THAT(load_error(bytes_of(shortened), "b.ply"), Catch::Contains("b.ply") && Catch::Contains("truncated"));
   }
+  SECTION("elements without properties and absurd counts are skipped in constant time") {
+    for (const char* format : {"ascii", "binary_little_endian", "binary_big_endian"}) {
+      auto bytes = make_ply(format, {TElement{"nothing", {}, {}}, inria_vertex(read_raw_metal_ply().rows, 0)});
+      std::string t(bytes.begin(), bytes.end());
+      t.replace(t.find("element nothing 0"), 17, "element nothing 18446744073709551615");
+      auto r = load_bytes(bytes_of(t), "empty_rows.ply");
+      INFO(r.status().message());
+      REQUIRE(r.is_ok());
+      CHECK(r->size() == 3);
+    }
+  }
   SECTION("a list row running past the end") {
     TElement e{"junk", {{"l", "float", "uint"}}, {{1, 0.5}}};
     auto bytes = make_ply("binary_little_endian", {e, inria_vertex(read_raw_metal_ply().rows, 0)});
@@ -809,30 +820,63 @@ TEST_CASE("formats: bad .spz input (magic, version, counts, gzip bombs, truncati
 }
 
 TEST_CASE("formats: mutated files never crash the loaders", "[formats]") {
-  std::mt19937 rng(1234);
-  int ok = 0, failed = 0;
+  // Inputs: the three MetalSplatter files, the .ply as ascii and as shuffled big-endian with lists,
+  // and a small compressed .ply (one chunk, SH degree 1).
+  std::vector<std::pair<std::string, std::vector<uint8_t>>> inputs;
   for (const char* ext : {"ply", "splat", "spz"}) {
     auto good = read_file(metal(ext));
     REQUIRE(good.is_ok());
-    for (int it = 0; it < 400; ++it) {
-      std::vector<uint8_t> b = *good;
+    inputs.push_back({std::string("fuzz.") + ext, *good});
+  }
+  const RawPly raw = read_raw_metal_ply();
+  inputs.push_back({"fuzz_ascii.ply", make_ply("ascii", {inria_vertex(raw.rows, 2)})});
+  TElement track{"track", {{"path", "float", "uchar"}}, {{2, 1, 2}, {0}, {1, 3}}};
+  inputs.push_back({"fuzz_be.ply", make_ply("binary_big_endian", {track, shuffled_vertex(raw.rows)})});
+  {
+    TElement chunk{"chunk", {}, {{-1, -1, -1, 1, 1, 1, -5, -5, -5, 0, 0, 0}}};
+    for (const char* n : {"min_x", "min_y", "min_z", "max_x", "max_y", "max_z", "min_scale_x",
+                          "min_scale_y", "min_scale_z", "max_scale_x", "max_scale_y", "max_scale_z"})
+      chunk.props.push_back({n, "float"});
+    TElement vertex{"vertex", {{"packed_position", "uint"}, {"packed_rotation", "uint"},
+                               {"packed_scale", "uint"}, {"packed_color", "uint"}}, {}};
+    TElement sh{"sh", {}, {}};
+    for (int j = 0; j < 9; ++j) sh.props.push_back({"f_rest_" + std::to_string(j), "uchar"});
+    for (uint32_t i = 0; i < 5; ++i) {
+      vertex.rows.push_back({double(i * 123457u), double(i * 7654321u), double(i * 98765u), double(i * 3333333u)});
+      sh.rows.push_back(std::vector<double>(9, double(i * 40)));
+    }
+    inputs.push_back({"fuzz.compressed.ply", make_ply("binary_little_endian", {chunk, vertex, sh})});
+  }
+  std::mt19937 rng(1234);
+  for (const auto& [name, good] : inputs) {
+    int ok = 0, failed = 0;
+    REQUIRE(load_bytes(good, name).is_ok());
+    for (int it = 0; it < 1500; ++it) {
+      std::vector<uint8_t> b = good;
       const int edits = 1 + static_cast<int>(rng() % 4);
       for (int e = 0; e < edits; ++e) b[rng() % b.size()] = static_cast<uint8_t>(rng());
       if (rng() % 4 == 0) b.resize(rng() % b.size());
       LoadLimits limits;
       limits.max_gaussians = 1'000'000;
-      auto r = load_bytes(b, std::string("fuzz.") + ext, nullptr, limits);
+      auto r = load_bytes(b, name, nullptr, limits);
       (r.is_ok() ? ok : failed)++;
       if (r.is_ok()) {
         for (float o : r->opacity) REQUIRE((o >= 0.f && o <= 1.f));
         for (float s : r->scale) REQUIRE(s > 0.f);
+        double n = 0;
+        for (size_t i = 0; i < r->size(); ++i) {
+          n = 0;
+          for (size_t a = 0; a < 4; ++a) n += double(r->rotation[i * 4 + a]) * r->rotation[i * 4 + a];
+          REQUIRE(n == Approx(1.0).margin(1e-5));
+        }
       } else {
-        REQUIRE_THAT(r.status().message(), Catch::Contains("fuzz."));
+        REQUIRE_THAT(r.status().message(), Catch::Contains(name));
       }
     }
+    INFO(name << ": " << ok << " loaded, " << failed << " refused");
+    CHECK(ok > 0);
+    CHECK(failed > 0);
   }
-  CHECK(ok > 0);
-  CHECK(failed > 0);
 }
 
 TEST_CASE("formats: macro convert", "[formats]") {
