@@ -68,6 +68,7 @@ namespace {
 
 constexpr uint64_t kMaxDeflateRatio = 1100;  // deflate's limit is ~1032:1
 constexpr uint64_t kMaxOtherRatio = 8192;    // JPEG/BMP/TGA decoded bytes per file byte
+constexpr uint64_t kMaxExrRatio = 8192;      // EXR float bytes per file byte
 
 std::string dims(uint64_t w, uint64_t h) { return std::to_string(w) + "x" + std::to_string(h); }
 
@@ -295,6 +296,13 @@ Result<ExrImage> read_exr(const std::string& path, const ImageLimits& limits) {
       return Status::error(path + ": " + std::to_string(count) + " channels of " + dims(w, h) +
                            " exceed the limit of " + std::to_string(4 * limits.max_pixels) +
                            " values");
+    }
+    // The header may lie; the planes are allocated from it. Compressed EXR stays within a few
+    // thousand to one of its raw size, so a small file claiming a huge image is refused first.
+    if (count * uint64_t(w) * uint64_t(h) * sizeof(float) > kMaxExrRatio * bytes + (1u << 20)) {
+      return Status::error(path + ": header says " + std::to_string(count) + " channels of " +
+                           dims(w, h) + " but the file has only " + std::to_string(bytes) +
+                           " bytes: truncated or corrupt");
     }
     out.width = int(w);
     out.height = int(h);

@@ -4,7 +4,9 @@
 //
 // Reading validates before decoding: the file must exist and be non-empty, the header must give a
 // positive size whose pixel count is at most ImageLimits::max_pixels (checked from the header,
-// before the pixels are allocated), and a truncated or corrupt file is an error naming it.
+// before the pixels are allocated), the file must be large enough to hold what its header claims
+// (PNG: its raw size within deflate's ~1032:1; other formats within 8192:1), and a truncated or
+// corrupt file is an error naming it.
 // PNG (8- or 16-bit, gray, gray+alpha, RGB, RGBA) and the other formats stb decodes (JPEG, BMP,
 // TGA) come back as float RGB in [0, 1] (value / 255 or / 65535; gray is copied to R, G, B; alpha
 // is dropped, not composited). Writing clamps to [0, 1] and rounds to 8 bits (round half up).

@@ -2,6 +2,7 @@
 // validation of broken inputs, atomic writes.
 #include <zlib.h>
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstring>
@@ -297,6 +298,24 @@ TEST_CASE("EXR errors name the file and leave nothing behind", "[render][image_i
     CHECK(t.status().message().find("cut.exr") != std::string::npos);
     write_bytes(dir.file("junk.exr"), std::vector<uint8_t>(500, 0x11));
     CHECK_FALSE(read_exr(dir.file("junk.exr")));
+  }
+  SECTION("a header claiming more pixels than the file can hold") {
+    REQUIRE(write_exr(dir.file("ok.exr"), 64, 32, {{"R", plane.data()}}));
+    auto bytes = read_file(dir.file("ok.exr"));
+    REQUIRE(bytes);
+    // dataWindow attribute: name, type "box2i", size 16, then xMin yMin xMax yMax (int32 LE).
+    const std::string key("dataWindow\0box2i\0", 17);
+    auto at = std::search(bytes->begin(), bytes->end(), key.begin(), key.end());
+    REQUIRE(at != bytes->end());
+    const size_t box = size_t(at - bytes->begin()) + key.size() + 4;
+    for (size_t k : {box + 8, box + 12}) {  // xMax, yMax = 29999
+      const uint32_t v = 29999;
+      std::memcpy(bytes->data() + k, &v, 4);
+    }
+    write_bytes(dir.file("liar.exr"), *bytes);
+    auto r = read_exr(dir.file("liar.exr"));
+    REQUIRE_FALSE(r);
+    CHECK(r.status().message().find("liar.exr") != std::string::npos);
   }
 }
 
