@@ -12,10 +12,13 @@
 // size allocates nothing.
 #pragma once
 
+#include <sys/mman.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
 #include <memory>
 
 #include "attention/runtime/thread_pool.h"
@@ -27,14 +30,20 @@
 
 namespace macro::gs::raster {
 
-// A grow-only byte buffer from which typed arrays are carved, 64-byte aligned.
+// A grow-only byte buffer from which typed arrays are carved, 64-byte aligned. Buffers of 4 MB
+// and more are 2 MB aligned and advised for transparent huge pages: the bin and blend stages read
+// records at random across tens of MB, where 4 KB pages would miss the TLB on nearly every read.
 class Arena {
  public:
   // Start carving; make room for `bytes` (call with the sum of carve sizes, see carve_size()).
   void reset(size_t bytes) {
     if (bytes > capacity_) {
-      buffer_.reset(new std::byte[bytes + 64]);
-      capacity_ = bytes;
+      constexpr size_t kHuge = size_t(2) << 20;
+      const size_t size = (bytes + kHuge - 1) / kHuge * kHuge;
+      buffer_.reset(static_cast<std::byte*>(std::aligned_alloc(kHuge, size)));
+      MACRO_CHECK(buffer_ != nullptr);
+      if (size >= 2 * kHuge) madvise(buffer_.get(), size, MADV_HUGEPAGE);  // a hint; may fail
+      capacity_ = size;
     }
     used_ = 0;
   }
@@ -44,9 +53,7 @@ class Arena {
   }
   template <typename T>
   T* carve(size_t n) {
-    auto base = reinterpret_cast<uintptr_t>(buffer_.get());
-    uintptr_t aligned = (base + 63) & ~uintptr_t(63);
-    T* p = reinterpret_cast<T*>(aligned + used_);
+    T* p = reinterpret_cast<T*>(buffer_.get() + used_);
     used_ += carve_size<T>(n);
     MACRO_CHECK(used_ <= capacity_);
     return p;
@@ -54,10 +61,14 @@ class Arena {
   size_t capacity() const { return capacity_; }
 
  private:
-  std::unique_ptr<std::byte[]> buffer_;
+  struct Free {
+    void operator()(std::byte* p) const { std::free(p); }
+  };
+  std::unique_ptr<std::byte, Free> buffer_;
   size_t capacity_ = 0, used_ = 0;
 };
 
+// The camera in float (CameraF, gs/raster_kernels.h) for a validated Camera.
 CameraF make_camera_f(const Camera& camera);
 
 // Tile coverage rule.
