@@ -10,8 +10,9 @@
 // Work is split over (head, group of up to four 64-query blocks) items on the ThreadPool; every
 // item is computed by one thread in a fixed order, so the result is bit-identical for any thread
 // count. The blocks of a group share each K/V block while it is in cache. Per-thread scratch
-// (packed Q^T [D, 64], score tile [64, 64], output accumulator [64, D]: 16 KiB + 512 D bytes, i.e.
-// 48 KiB at D = 64, 272 KiB at D = 512) is allocated once per call.
+// (per query block of the group: packed Q^T [D, 64], score tile [64, 64], output accumulator
+// [64, D], i.e. 16 KiB + 512 D bytes; 4 x 48 KiB at D = 64, 1 x 272 KiB at D = 512) is allocated
+// once per call.
 //
 // Masking: a BlockSparseMask (attention_mask.h) lists, per 64-query block, the 64-key blocks it may
 // see; unlisted tiles cost nothing. `causal` allows key j for query i iff j <= i (CLIP text
@@ -21,8 +22,9 @@
 // A query row that may attend to no key at all gets an output of zeros (never NaN).
 //
 // Paths: scalar twin (any D), AVX2 (D % 8 == 0), AVX-512 (D % 16 == 0), chosen from active_isa()
-// at each call (a head dim the path cannot take falls back to the next narrower path). All paths
-// run the same algorithm; they differ only in rounding (exp2 polynomial, summation order).
+// at each call (a head dim the path cannot take falls back to the next narrower path; the
+// avx512bf16 and amx paths use the fp32 AVX-512 kernel). All paths run the same algorithm; they
+// differ only in rounding (exp2 polynomial, summation order, Q pre-scaled in the SIMD paths).
 #pragma once
 
 #include <cstddef>

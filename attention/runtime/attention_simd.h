@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <climits>
+#include <cstring>
 #include <cstdint>
 #include <limits>
 
@@ -237,6 +238,9 @@ void blocks_simd(const BlockJob* jobs, int count, const BlockScratch* scratch) {
   int pos[kMaxGroup] = {};
   const float* k_rows[kTileK];
   const float* const* v_rows = scratch[0].v_rows;
+  const float* live_k[kTileK];
+  const float* live_v[kTileK];
+  alignas(64) uint8_t live_tile[kTileQ * kTileK];
   auto next_block = [&](const int* at) {
     int kb = INT32_MAX;
     for (int g = 0; g < count; ++g)
@@ -256,9 +260,36 @@ void blocks_simd(const BlockJob* jobs, int count, const BlockScratch* scratch) {
       if (pos[g] < jobs[g].entries && jobs[g].key_blocks[pos[g]] == kb) ++pos[g];
     const int next = next_block(pos);
     if (next != INT32_MAX) prefetch_key_block(j0, next);
-    for (int g = 0; g < count; ++g)
-      if (pos[g] > 0 && jobs[g].key_blocks[pos[g] - 1] == kb)
-        block_step<T>(jobs[g], scratch[g], k_rows, v_rows, cols, jobs[g].tiles[pos[g] - 1]);
+    for (int g = 0; g < count; ++g) {
+      if (pos[g] == 0 || jobs[g].key_blocks[pos[g] - 1] != kb) continue;
+      const uint8_t* tile = jobs[g].tiles[pos[g] - 1];
+      if (!tile) {
+        block_step<T>(jobs[g], scratch[g], k_rows, v_rows, cols, nullptr);
+        continue;
+      }
+      // Partial tile: drop the keys no query of this block may see (they would only add exact
+      // zeros), so a tile cut by a key-group edge costs its live columns only.
+      int live = 0;
+      for (int c = 0; c < cols; ++c) {
+        const uint8_t* col = tile + size_t(c) * kTileQ;
+        uint64_t any = 0;
+        for (int i = 0; i < kTileQ; i += 8) {
+          uint64_t w;
+          std::memcpy(&w, col + i, 8);
+          any |= w;
+        }
+        if (!any) continue;
+        live_k[live] = k_rows[c];
+        live_v[live] = v_rows[c];
+        std::memcpy(live_tile + size_t(live) * kTileQ, col, kTileQ);
+        ++live;
+      }
+      if (live == cols) {
+        block_step<T>(jobs[g], scratch[g], k_rows, v_rows, cols, tile);
+      } else if (live > 0) {
+        block_step<T>(jobs[g], scratch[g], live_k, live_v, live, live_tile);
+      }
+    }
     kb = next;
   }
   for (int g = 0; g < count; ++g) block_finish<T>(jobs[g], scratch[g]);
