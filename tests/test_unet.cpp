@@ -2,13 +2,17 @@
 // view (with intermediates), odd latent, two joint views, MACRO masked/unmasked; bf16 deviation;
 // checkpoint mismatches reported by name; the full-size SD-Turbo layout from the manifest loads.
 #include <catch2/catch.hpp>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <tuple>
+#include <nlohmann/json.hpp>
 
 #include "attention/nets/nn_run.h"
 #include "attention/nets/synthetic_checkpoint.h"
 #include "attention/nets/unet.h"
+#include "attention/nets/vae.h"
 #include "attention/runtime/attention_mask.h"
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/safetensors.h"
@@ -273,24 +277,113 @@ TEST_CASE("unet: a config with other widths, heads and layers builds and runs", 
   for (int64_t i = 0; i < eps->numel(); ++i) REQUIRE(std::isfinite(eps->f32()[i]));
 }
 
+namespace {
+
+// A full-size checkpoint written straight from the manifest's names and shapes, in BF16, with a
+// cheap deterministic fill (a repeated pseudo-random block scaled by 1/sqrt(fan_in); norm weights
+// 1, biases small). write_synthetic_component() draws every value independently, which for the
+// 866M-parameter U-Net takes over a minute on a shared 2-core machine; the VAE test uses it.
+Status write_fast_full_checkpoint(const std::string& manifest, const std::string& dir,
+                                  const std::string& class_name) {
+  MACRO_ASSIGN_OR_RETURN(std::string text, read_text_file(manifest));
+  const nlohmann::json m = nlohmann::json::parse(text);
+  nlohmann::json config = m["config"];
+  config["_class_name"] = class_name;
+  std::filesystem::create_directories(dir);
+  MACRO_TRY(write_file_atomic(dir + "/config.json", config.dump(1)));
+  std::map<int64_t, std::vector<uint16_t>> by_fan_in;  // fan_in -> pattern of the largest size
+  std::vector<std::pair<std::string, std::vector<int64_t>>> tensors;
+  std::map<int64_t, int64_t> max_numel;
+  for (auto it = m["tensors"].begin(); it != m["tensors"].end(); ++it) {
+    std::vector<int64_t> shape = it.value()["shape"].get<std::vector<int64_t>>();
+    int64_t n = 1, fan_in = 1;
+    for (size_t i = 0; i < shape.size(); ++i) n *= shape[i], fan_in *= i ? shape[i] : 1;
+    const bool norm_w = it.key().find("norm") != std::string::npos &&
+                        it.key().size() > 7 && it.key().compare(it.key().size() - 7, 7, ".weight") == 0;
+    const int64_t key = shape.size() == 1 ? (norm_w ? -1 : 0) : fan_in;
+    max_numel[key] = std::max(max_numel[key], n);
+    tensors.emplace_back(it.key(), shape);
+  }
+  for (auto [key, n] : max_numel) {
+    std::vector<uint16_t>& buf = by_fan_in[key];
+    buf.resize(size_t(n));
+    const float s = key == -1 ? 0.0f : key == 0 ? 0.02f : float(1.0 / std::sqrt(double(key)));
+    uint32_t x = 12345u + uint32_t(key);
+    constexpr size_t kBlock = 4099;  // prime: the pattern does not align with rows
+    for (size_t i = 0; i < std::min(buf.size(), kBlock); ++i) {
+      x = x * 1664525u + 1013904223u;
+      const float u = float(x >> 8) / float(1u << 24) * 2.0f - 1.0f;  // U(-1, 1)
+      buf[i] = f32_to_bf16(key == -1 ? 1.0f + 0.05f * u : s * 1.7f * u);
+    }
+    for (size_t i = kBlock; i < buf.size(); ++i) buf[i] = buf[i - kBlock];
+  }
+  std::vector<TensorToWrite> ts;
+  for (const auto& [name, shape] : tensors) {
+    int64_t fan_in = 1;
+    for (size_t i = 1; i < shape.size(); ++i) fan_in *= shape[i];
+    const bool norm_w = name.find("norm") != std::string::npos && name.size() > 7 &&
+                        name.compare(name.size() - 7, 7, ".weight") == 0;
+    const int64_t key = shape.size() == 1 ? (norm_w ? -1 : 0) : fan_in;
+    ts.push_back({name, DType::kBF16, shape, by_fan_in.at(key).data()});
+  }
+  return write_safetensors(dir + "/diffusion_pytorch_model.safetensors", ts);
+}
+
+}  // namespace
+
 TEST_CASE("unet: the full-size SD-Turbo layout from the manifest loads (bf16 storage)",
           "[nets][unet][full]") {
   test::TempDir dir("unet-full");
-  SyntheticCheckpointOptions o;
-  o.bf16 = true;
-  REQUIRE(write_synthetic_component(test::golden_dir() + "/manifests/unet.json", dir.path,
-                                    "UNet2DConditionModel", o)
-              .is_ok());
+  auto tw = std::chrono::steady_clock::now();
+  const Status w = write_fast_full_checkpoint(test::golden_dir() + "/manifests/unet.json", dir.path,
+                                              "UNet2DConditionModel");
+  INFO(w.message());
+  REQUIRE(w.is_ok());
+  auto t0 = std::chrono::steady_clock::now();
+  std::printf("full unet write %.1f s\n", std::chrono::duration<double>(t0 - tw).count());
   auto m = UNet2DConditionModel::load(dir.path, Precision::kBf16);
+  std::printf("full unet load %.1f s\n", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   INFO((m.is_ok() ? "" : m.status().message()));
   REQUIRE(m.is_ok());
   CHECK((*m)->config().block_out_channels == std::vector<int>{320, 640, 1280, 1280});
+  CHECK((*m)->config().num_heads == std::vector<int>{5, 10, 20, 20});
   // One small forward (latent 8x8, one view) proves the packed tree is complete.
   Tensor z = Tensor::f32({1, 4, 8, 8}), ctx = Tensor::f32({1, 77, 1024});
   for (int64_t i = 0; i < z.numel(); ++i) z.f32()[i] = float(std::sin(double(i)));
+  for (int64_t i = 0; i < ctx.numel(); ++i) ctx.f32()[i] = float(std::cos(double(i) * 0.01));
+  auto t1 = std::chrono::steady_clock::now();
   auto eps = (*m)->forward(z, 199, ctx, {}, &ThreadPool::global());
+  std::printf("full unet forward 8x8 %.1f s\n", std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count());
   REQUIRE(eps.is_ok());
   for (int64_t i = 0; i < eps->numel(); ++i) REQUIRE(std::isfinite(eps->f32()[i]));
+}
+
+TEST_CASE("unet/vae: planned scratch at the full SD-Turbo / Difix sizes", "[nets][unet][vae]") {
+  auto text = read_text_file(test::golden_dir() + "/manifests/unet.json");
+  REQUIRE(text.is_ok());
+  const nlohmann::json m = nlohmann::json::parse(*text);
+  auto cfg = parse_unet_config(m["config"].dump(), "unet.json");
+  REQUIRE(cfg.is_ok());
+  auto unet = UNet2DConditionModel::build(*cfg);  // structure only: planning reads no weights
+  REQUIRE(unet.is_ok());
+  auto vtext = read_text_file(test::golden_dir() + "/manifests/vae.json");
+  REQUIRE(vtext.is_ok());
+  auto vcfg = parse_vae_config(nlohmann::json::parse(*vtext)["config"].dump(), "vae.json");
+  REQUIRE(vcfg.is_ok());
+  auto vae = DifixVae::build(*vcfg);
+  REQUIRE(vae.is_ok());
+  const double gib = 1024.0 * 1024.0 * 1024.0;
+  for (auto [views, h, w] : {std::tuple{1, 64, 64}, std::tuple{2, 72, 128}, std::tuple{5, 72, 128}}) {
+    const double u = double((*unet)->workspace_bytes(views, h, w)) / gib;
+    std::printf("unet scratch: %d view(s) latent %dx%d: %.2f GiB\n", views, h, w, u);
+    CHECK(u < 1.5 * views);  // activations only: no N x N attention matrix anywhere
+  }
+  for (auto [h, w] : {std::pair{512, 512}, std::pair{576, 1024}}) {
+    const double e = double((*vae)->encode_workspace_bytes(h, w)) / gib;
+    const double d = double((*vae)->decode_workspace_bytes(h, w)) / gib;
+    std::printf("vae scratch %dx%d: encode %.2f GiB, decode %.2f GiB\n", h, w, e, d);
+    CHECK(d < 3.0);
+  }
 }
 
 TEST_CASE("nn-run unet folder: golden case through the library entry point", "[nets][unet][nn-run]") {

@@ -389,7 +389,6 @@ void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t vi
   // Up path: ping-pong buffers sized for the largest level, one concat buffer.
   int64_t max_h = 0, max_cat = 0;
   {
-    int64_t ch = cc;
     for (int i = 0; i < n; ++i) {
       const UNetBlock& b = up_blocks[size_t(i)];
       const auto [gh, gw] = grids[size_t(n - 1 - i)];
@@ -399,9 +398,7 @@ void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t vi
         const auto [nh, nw] = grids[size_t(n - 2 - i)];
         max_h = std::max(max_h, views * b.c_out * nh * nw);
       }
-      ch = b.c_out;
     }
-    (void)ch;
   }
   float* hbuf[2] = {r.alloc(max_h), r.alloc(max_h)};
   float* cat = r.alloc(max_cat);
@@ -444,6 +441,14 @@ void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t vi
   float* t2 = r.alloc(views * cc * hh * ww);
   conv_norm_out.forward(r, t2, cur, views, hh * ww, /*silu=*/true);
   conv_out.forward_scratch(r, t2, views, hh, ww, eps, nullptr, 1, 1, 1, 1, 1);
+}
+
+size_t UNet2DConditionModel::workspace_bytes(int64_t views, int64_t h, int64_t w,
+                                             int64_t ctx_tokens) const {
+  Workspace plan;
+  forward_impl(Run{&plan, nullptr, precision_}, nullptr, views, h, w, 0, nullptr, views, ctx_tokens,
+               {}, nullptr, {});
+  return plan.peak();
 }
 
 Result<Tensor> UNet2DConditionModel::forward(const TensorView& z, float timestep,

@@ -111,6 +111,8 @@ class UNet2DConditionModel {
   // Shapes and masks are validated (errors name `what` and the argument).
   Result<Tensor> forward(const TensorView& z, float timestep, const TensorView& ctx,
                          const UNetMasks& masks, ThreadPool* pool, const UNetTap& tap = {}) const;
+  // Scratch bytes one forward takes (the planned arena size) for V views of a latent h x w.
+  size_t workspace_bytes(int64_t views, int64_t h, int64_t w, int64_t ctx_tokens = 77) const;
 
  private:
   void forward_impl(const Run& r, const float* z, int64_t views, int64_t h, int64_t w, float t,

@@ -212,6 +212,20 @@ void DifixVae::encode_impl(const Run& r, const float* x, int64_t h, int64_t w, f
   quant_conv.forward_scratch(r, e, 1, hh, ww, moments, nullptr, 1, 0, 0, 0, 0);
 }
 
+size_t DifixVae::encode_workspace_bytes(int64_t h, int64_t w) const {
+  Workspace plan;
+  encode_impl(Run{&plan, nullptr, precision_}, nullptr, h, w, nullptr,
+              std::vector<float*>(size_t(levels()), nullptr));
+  return plan.peak();
+}
+
+size_t DifixVae::decode_workspace_bytes(int64_t h, int64_t w) const {
+  Workspace plan;
+  decode_impl(Run{&plan, nullptr, precision_}, nullptr, h / downscale(), w / downscale(),
+              std::vector<const float*>(size_t(levels()), nullptr), nullptr);
+  return plan.peak();
+}
+
 Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skips,
                                      ThreadPool* pool) const {
   const int64_t f = downscale();

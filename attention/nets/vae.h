@@ -71,6 +71,9 @@ class DifixVae {
   // matching sizes) -> image [1, Cout, H, W], not clamped.
   Result<Tensor> decode(const TensorView& z, const std::vector<TensorView>& skips,
                         ThreadPool* pool) const;
+  // Scratch bytes of one image's encode / decode at H x W pixels (the planned arena sizes).
+  size_t encode_workspace_bytes(int64_t h, int64_t w) const;
+  size_t decode_workspace_bytes(int64_t h, int64_t w) const;
 
  private:
   void encode_impl(const Run& r, const float* x, int64_t h, int64_t w, float* moments,

@@ -1,0 +1,168 @@
+// The single-step Difix pipeline (attention/nets/difix.h) against shared/golden/difix-tiny (tiny
+// U-Net + tiny Difix VAE; two views, and three views with the MACRO mask), in fp32 and bf16, and
+// `macro nn-run` on a pipeline folder through the binary.
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "attention/nets/difix.h"
+#include "attention/runtime/attention_mask.h"
+#include "attention/runtime/file_io.h"
+#include "attention/runtime/safetensors.h"
+#include "test_support.h"
+
+using namespace macro;
+using namespace macro::nets;
+
+namespace {
+
+Tensor read_tensor(const SafeTensors& f, const std::string& name) {
+  const TensorEntry* e = f.find(name);
+  REQUIRE(e != nullptr);
+  auto v = f.read_f32(name);
+  REQUIRE(v.is_ok());
+  return Tensor::from_f32(e->shape, *v);
+}
+
+struct Bound {
+  double rel_l2, max_abs;
+};
+constexpr Bound kFp32{1e-4, 1e-3};
+// bf16 through encoder, U-Net and decoder of random-weight tiny nets; measured values printed.
+constexpr Bound kBf16{5e-2, 2e-1};
+
+void check_close(const std::string& what, const TensorView& got, const Tensor& want, Bound b) {
+  REQUIRE(got.shape_vec() == want.shape());
+  const test::Diff d = test::compare(got.f32(), want.f32(), size_t(want.numel()));
+  std::printf("  %-24s rel L2 %.3e  max abs %.3e\n", what.c_str(), d.rel_l2, d.max_abs);
+  INFO(what << ": rel L2 " << d.rel_l2 << ", max abs " << d.max_abs);
+  CHECK(d.rel_l2 <= b.rel_l2);
+  CHECK(d.max_abs <= b.max_abs);
+}
+
+// A pipeline folder over the tiny goldens: model_index.json, unet/ and vae/ (symlinks),
+// scheduler/scheduler_config.json.
+std::string make_pipeline(const test::TempDir& dir) {
+  namespace fs = std::filesystem;
+  const std::string root = dir.path + "/difix-tiny";
+  fs::create_directories(root + "/scheduler");
+  fs::create_directory_symlink(test::golden_dir() + "/unet-tiny", root + "/unet");
+  fs::create_directory_symlink(test::golden_dir() + "/vae-tiny", root + "/vae");
+  REQUIRE(write_file_atomic(root + "/model_index.json",
+                            std::string(R"({"_class_name": "DifixPipeline", "unet": ["diffusers", "UNet2DConditionModel"], "vae": ["diffusers", "AutoencoderKL"]})"))
+              .is_ok());
+  REQUIRE(write_file_atomic(root + "/scheduler/scheduler_config.json",
+                            std::string(R"({"_class_name": "DDPMScheduler", "num_train_timesteps": 1000, "beta_schedule": "scaled_linear", "beta_start": 0.00085, "beta_end": 0.012, "prediction_type": "epsilon", "clip_sample": false})"))
+              .is_ok());
+  return root;
+}
+
+void run_case(const DifixPipeline& pipe, const std::string& name, Precision p, Bound b) {
+  auto g = SafeTensors::open(test::golden_dir() + "/difix-tiny/" + name + ".safetensors");
+  REQUIRE(g.is_ok());
+  Tensor images = read_tensor(*g, "input.images"), ctx = read_tensor(*g, "input.ctx");
+  std::vector<BlockSparseMask> store;
+  store.reserve(8);
+  UNetMasks masks;
+  for (int l = 0; l < 8; ++l) {
+    const TensorEntry* e = g->find("mask.level" + std::to_string(l));
+    if (!e) break;
+    auto m = mask_from_dense(e->data, int(e->shape[0]), int(e->shape[1]), 0, true);
+    REQUIRE(m.is_ok());
+    store.push_back(std::move(*m));
+    masks.level.push_back(&store.back());
+  }
+  std::printf("difix-tiny %s (%s, %zu masked levels)\n", name.c_str(), precision_name(p),
+              masks.level.size());
+  auto o = pipe.step(images, ctx, masks, &ThreadPool::global());
+  INFO((o.is_ok() ? "" : o.status().message()));
+  REQUIRE(o.is_ok());
+  check_close("output.z", o->z, read_tensor(*g, "output.z"), b);
+  check_close("output.eps", o->eps, read_tensor(*g, "output.eps"), b);
+  check_close("output.z0", o->z0, read_tensor(*g, "output.z0"), b);
+  check_close("output.image", o->image, read_tensor(*g, "output.image"), b);
+}
+
+}  // namespace
+
+TEST_CASE("difix-tiny fp32 matches the golden pipeline", "[nets][difix]") {
+  test::TempDir dir("difix");
+  auto pipe = DifixPipeline::load(make_pipeline(dir), Precision::kF32);
+  INFO((pipe.is_ok() ? "" : pipe.status().message()));
+  REQUIRE(pipe.is_ok());
+  // The scheduler's abar_199 against the golden constant.
+  auto g = SafeTensors::open(test::golden_dir() + "/difix-tiny/case-ref2.safetensors");
+  REQUIRE(g.is_ok());
+  const double abar_golden = read_tensor(*g, "const.alpha_bar_199").f32()[0];
+  auto abar = alpha_bar((*pipe)->schedule(), 199);
+  REQUIRE(abar.is_ok());
+  std::printf("abar_199 %.9f (golden %.9f)\n", *abar, abar_golden);
+  CHECK(std::abs(*abar - abar_golden) < 1e-6);
+  run_case(**pipe, "case-ref2", Precision::kF32, kFp32);
+  run_case(**pipe, "case-macro", Precision::kF32, kFp32);
+}
+
+TEST_CASE("difix-tiny bf16 stays within its stated bound", "[nets][difix][bf16]") {
+  test::TempDir dir("difix-bf16");
+  auto pipe = DifixPipeline::load(make_pipeline(dir), Precision::kBf16);
+  REQUIRE(pipe.is_ok());
+  run_case(**pipe, "case-ref2", Precision::kBf16, kBf16);
+  run_case(**pipe, "case-macro", Precision::kBf16, kBf16);
+}
+
+TEST_CASE("difix: bad scheduler configs and inputs are refused by name", "[nets][difix]") {
+  test::TempDir dir("difix-bad");
+  const std::string root = make_pipeline(dir);
+  REQUIRE(write_file_atomic(root + "/scheduler/scheduler_config.json",
+                            std::string(R"({"beta_schedule": "linear"})"))
+              .is_ok());
+  auto p = DifixPipeline::load(root, Precision::kF32);
+  REQUIRE_FALSE(p.is_ok());
+  CHECK_THAT(p.status().message(), Catch::Contains("beta_schedule"));
+  REQUIRE(write_file_atomic(root + "/scheduler/scheduler_config.json", std::string("{}")).is_ok());
+  auto pipe = DifixPipeline::load(root, Precision::kF32);
+  REQUIRE(pipe.is_ok());
+  auto r = (*pipe)->step(Tensor::f32({2, 3, 60, 88}), Tensor::f32({2, 77, 48}), {}, nullptr);
+  REQUIRE_FALSE(r.is_ok());
+  CHECK_THAT(r.status().message(), Catch::Contains("images"));
+  auto r2 = (*pipe)->step(Tensor::f32({2, 3, 64, 88}), Tensor::f32({3, 77, 48}), {}, nullptr);
+  REQUIRE_FALSE(r2.is_ok());
+  CHECK_THAT(r2.status().message(), Catch::Contains("ctx"));
+}
+
+TEST_CASE("nn-run difix pipeline folder: the binary reproduces the golden", "[nets][difix][nn-run]") {
+  test::TempDir dir("nn-run-difix");
+  const std::string model = make_pipeline(dir);
+  auto g = SafeTensors::open(test::golden_dir() + "/difix-tiny/case-macro.safetensors");
+  REQUIRE(g.is_ok());
+  // Pass only the pipeline's inputs (the golden also holds outputs and the maps masks came from).
+  std::vector<TensorToWrite> ins;
+  for (const std::string& n : g->names()) {
+    if (n != "input.images" && n != "input.ctx" && n.rfind("mask.level", 0) != 0) continue;
+    const TensorEntry* e = g->find(n);
+    ins.push_back({n, e->dtype, e->shape, e->data});
+  }
+  REQUIRE(ins.size() == 6);
+  const std::string in = dir.file("in.safetensors"), out = dir.file("out.safetensors");
+  REQUIRE(write_safetensors(in, ins).is_ok());
+  const std::string cmd = test::macro_exe() + " nn-run --model " + model + " --inputs " + in +
+                          " --out " + out + " --threads 2 > " + dir.file("log.txt") + " 2>&1";
+  const int rc = test::run_command(cmd);
+  auto log = read_text_file(dir.file("log.txt"));
+  INFO((log.is_ok() ? *log : std::string("no log")));
+  REQUIRE(rc == 0);
+  auto o = SafeTensors::open(out);
+  REQUIRE(o.is_ok());
+  CHECK(o->metadata().at("model") == "difix");
+  for (const char* n : {"output.z", "output.eps", "output.z0", "output.image"})
+    check_close(std::string("nn-run ") + n, read_tensor(*o, n), read_tensor(*g, n), kFp32);
+  // An unexpected tensor is refused naming it.
+  ins.push_back({"input.plane_level0", g->find("input.plane_level0")->dtype,
+                 g->find("input.plane_level0")->shape, g->find("input.plane_level0")->data});
+  REQUIRE(write_safetensors(in, ins).is_ok());
+  CHECK(test::run_command(cmd) == 1);
+  auto log2 = read_text_file(dir.file("log.txt"));
+  REQUIRE(log2.is_ok());
+  CHECK_THAT(*log2, Catch::Contains("input.plane_level0"));
+}
