@@ -631,6 +631,64 @@ TEST_CASE("formats: .ply -> .splat and .spz round trips stay within quantisation
   CHECK(max_abs_diff(z.opacity, theirs.opacity) <= 1.0 / 255 + 1e-6);
 }
 
+TEST_CASE("formats: .spz version 2 rotations and SH degree 4 payloads", "[formats]") {
+  GaussianCloud ply = must_load(metal("ply"));
+  GaussianCloud v3 = must_load(metal("spz"));
+  auto file = read_file(metal("spz"));
+  REQUIRE(file.is_ok());
+  const std::vector<uint8_t> plain = gunzip(*file);
+  const size_t N = 3, rot3 = 16 + N * 16, sh3 = rot3 + N * 4;  // offsets of rotations and SH
+  SECTION("version 2: (x, y, z) bytes, w implied") {
+    std::vector<uint8_t> p(plain.begin(), plain.begin() + static_cast<long>(rot3));
+    p[4] = 2;
+    for (size_t i = 0; i < N; ++i) {
+      // RDF (w, x, y, z) -> RUB (x, -y, -z, w) with w >= 0, as a v2 writer stores it.
+      const float* q = &ply.rotation[i * 4];
+      float xyzw[4] = {q[1], -q[2], -q[3], q[0]};
+      const float sign = xyzw[3] < 0 ? -1.f : 1.f;
+      for (int a = 0; a < 3; ++a)
+        p.push_back(static_cast<uint8_t>(std::lround((sign * xyzw[a] + 1.f) * 127.5f)));
+    }
+    p.insert(p.end(), plain.begin() + static_cast<long>(sh3), plain.end());
+    auto r = load_bytes(gzip(p), "v2.spz");
+    INFO(r.status().message());
+    REQUIRE(r.is_ok());
+    CHECK(rotation_diff(*r, ply) <= 0.02);  // 1/255 per component, w recomputed from them
+    CHECK(max_abs_diff(r->position, v3.position) == 0);
+    CHECK(max_abs_diff(r->sh, v3.sh) == 0);
+  }
+  SECTION("shDegree 4: the fourth band is skipped") {
+    std::vector<uint8_t> p(plain.begin(), plain.begin() + static_cast<long>(sh3));
+    p[12] = 4;
+    for (size_t i = 0; i < N; ++i) {
+      p.insert(p.end(), plain.begin() + static_cast<long>(sh3 + i * 45),
+               plain.begin() + static_cast<long>(sh3 + i * 45 + 45));
+      for (int j = 0; j < 27; ++j) p.push_back(static_cast<uint8_t>(j * 9));
+    }
+    LoadReport report;
+    auto r = load_bytes(gzip(p), "d4.spz", &report);
+    INFO(r.status().message());
+    REQUIRE(r.is_ok());
+    CHECK(r->sh_degree == 3);
+    CHECK(report.ignored_sh_coeffs == 9);
+    CHECK(max_abs_diff(r->sh, v3.sh) == 0);
+  }
+}
+
+TEST_CASE("formats: writers refuse what they cannot store", "[formats]") {
+  test::TempDir dir("formats");
+  GaussianCloud c = must_load(metal("ply"));
+  c.position[4] = 5000.f;  // beyond the 24-bit, 12-fraction-bit .spz range
+  Status s = save_scene(c, dir.file("far.spz"));
+  REQUIRE_FALSE(s.is_ok());
+  CHECK_THAT(s.message(), Catch::Contains("far.spz") && Catch::Contains("position"));
+  CHECK_FALSE(file_exists(dir.file("far.spz")));
+  CHECK_FALSE(save_scene(c, dir.file("x.compressed.ply")).is_ok());
+  CHECK_FALSE(save_scene(c, dir.file("x.obj")).is_ok());
+  c.sh.pop_back();
+  CHECK_THAT(save_scene(c, dir.file("bad.ply")).message(), Catch::Contains("inconsistent"));
+}
+
 // ---- Bad input. ----
 TEST_CASE("formats: bad .ply input fails with messages naming the file and the field",
           "[formats]") {
