@@ -131,7 +131,7 @@ double probe_amx(int64_t iters) {
 namespace detail {
 void fill_amx_kernels(KernelTable& t) {
   fill_avx512bf16_kernels(t);
-  t.bf16 = GemmKernel{kMr, kNr, 32, 256, PackLayout::kBf16Amx, micro_amx, "amx bf16 32x32"};
+  t.bf16 = GemmKernel{kMr, kNr, 32, 384, PackLayout::kBf16Amx, micro_amx, "amx bf16 32x32"};
   t.probe_bf16 = probe_amx;
 }
 }  // namespace detail

@@ -142,8 +142,8 @@ double probe_fma(int64_t iters) {
 
 namespace detail {
 void fill_avx512_kernels(KernelTable& t) {
-  t.f32 = GemmKernel{kMrF32, kNr, 1, 256, PackLayout::kF32, micro_f32, "avx512 f32 12x32"};
-  t.bf16 = GemmKernel{kMrBf16, kNr, 2, 256, PackLayout::kBf16Pairs, micro_bf16_emulated,
+  t.f32 = GemmKernel{kMrF32, kNr, 1, 384, PackLayout::kF32, micro_f32, "avx512 f32 12x32"};
+  t.bf16 = GemmKernel{kMrBf16, kNr, 2, 384, PackLayout::kBf16Pairs, micro_bf16_emulated,
                       "avx512 bf16 12x32 (shift-widened)"};
   t.probe_fma = probe_fma;
   t.probe_bf16 = probe_fma;

@@ -76,6 +76,40 @@ void micro_bf16(const MicroTile& t) {
   store_tile<kMr>(t, c0, c1);
 }
 
+// A panel [kcp/2][w] of pair words from row-major fp32 rows: 32 floats -> 16 pair words with one
+// vcvtne2ps2bf16 (nearest even; like the hardware, fp32 denormal inputs become zero), then scalar
+// stores into the panel's column r.
+void pack_a_pairs(const float* src, int64_t ld, int valid_rows, int64_t valid_k, int64_t kcp,
+                  int w, void* dst) {
+  uint32_t* d = static_cast<uint32_t*>(dst);
+  const int64_t pairs = kcp / 2;
+  alignas(64) uint32_t words[16];
+  for (int r = 0; r < w; ++r) {
+    if (r >= valid_rows) {
+      for (int64_t q = 0; q < pairs; ++q) d[q * w + r] = 0;
+      continue;
+    }
+    const float* s = src + r * ld;
+    for (int64_t q0 = 0; q0 < pairs; q0 += 16) {
+      const int64_t k = 2 * q0;
+      const int64_t left = valid_k - k;
+      __m512 lo, hi;
+      if (left >= 32) {
+        lo = _mm512_loadu_ps(s + k);
+        hi = _mm512_loadu_ps(s + k + 16);
+      } else {
+        const int64_t n0 = left <= 0 ? 0 : (left >= 16 ? 16 : left);
+        const int64_t n1 = left <= 16 ? 0 : left - 16;
+        lo = _mm512_maskz_loadu_ps(__mmask16((1u << n0) - 1), s + k);
+        hi = _mm512_maskz_loadu_ps(__mmask16((1u << n1) - 1), s + k + 16);
+      }
+      _mm512_store_si512(words, (__m512i)_mm512_cvtne2ps_pbh(hi, lo));
+      const int64_t nq = pairs - q0 < 16 ? pairs - q0 : 16;
+      for (int64_t j = 0; j < nq; ++j) d[(q0 + j) * w + r] = words[j];
+    }
+  }
+}
+
 // 24 independent vdpbf16ps chains; each does 16 lanes x 2 products x 2 flops.
 double probe_bf16(int64_t iters) {
   __m512 x[24];
@@ -98,7 +132,8 @@ double probe_bf16(int64_t iters) {
 namespace detail {
 void fill_avx512bf16_kernels(KernelTable& t) {
   fill_avx512_kernels(t);
-  t.bf16 = GemmKernel{kMr, kNr, 2, 256, PackLayout::kBf16Pairs, micro_bf16, "avx512bf16 14x32"};
+  t.bf16 = GemmKernel{kMr, kNr, 2, 384, PackLayout::kBf16Pairs, micro_bf16, "avx512bf16 14x32",
+                      pack_a_pairs};
   t.probe_bf16 = probe_bf16;
 }
 }  // namespace detail

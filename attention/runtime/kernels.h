@@ -43,6 +43,12 @@ struct MicroTile {
 };
 using MicroKernel = void (*)(const MicroTile& t);
 
+// Optional fast packer for one A micro-panel from a row-major fp32 source: rows r < valid_rows of
+// src[r * ld + k], k < valid_k, into the kernel's A layout [kcp][w] (zeros beyond; kcp a multiple
+// of k_align). When null the generic packer in gemm.cpp is used.
+using PackPanelF32 = void (*)(const float* src, int64_t ld, int valid_rows, int64_t valid_k,
+                              int64_t kcp, int w, void* dst);
+
 struct GemmKernel {
   int mr = 0, nr = 0;    // register tile
   int k_align = 1;       // packed K is padded to a multiple of this
@@ -50,6 +56,7 @@ struct GemmKernel {
   PackLayout layout = PackLayout::kF32;
   MicroKernel micro = nullptr;
   const char* name = "";
+  PackPanelF32 pack_a_f32 = nullptr;
 };
 
 struct KernelTable {
