@@ -87,7 +87,7 @@ TEST_CASE("conv2d: 3x3 stride 1 pad 1, every path", "[kernels][conv]") {
   for (Isa isa : supported_isas()) {
     REQUIRE(set_isa(isa));
     check_conv(shape(2, 3, 7, 9, 5, 3, 1, 1, 1, 1, 1), true, false, nullptr);
-    check_conv(shape(1, 40, 13, 35, 37, 3, 1, 1, 1, 1, 1), true, true, nullptr);  // K=360 > KC
+    check_conv(shape(1, 50, 13, 35, 37, 3, 1, 1, 1, 1, 1), true, true, nullptr);  // K=450 > KC
     check_conv(shape(1, 1, 1, 1, 1, 3, 1, 1, 1, 1, 1), false, false, nullptr);
     check_conv(shape(1, 17, 5, 70, 29, 3, 1, 1, 1, 1, 1), false, true, nullptr);  // rows > NR
   }
@@ -119,7 +119,7 @@ TEST_CASE("conv2d: bf16 weights and activations, every path", "[kernels][conv]")
     for (float& x : v) x = bf16_to_f32(f32_to_bf16(x));
     return v;
   };
-  const Conv2dShape shapes[] = {shape(1, 40, 13, 35, 37, 3, 1, 1, 1, 1, 1),
+  const Conv2dShape shapes[] = {shape(1, 50, 13, 35, 37, 3, 1, 1, 1, 1, 1),  // K > KC
                                 shape(2, 9, 11, 15, 7, 3, 2, 0, 0, 1, 1),
                                 shape(1, 33, 9, 10, 65, 1, 1, 0, 0, 0, 0),
                                 shape(1, 3, 5, 6, 4, 3, 1, 1, 1, 1, 1)};  // odd K = 27
