@@ -7,6 +7,7 @@
 #include <filesystem>
 
 #include "attention/nets/difix.h"
+#include "attention/runtime/cpu.h"
 #include "attention/runtime/attention_mask.h"
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/safetensors.h"
@@ -109,6 +110,27 @@ TEST_CASE("difix-tiny bf16 stays within its stated bound", "[nets][difix][bf16]"
   REQUIRE(pipe.is_ok());
   run_case(**pipe, "case-ref2", Precision::kBf16, kBf16);
   run_case(**pipe, "case-macro", Precision::kBf16, kBf16);
+}
+
+TEST_CASE("difix-tiny matches on every instruction-set path the machine supports",
+          "[nets][difix][isa]") {
+  const Isa saved = active_isa();
+  test::TempDir dir("difix-isa");
+  const std::string root = make_pipeline(dir);
+  for (Isa isa : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512, Isa::kAvx512Bf16, Isa::kAmx}) {
+    if (!isa_supported(isa)) {
+      std::printf("difix-tiny: %s not supported here, skipped\n", isa_name(isa));
+      continue;
+    }
+    REQUIRE(set_isa(isa).is_ok());
+    for (Precision p : {Precision::kF32, Precision::kBf16}) {
+      auto pipe = DifixPipeline::load(root, p);  // weights are packed for the path active now
+      REQUIRE(pipe.is_ok());
+      std::printf("[%s] ", isa_name(isa));
+      run_case(**pipe, "case-macro", p, p == Precision::kF32 ? kFp32 : kBf16);
+    }
+  }
+  REQUIRE(set_isa(saved).is_ok());
 }
 
 TEST_CASE("difix: bad scheduler configs and inputs are refused by name", "[nets][difix]") {
