@@ -14,7 +14,14 @@ int run_nn_run(std::vector<std::string> argv) {
     std::printf(
         "usage: macro nn-run --model DIR --inputs IN.safetensors --out OUT.safetensors\n"
         "                    [--precision fp32|bf16] [--threads N] [--isa NAME]\n"
-        "  taesd folder: input.image [N,3,H,W] in [0,1] -> output.latent, output.decoded\n");
+        "  taesd folder: input.image [N,3,H,W] in [0,1] -> output.latent, output.decoded\n"
+        "  unet folder (config.json UNet2DConditionModel): input.z, input.ctx, [input.timestep],\n"
+        "      [mask.levelL] -> output.eps\n"
+        "  vae folder (config.json AutoencoderKL, Difix): input.image [N,3,H,W] in [-1,1] ->\n"
+        "      output.moments, output.z, output.skip0.., output.decoded_view0\n"
+        "  pipeline folder (model_index.json, unet/, vae/): input.images [V,3,H,W] in [-1,1],\n"
+        "      input.ctx, [input.timestep], [mask.levelL] -> output.z, output.eps, output.z0,\n"
+        "      output.image\n");
     return 0;
   }
   if (Status s = apply_common_flags(args); !s) return fail("nn-run", s);
