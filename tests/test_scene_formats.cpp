@@ -320,7 +320,7 @@ TEST_CASE("formats: MetalSplatter .ply loads to the activated values of its raw 
   check_against_raw(c, raw.rows, 3, 0.f);
 }
 
-TEST_CASE("formats: the same 3 Gaussians from .ply, .splat and .spz agree within quantisation",
+TEST_CASE("formats: the same 3 Gaussians from .ply .splat and .spz agree within quantisation",
           "[formats]") {
   GaussianCloud ply = must_load(metal("ply"));
   LoadReport rs, rz;
@@ -373,8 +373,8 @@ TEST_CASE("formats: the same 3 Gaussians from .ply, .splat and .spz agree within
   CHECK(sign_checked >= 10);
 }
 
-TEST_CASE("formats: .ply layouts — ascii, big endian, shuffled typed properties, lists, extra "
-          "elements, more than one block of rows", "[formats]") {
+TEST_CASE("formats: .ply layouts ascii and big endian with shuffled typed properties and lists "
+          "and extra elements over several blocks of rows", "[formats]") {
   RawPly raw = read_raw_metal_ply();
   // 2600 rows (crosses the 1024-row blocks): the 3 Gaussians with shifted positions.
   std::vector<std::array<float, 62>> rows;
@@ -458,7 +458,7 @@ TEST_CASE("formats: Mip-Splatting filter_3D is folded into scale and opacity", "
   CHECK(r->opacity[2] < 0.2f * r->opacity[0]);                             // big filter: fainter
 }
 
-TEST_CASE("formats: a point-cloud .ply (red/green/blue, no f_dc) loads with defaults",
+TEST_CASE("formats: a point-cloud .ply with red green blue and no f_dc loads with defaults",
           "[formats]") {
   TElement v{"vertex", {{"x", "float"}, {"y", "float"}, {"z", "float"}, {"red", "uchar"},
                         {"green", "uchar"}, {"blue", "uchar"}}, {}};
@@ -780,7 +780,7 @@ TEST_CASE("formats: bad .ply input fails with messages naming the file and the f
   }
 }
 
-TEST_CASE("formats: NaN/Inf Gaussians dropped, zero quaternions fixed, all counted", "[formats]") {
+TEST_CASE("formats: NaN and Inf Gaussians dropped and zero quaternions fixed and counted", "[formats]") {
   RawPly raw = read_raw_metal_ply();
   std::vector<std::array<float, 62>> rows;
   for (int r = 0; r < 8; ++r) rows.push_back(raw.rows[static_cast<size_t>(r % 3)]);
@@ -835,7 +835,7 @@ TEST_CASE("formats: bad .splat input", "[formats]") {
   CHECK(r->rotation[4] == 1.f);
 }
 
-TEST_CASE("formats: bad .spz input (magic, version, counts, gzip bombs, truncation)", "[formats]") {
+TEST_CASE("formats: bad .spz input - magic version counts gzip bombs truncation", "[formats]") {
   auto good = read_file(metal("spz"));
   REQUIRE(good.is_ok());
   const std::vector<uint8_t> plain = gunzip(*good);
