@@ -294,8 +294,6 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
 
   if (K <= 0) {
     // Nothing to accumulate: C = beta * C + bias + residual.
-    float zero_acc[1] = {0};
-    (void)zero_acc;
     for (int64_t i = 0; i < M; ++i)
       for (int64_t j = 0; j < N; ++j) {
         float& c = s.C[i * s.ldc + j];
