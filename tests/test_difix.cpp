@@ -7,8 +7,8 @@
 #include <filesystem>
 
 #include "attention/nets/difix.h"
-#include "attention/runtime/cpu.h"
 #include "attention/runtime/attention_mask.h"
+#include "attention/runtime/cpu.h"
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/safetensors.h"
 #include "test_support.h"
@@ -50,12 +50,18 @@ std::string make_pipeline(const test::TempDir& dir) {
   fs::create_directories(root + "/scheduler");
   fs::create_directory_symlink(test::golden_dir() + "/unet-tiny", root + "/unet");
   fs::create_directory_symlink(test::golden_dir() + "/vae-tiny", root + "/vae");
-  REQUIRE(write_file_atomic(root + "/model_index.json",
-                            std::string(R"({"_class_name": "DifixPipeline", "unet": ["diffusers", "UNet2DConditionModel"], "vae": ["diffusers", "AutoencoderKL"]})"))
-              .is_ok());
-  REQUIRE(write_file_atomic(root + "/scheduler/scheduler_config.json",
-                            std::string(R"({"_class_name": "DDPMScheduler", "num_train_timesteps": 1000, "beta_schedule": "scaled_linear", "beta_start": 0.00085, "beta_end": 0.012, "prediction_type": "epsilon", "clip_sample": false})"))
-              .is_ok());
+  REQUIRE(
+      write_file_atomic(
+          root + "/model_index.json",
+          std::string(
+              R"({"_class_name": "DifixPipeline", "unet": ["diffusers", "UNet2DConditionModel"], "vae": ["diffusers", "AutoencoderKL"]})"))
+          .is_ok());
+  REQUIRE(
+      write_file_atomic(
+          root + "/scheduler/scheduler_config.json",
+          std::string(
+              R"({"_class_name": "DDPMScheduler", "num_train_timesteps": 1000, "beta_schedule": "scaled_linear", "beta_start": 0.00085, "beta_end": 0.012, "prediction_type": "epsilon", "clip_sample": false})"))
+          .is_ok());
   return root;
 }
 
@@ -153,7 +159,8 @@ TEST_CASE("difix: bad scheduler configs and inputs are refused by name", "[nets]
   CHECK_THAT(r2.status().message(), Catch::Contains("ctx"));
 }
 
-TEST_CASE("nn-run difix pipeline folder: the binary reproduces the golden", "[nets][difix][nn-run]") {
+TEST_CASE("nn-run difix pipeline folder: the binary reproduces the golden",
+          "[nets][difix][nn-run]") {
   test::TempDir dir("nn-run-difix");
   const std::string model = make_pipeline(dir);
   auto g = SafeTensors::open(test::golden_dir() + "/difix-tiny/case-macro.safetensors");

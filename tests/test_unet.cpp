@@ -6,8 +6,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
-#include <tuple>
 #include <nlohmann/json.hpp>
+#include <tuple>
 
 #include "attention/nets/nn_run.h"
 #include "attention/nets/synthetic_checkpoint.h"
@@ -23,7 +23,9 @@ using namespace macro::nets;
 
 namespace {
 
-std::string unet_dir() { return test::golden_dir() + "/unet-tiny"; }
+std::string unet_dir() {
+  return test::golden_dir() + "/unet-tiny";
+}
 
 Tensor read_tensor(const SafeTensors& f, const std::string& name) {
   const TensorEntry* e = f.find(name);
@@ -121,8 +123,8 @@ TEST_CASE("unet-tiny fp32 matches the diffusers goldens", "[nets][unet]") {
 
 TEST_CASE("unet-tiny bf16 stays within its stated bound", "[nets][unet][bf16]") {
   auto unet = load_tiny(Precision::kBf16);
-  for (const char* c : {"case-single", "case-odd", "case-ref2", "case-macro-masked",
-                        "case-macro-unmasked"})
+  for (const char* c :
+       {"case-single", "case-odd", "case-ref2", "case-macro-masked", "case-macro-unmasked"})
     run_case(*unet, c, kBf16);
 }
 
@@ -256,7 +258,8 @@ TEST_CASE("unet: a config with other widths, heads and layers builds and runs", 
       int64_t n = 1;
       for (int64_t d : shape) n *= d;
       auto v = std::make_unique<std::vector<float>>(size_t(n));
-      const bool norm = name.find("norm") != std::string::npos && name.find(".weight") != std::string::npos;
+      const bool norm =
+          name.find("norm") != std::string::npos && name.find(".weight") != std::string::npos;
       for (int64_t i = 0; i < n; ++i)
         (*v)[size_t(i)] = norm ? 1.0f : 0.05f * float(std::sin(double(i) * 0.37 + double(count)));
       p.data = v->data();
@@ -298,8 +301,8 @@ Status write_fast_full_checkpoint(const std::string& manifest, const std::string
     std::vector<int64_t> shape = it.value()["shape"].get<std::vector<int64_t>>();
     int64_t n = 1, fan_in = 1;
     for (size_t i = 0; i < shape.size(); ++i) n *= shape[i], fan_in *= i ? shape[i] : 1;
-    const bool norm_w = it.key().find("norm") != std::string::npos &&
-                        it.key().size() > 7 && it.key().compare(it.key().size() - 7, 7, ".weight") == 0;
+    const bool norm_w = it.key().find("norm") != std::string::npos && it.key().size() > 7 &&
+                        it.key().compare(it.key().size() - 7, 7, ".weight") == 0;
     const int64_t key = shape.size() == 1 ? (norm_w ? -1 : 0) : fan_in;
     max_numel[key] = std::max(max_numel[key], n);
     tensors.emplace_back(it.key(), shape);
@@ -342,7 +345,8 @@ TEST_CASE("unet: the full-size SD-Turbo layout from the manifest loads (bf16 sto
   auto t0 = std::chrono::steady_clock::now();
   std::printf("full unet write %.1f s\n", std::chrono::duration<double>(t0 - tw).count());
   auto m = UNet2DConditionModel::load(dir.path, Precision::kBf16);
-  std::printf("full unet load %.1f s\n", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  std::printf("full unet load %.1f s\n",
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   INFO((m.is_ok() ? "" : m.status().message()));
   REQUIRE(m.is_ok());
   CHECK((*m)->config().block_out_channels == std::vector<int>{320, 640, 1280, 1280});
@@ -353,7 +357,8 @@ TEST_CASE("unet: the full-size SD-Turbo layout from the manifest loads (bf16 sto
   for (int64_t i = 0; i < ctx.numel(); ++i) ctx.f32()[i] = float(std::cos(double(i) * 0.01));
   auto t1 = std::chrono::steady_clock::now();
   auto eps = (*m)->forward(z, 199, ctx, {}, &ThreadPool::global());
-  std::printf("full unet forward 8x8 %.1f s\n", std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count());
+  std::printf("full unet forward 8x8 %.1f s\n",
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count());
   REQUIRE(eps.is_ok());
   for (int64_t i = 0; i < eps->numel(); ++i) REQUIRE(std::isfinite(eps->f32()[i]));
 }
@@ -373,7 +378,8 @@ TEST_CASE("unet/vae: planned scratch at the full SD-Turbo / Difix sizes", "[nets
   auto vae = DifixVae::build(*vcfg);
   REQUIRE(vae.is_ok());
   const double gib = 1024.0 * 1024.0 * 1024.0;
-  for (auto [views, h, w] : {std::tuple{1, 64, 64}, std::tuple{2, 72, 128}, std::tuple{5, 72, 128}}) {
+  for (auto [views, h, w] :
+       {std::tuple{1, 64, 64}, std::tuple{2, 72, 128}, std::tuple{5, 72, 128}}) {
     const double u = double((*unet)->workspace_bytes(views, h, w)) / gib;
     std::printf("unet scratch: %d view(s) latent %dx%d: %.2f GiB\n", views, h, w, u);
     CHECK(u < 1.5 * views);  // activations only: no N x N attention matrix anywhere
@@ -386,7 +392,8 @@ TEST_CASE("unet/vae: planned scratch at the full SD-Turbo / Difix sizes", "[nets
   }
 }
 
-TEST_CASE("nn-run unet folder: golden case through the library entry point", "[nets][unet][nn-run]") {
+TEST_CASE("nn-run unet folder: golden case through the library entry point",
+          "[nets][unet][nn-run]") {
   test::TempDir dir("nn-run-unet");
   auto g = SafeTensors::open(unet_dir() + "/case-odd.safetensors");
   REQUIRE(g.is_ok());
@@ -408,7 +415,8 @@ TEST_CASE("nn-run unet folder: golden case through the library entry point", "[n
   auto o = SafeTensors::open(out);
   REQUIRE(o.is_ok());
   CHECK(o->metadata().at("model") == "unet");
-  check_close("nn-run output.eps", read_tensor(*o, "output.eps"), read_tensor(*g, "output.eps"), kFp32);
+  check_close("nn-run output.eps", read_tensor(*o, "output.eps"), read_tensor(*g, "output.eps"),
+              kFp32);
   // A NaN in the input is refused naming the tensor.
   z.f32()[5] = NAN;
   REQUIRE(write_safetensors(in, {{"input.z", DType::kF32, z.shape(), z.f32()},

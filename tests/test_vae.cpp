@@ -16,7 +16,9 @@ using namespace macro::nets;
 
 namespace {
 
-std::string vae_dir() { return test::golden_dir() + "/vae-tiny"; }
+std::string vae_dir() {
+  return test::golden_dir() + "/vae-tiny";
+}
 
 Tensor read_tensor(const SafeTensors& f, const std::string& name) {
   const TensorEntry* e = f.find(name);
@@ -92,7 +94,8 @@ TEST_CASE("vae: bad image sizes and skips are refused", "[nets][vae]") {
   CHECK_THAT(d.status().message(), Catch::Contains("skip0"));
 }
 
-TEST_CASE("vae: missing LoRA half, extra and mis-shaped tensors are reported by name", "[nets][vae]") {
+TEST_CASE("vae: missing LoRA half, extra and mis-shaped tensors are reported by name",
+          "[nets][vae]") {
   auto copy_with = [](const test::TempDir& dir,
                       const std::function<void(std::vector<TensorToWrite>&)>& edit) {
     auto f = SafeTensors::open(vae_dir() + "/diffusion_pytorch_model.safetensors");
@@ -111,7 +114,8 @@ TEST_CASE("vae: missing LoRA half, extra and mis-shaped tensors are reported by 
     test::TempDir dir("vae-missing");
     const std::string victim = "encoder.down_blocks.1.resnets.0.conv_shortcut.weight";
     auto m = copy_with(dir, [&](auto& ts) {
-      ts.erase(std::remove_if(ts.begin(), ts.end(), [&](auto& t) { return t.name == victim; }), ts.end());
+      ts.erase(std::remove_if(ts.begin(), ts.end(), [&](auto& t) { return t.name == victim; }),
+               ts.end());
     });
     REQUIRE_FALSE(m.is_ok());
     CHECK_THAT(m.status().message(), Catch::Contains("missing") && Catch::Contains(victim));
@@ -119,9 +123,9 @@ TEST_CASE("vae: missing LoRA half, extra and mis-shaped tensors are reported by 
   {
     test::TempDir dir("vae-lora-half");
     auto m = copy_with(dir, [&](auto& ts) {
-      ts.erase(std::remove_if(ts.begin(), ts.end(), [&](auto& t) {
-                 return t.name == "decoder.skip_conv_3.lora_B.vae_skip.weight";
-               }),
+      ts.erase(std::remove_if(
+                   ts.begin(), ts.end(),
+                   [&](auto& t) { return t.name == "decoder.skip_conv_3.lora_B.vae_skip.weight"; }),
                ts.end());
     });
     REQUIRE_FALSE(m.is_ok());
@@ -135,7 +139,8 @@ TEST_CASE("vae: missing LoRA half, extra and mis-shaped tensors are reported by 
       ts.push_back(t);
     });
     REQUIRE_FALSE(m.is_ok());
-    CHECK_THAT(m.status().message(), Catch::Contains("unused") && Catch::Contains("decoder.skip_conv_5.weight"));
+    CHECK_THAT(m.status().message(),
+               Catch::Contains("unused") && Catch::Contains("decoder.skip_conv_5.weight"));
   }
   {
     test::TempDir dir("vae-shape");
@@ -174,13 +179,15 @@ TEST_CASE("vae: the full-size Difix layout from the manifest loads and runs (bf1
   for (int64_t i = 0; i < dec->numel(); ++i) REQUIRE(std::isfinite(dec->f32()[i]));
 }
 
-TEST_CASE("nn-run vae folder: golden round trip through the library entry point", "[nets][vae][nn-run]") {
+TEST_CASE("nn-run vae folder: golden round trip through the library entry point",
+          "[nets][vae][nn-run]") {
   test::TempDir dir("nn-run-vae");
   auto g = SafeTensors::open(vae_dir() + "/case-roundtrip.safetensors");
   REQUIRE(g.is_ok());
   Tensor image = read_tensor(*g, "input.image");
   const std::string in = dir.file("in.safetensors"), out = dir.file("out.safetensors");
-  REQUIRE(write_safetensors(in, {{"input.image", DType::kF32, image.shape(), image.f32()}}).is_ok());
+  REQUIRE(
+      write_safetensors(in, {{"input.image", DType::kF32, image.shape(), image.f32()}}).is_ok());
   NnRunOptions opt;
   opt.model = vae_dir();
   opt.inputs = in;
@@ -191,7 +198,7 @@ TEST_CASE("nn-run vae folder: golden round trip through the library entry point"
   REQUIRE(s.is_ok());
   auto o = SafeTensors::open(out);
   REQUIRE(o.is_ok());
-  for (const char* n : {"output.moments", "output.z", "output.skip0", "output.skip1", "output.skip2",
-                        "output.skip3", "output.decoded_view0"})
+  for (const char* n : {"output.moments", "output.z", "output.skip0", "output.skip1",
+                        "output.skip2", "output.skip3", "output.decoded_view0"})
     check_close(std::string("nn-run ") + n, read_tensor(*o, n), read_tensor(*g, n), kFp32);
 }

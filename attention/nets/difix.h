@@ -37,7 +37,8 @@ struct DifixOutputs {
 class DifixPipeline {
  public:
   static bool is_pipeline_folder(const std::string& folder);  // model_index.json + unet/ + vae/
-  static Result<std::unique_ptr<DifixPipeline>> load(const std::string& folder, Precision precision);
+  static Result<std::unique_ptr<DifixPipeline>> load(const std::string& folder,
+                                                     Precision precision);
 
   Result<DifixOutputs> step(const TensorView& images, const TensorView& ctx, const UNetMasks& masks,
                             ThreadPool* pool, int timestep = kDefaultTimestep) const;

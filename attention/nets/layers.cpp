@@ -16,9 +16,8 @@ std::string join_name(const std::string& prefix, const std::string& name) {
 }
 
 Result<std::string> component_weights_path(const std::string& folder) {
-  for (const char* name :
-       {"diffusion_pytorch_model.safetensors", "diffusion_pytorch_model.safetensors.index.json",
-        "model.safetensors"}) {
+  for (const char* name : {"diffusion_pytorch_model.safetensors",
+                           "diffusion_pytorch_model.safetensors.index.json", "model.safetensors"}) {
     const std::string p = folder + "/" + name;
     if (file_exists(p)) return p;
   }
@@ -51,7 +50,8 @@ template <typename Fn>
 void parallel(const Run& r, size_t n, Fn&& fn, size_t grain = 0) {
   if (n == 0) return;
   if (r.pool && r.pool->size() > 1) {
-    r.pool->parallel_for(n, [&](size_t b, size_t e, int) { fn(b, e); }, grain);
+    r.pool->parallel_for(
+        n, [&](size_t b, size_t e, int) { fn(b, e); }, grain);
   } else {
     fn(size_t(0), n);
   }
@@ -204,8 +204,9 @@ void Conv2d::pack(Precision p) {
 
 void Conv2d::forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* y,
                      const float* residual, int stride, int pt, int pl, int pb, int pr) const {
-  if (!r.bf16()) return forward_scratch(r, const_cast<float*>(x), n, h, w, y, residual, stride, pt,
-                                        pl, pb, pr);  // fp32: x is only read
+  if (!r.bf16())
+    return forward_scratch(r, const_cast<float*>(x), n, h, w, y, residual, stride, pt, pl, pb,
+                           pr);  // fp32: x is only read
   ScratchFrame frame(r);
   float* t = r.alloc(n * c_in * h * w);
   copy_floats(r, t, x, n * c_in * h * w);
@@ -359,7 +360,9 @@ void Downsample2D::forward(const Run& r, const float* x, int64_t n, int64_t h, i
     conv.forward(r, x, n, h, w, out, nullptr, 2, 1, 1, 1, 1);
 }
 
-void Upsample2D::init(int64_t channels) { conv.init(channels, channels, 3); }
+void Upsample2D::init(int64_t channels) {
+  conv.init(channels, channels, 3);
+}
 
 void Upsample2D::forward(const Run& r, const float* x, int64_t n, int64_t c, int64_t h, int64_t w,
                          int64_t oh, int64_t ow, float* out) const {
@@ -399,10 +402,10 @@ void VaeAttention::pack(Precision p) {
 
 void VaeAttention::forward(const Run& r, float* x, int64_t n, int64_t hw) const {
   ScratchFrame frame(r);
-  float* g = r.alloc(n * c * hw);     // GN(x), NCHW
-  float* q = r.alloc(hw * 3 * c);     // [HW, 3C] q | k | v of one item
-  float* a = r.alloc(hw * c);         // attention output [HW, C]
-  float* o = r.alloc(hw * c);         // to_out [HW, C]
+  float* g = r.alloc(n * c * hw);  // GN(x), NCHW
+  float* q = r.alloc(hw * 3 * c);  // [HW, 3C] q | k | v of one item
+  float* a = r.alloc(hw * c);      // attention output [HW, C]
+  float* o = r.alloc(hw * c);      // to_out [HW, C]
   group_norm.forward(r, g, x, n, hw, false);
   for (int64_t i = 0; i < n; ++i) {
     qkv.forward(r, hw, g + i * c * hw, hw, q, 3 * c, /*trans_x=*/true);

@@ -41,7 +41,7 @@ std::string join_name(const std::string& prefix, const std::string& name);
 // Plans (counts) or serves scratch from an Arena, with stack marks.
 class Workspace {
  public:
-  Workspace() = default;                      // planning mode
+  Workspace() = default;                               // planning mode
   explicit Workspace(Arena* arena) : arena_(arena) {}  // execution mode
   bool planning() const { return arena_ == nullptr; }
   float* alloc(int64_t floats);  // nullptr while planning
@@ -175,7 +175,9 @@ struct Downsample2D {
   Conv2d conv;
   bool vae_padding = false;
   void init(int64_t channels, bool vae_pad);
-  void visit(const std::string& prefix, ParamVisitor& v) { conv.visit(join_name(prefix, "conv"), v); }
+  void visit(const std::string& prefix, ParamVisitor& v) {
+    conv.visit(join_name(prefix, "conv"), v);
+  }
   void pack(Precision p) { conv.pack(p); }
   void out_size(int64_t h, int64_t w, int64_t* oh, int64_t* ow) const;
   void forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* out) const;
@@ -186,10 +188,12 @@ struct Downsample2D {
 struct Upsample2D {
   Conv2d conv;
   void init(int64_t channels);
-  void visit(const std::string& prefix, ParamVisitor& v) { conv.visit(join_name(prefix, "conv"), v); }
+  void visit(const std::string& prefix, ParamVisitor& v) {
+    conv.visit(join_name(prefix, "conv"), v);
+  }
   void pack(Precision p) { conv.pack(p); }
-  void forward(const Run& r, const float* x, int64_t n, int64_t c, int64_t h, int64_t w,
-               int64_t oh, int64_t ow, float* out) const;
+  void forward(const Run& r, const float* x, int64_t n, int64_t c, int64_t h, int64_t w, int64_t oh,
+               int64_t ow, float* out) const;
 };
 
 // VAE mid-block attention: GN(eps) -> tokens -> single-head attention (q/k/v/out with biases,

@@ -39,8 +39,8 @@ Result<Tensor> read_float(const SafeTensors& f, const std::string& name, int ran
     return Status::error(f.path() + ": tensor '" + name + "': expected a float dtype, found " +
                          dtype_name(e->dtype));
   if (int(e->shape.size()) != rank)
-    return Status::error(f.path() + ": tensor '" + name + "': expected rank " + std::to_string(rank) +
-                         ", found shape " + shape_to_string(e->shape));
+    return Status::error(f.path() + ": tensor '" + name + "': expected rank " +
+                         std::to_string(rank) + ", found shape " + shape_to_string(e->shape));
   for (int64_t d : e->shape)
     if (d < 1)
       return Status::error(f.path() + ": tensor '" + name + "': expected non-empty dims, found " +
@@ -77,7 +77,8 @@ Status read_masks(const SafeTensors& f, const UNet2DConditionModel& unet, int64_
     if (idx.empty() || idx.size() > 2 || (idx.size() > 1 && idx[0] == '0') ||
         idx.find_first_not_of("0123456789") != std::string::npos ||
         std::stoi(idx) >= int(grids.size()))
-      return Status::error(f.path() + ": tensor '" + name + "': expected mask.level0 .. mask.level" +
+      return Status::error(f.path() + ": tensor '" + name +
+                           "': expected mask.level0 .. mask.level" +
                            std::to_string(grids.size() - 1));
     const size_t level = size_t(std::stoi(idx));
     const TensorEntry* e = f.find(name);
@@ -86,11 +87,11 @@ Status read_masks(const SafeTensors& f, const UNet2DConditionModel& unet, int64_
       return Status::error(f.path() + ": tensor '" + name + "': expected U8 or BOOL, found " +
                            dtype_name(e->dtype));
     if (e->shape != std::vector<int64_t>{tokens, tokens})
-      return Status::error(f.path() + ": tensor '" + name + "': expected [" + std::to_string(tokens) +
-                           "," + std::to_string(tokens) + "] (" + std::to_string(views) +
-                           " views x " + std::to_string(grids[level].first) + "x" +
-                           std::to_string(grids[level].second) + " tokens), found " +
-                           shape_to_string(e->shape));
+      return Status::error(
+          f.path() + ": tensor '" + name + "': expected [" + std::to_string(tokens) + "," +
+          std::to_string(tokens) + "] (" + std::to_string(views) + " views x " +
+          std::to_string(grids[level].first) + "x" + std::to_string(grids[level].second) +
+          " tokens), found " + shape_to_string(e->shape));
     MACRO_ASSIGN_OR_RETURN(BlockSparseMask m, mask_from_dense(e->data, int(tokens), int(tokens), 0,
                                                               /*group_tokens=*/true));
     store->push_back(std::move(m));
@@ -132,8 +133,8 @@ Status nn_run_vae(const NnRunOptions& opt, const SafeTensors& in) {
       {"output.z", DType::kF32, enc.z.shape(), enc.z.f32()},
       {"output.decoded_view0", DType::kF32, dec.shape(), dec.f32()}};
   for (size_t i = 0; i < enc.skips.size(); ++i)
-    outs.push_back({"output.skip" + std::to_string(i), DType::kF32, enc.skips[i].shape(),
-                    enc.skips[i].f32()});
+    outs.push_back(
+        {"output.skip" + std::to_string(i), DType::kF32, enc.skips[i].shape(), enc.skips[i].f32()});
   return write_safetensors(opt.out, outs, meta("vae", opt.precision));
 }
 

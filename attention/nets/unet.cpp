@@ -11,7 +11,8 @@ namespace macro::nets {
 
 // ---- attention and transformer -----------------------------------------------------------------
 
-void CrossAttention::init(int64_t channels, int64_t context_dim, int num_heads, bool self_attention) {
+void CrossAttention::init(int64_t channels, int64_t context_dim, int num_heads,
+                          bool self_attention) {
   c = channels;
   ctx_dim = context_dim;
   heads = num_heads;
@@ -81,9 +82,9 @@ void BasicTransformerBlock::forward(const Run& r, float* x, int64_t views, int64
   const int64_t dc = attn2.ctx_dim;
   const int heads = attn1.heads;
   ScratchFrame frame(r);
-  float* n = r.alloc(m * c);           // LayerNorm output, then attention output [M, C]
-  float* big = r.alloc(m * 8 * c);     // q|k|v [M, 3C], q2 [M, C], GEGLU projection [M, 8C]
-  float* g = r.alloc(m * 4 * c);       // GEGLU output [M, 4C]
+  float* n = r.alloc(m * c);        // LayerNorm output, then attention output [M, C]
+  float* big = r.alloc(m * 8 * c);  // q|k|v [M, 3C], q2 [M, C], GEGLU projection [M, 8C]
+  float* g = r.alloc(m * 4 * c);    // GEGLU output [M, 4C]
   float* kv = r.alloc(ctx_views * lc * 2 * c);  // cross k|v [Vc*Lc, 2C]
 
   // attn1: joint self-attention over all views' tokens (view-major), optionally masked.
@@ -106,7 +107,7 @@ void BasicTransformerBlock::forward(const Run& r, float* x, int64_t views, int64
 
   // attn2: per-view cross-attention to the text context.
   norm2.forward(r, n, x, m);
-  attn2.to_q.forward(r, m, n, c, big, c);                   // [M, C]
+  attn2.to_q.forward(r, m, n, c, big, c);                    // [M, C]
   attn2.qkv.forward(r, ctx_views * lc, ctx, dc, kv, 2 * c);  // [Vc*Lc, 2C]
   round_if_bf16(r, big, m * c);
   round_if_bf16(r, kv, ctx_views * lc * 2 * c);
@@ -221,7 +222,8 @@ Result<std::unique_ptr<UNet2DConditionModel>> UNet2DConditionModel::build(const 
     for (int j = 0; j < cfg.layers_per_block; ++j) {
       b.resnets[size_t(j)].init(j == 0 ? in : out, out, temb, groups, eps);
       if (cross)
-        b.attentions[size_t(j)].init(out, cfg.cross_attention_dim, cfg.num_heads[size_t(i)], groups);
+        b.attentions[size_t(j)].init(out, cfg.cross_attention_dim, cfg.num_heads[size_t(i)],
+                                     groups);
     }
     b.c_out = out;
     b.has_down = i + 1 < n;
@@ -234,7 +236,8 @@ Result<std::unique_ptr<UNet2DConditionModel>> UNet2DConditionModel::build(const 
   m->mid_block.resnets[1].init(cl, cl, temb, groups, eps);
   m->mid_block.attentions[0].init(cl, cfg.cross_attention_dim, cfg.num_heads.back(), groups);
   m->mid_block.c_out = cl;
-  std::vector<int> rev(boc.rbegin(), boc.rend()), rev_heads(cfg.num_heads.rbegin(), cfg.num_heads.rend());
+  std::vector<int> rev(boc.rbegin(), boc.rend()),
+      rev_heads(cfg.num_heads.rbegin(), cfg.num_heads.rend());
   out = rev[0];
   m->up_blocks.resize(size_t(n));
   for (int i = 0; i < n; ++i) {
@@ -250,7 +253,8 @@ Result<std::unique_ptr<UNet2DConditionModel>> UNet2DConditionModel::build(const 
       const int64_t skip = j == layers - 1 ? in : out;
       const int64_t rin = j == 0 ? prev : out;
       b.resnets[size_t(j)].init(rin + skip, out, temb, groups, eps);
-      if (cross) b.attentions[size_t(j)].init(out, cfg.cross_attention_dim, rev_heads[size_t(i)], groups);
+      if (cross)
+        b.attentions[size_t(j)].init(out, cfg.cross_attention_dim, rev_heads[size_t(i)], groups);
     }
     b.c_out = out;
     b.has_up = i + 1 < n;
@@ -268,7 +272,8 @@ void UNet2DConditionModel::visit(ParamVisitor& v) {
   for (size_t i = 0; i < down_blocks.size(); ++i)
     down_blocks[i].visit("down_blocks." + std::to_string(i), v);
   mid_block.visit("mid_block", v);
-  for (size_t i = 0; i < up_blocks.size(); ++i) up_blocks[i].visit("up_blocks." + std::to_string(i), v);
+  for (size_t i = 0; i < up_blocks.size(); ++i)
+    up_blocks[i].visit("up_blocks." + std::to_string(i), v);
   conv_norm_out.visit("conv_norm_out", v);
   conv_out.visit("conv_out", v);
 }
@@ -297,7 +302,8 @@ Result<std::unique_ptr<UNet2DConditionModel>> UNet2DConditionModel::load(const s
   return model;
 }
 
-std::vector<std::pair<int64_t, int64_t>> UNet2DConditionModel::level_grids(int64_t h, int64_t w) const {
+std::vector<std::pair<int64_t, int64_t>> UNet2DConditionModel::level_grids(int64_t h,
+                                                                           int64_t w) const {
   std::vector<std::pair<int64_t, int64_t>> g;
   for (size_t i = 0; i < down_blocks.size(); ++i) {
     g.emplace_back(h, w);
@@ -358,7 +364,8 @@ void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t vi
       float* o = r.alloc(views * b.c_out * hh * ww);
       b.resnets[j].forward(r, cur, views, hh, ww, emb, o);
       cc = b.c_out;
-      if (!b.attentions.empty()) b.attentions[j].forward(r, o, views, hh * ww, ctx, ctx_views, lc, mask_at(i));
+      if (!b.attentions.empty())
+        b.attentions[j].forward(r, o, views, hh * ww, ctx, ctx_views, lc, mask_at(i));
       cur = o;
       skips.push_back({cur, cc, hh, ww});
     }
@@ -392,7 +399,8 @@ void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t vi
     for (int i = 0; i < n; ++i) {
       const UNetBlock& b = up_blocks[size_t(i)];
       const auto [gh, gw] = grids[size_t(n - 1 - i)];
-      for (const ResnetBlock2D& rb : b.resnets) max_cat = std::max(max_cat, views * rb.c_in * gh * gw);
+      for (const ResnetBlock2D& rb : b.resnets)
+        max_cat = std::max(max_cat, views * rb.c_in * gh * gw);
       max_h = std::max(max_h, views * b.c_out * gh * gw);
       if (b.has_up && n - 2 - i >= 0) {
         const auto [nh, nw] = grids[size_t(n - 2 - i)];
@@ -462,8 +470,9 @@ Result<Tensor> UNet2DConditionModel::forward(const TensorView& z, float timestep
   if (ctx.dtype != DType::kF32 || ctx.rank != 3 || !ctx.is_contiguous() ||
       (ctx.dim(0) != views && ctx.dim(0) != 1) || ctx.dim(1) < 1 ||
       ctx.dim(2) != cfg_.cross_attention_dim)
-    return Status::error("unet: ctx: expected contiguous F32 [" + std::to_string(views) + " or 1,L," +
-                         std::to_string(cfg_.cross_attention_dim) + "], found " + ctx.describe());
+    return Status::error("unet: ctx: expected contiguous F32 [" + std::to_string(views) +
+                         " or 1,L," + std::to_string(cfg_.cross_attention_dim) + "], found " +
+                         ctx.describe());
   const auto grids = level_grids(h, w);
   if (masks.level.size() > grids.size())
     return Status::error("unet: masks: expected at most " + std::to_string(grids.size()) +

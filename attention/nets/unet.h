@@ -116,8 +116,8 @@ class UNet2DConditionModel {
 
  private:
   void forward_impl(const Run& r, const float* z, int64_t views, int64_t h, int64_t w, float t,
-                    const float* ctx, int64_t ctx_views, int64_t lc, const UNetMasks& masks, float* eps,
-                    const UNetTap& tap) const;
+                    const float* ctx, int64_t ctx_views, int64_t lc, const UNetMasks& masks,
+                    float* eps, const UNetTap& tap) const;
 
   UNetConfig cfg_;
   Precision precision_ = Precision::kF32;

@@ -232,7 +232,8 @@ Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skip
   if (images.dtype != DType::kF32 || images.rank != 4 || !images.is_contiguous() ||
       images.dim(1) != cfg_.in_channels || images.dim(0) < 1 || images.dim(2) < f ||
       images.dim(3) < f || images.dim(2) % f || images.dim(3) % f)
-    return Status::error("vae: images: expected contiguous F32 [N," + std::to_string(cfg_.in_channels) +
+    return Status::error("vae: images: expected contiguous F32 [N," +
+                         std::to_string(cfg_.in_channels) +
                          ",H,W] with H, W positive multiples of " + std::to_string(f) + ", found " +
                          images.describe());
   const int64_t n = images.dim(0), H = images.dim(2), W = images.dim(3);
@@ -245,7 +246,8 @@ Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skip
     int64_t hh = H, ww = W;
     for (int i = 0; i < levels(); ++i) {
       enc.skips.push_back(Tensor::f32({keep_skips, skip_channels(i), hh, ww}));
-      if (down_blocks[size_t(i)].has_down) down_blocks[size_t(i)].downsampler.out_size(hh, ww, &hh, &ww);
+      if (down_blocks[size_t(i)].has_down)
+        down_blocks[size_t(i)].downsampler.out_size(hh, ww, &hh, &ww);
     }
   }
   auto skip_ptrs = [&](int64_t img) {
@@ -271,8 +273,8 @@ Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skip
   // z = scaling * mean (first L channels of the moments).
   const float s = float(cfg_.scaling_factor);
   for (int64_t img = 0; img < n; ++img)
-    scale(enc.z.f32() + img * lat * h * w, enc.moments.f32() + img * 2 * lat * h * w, s, lat * h * w,
-          nullptr);
+    scale(enc.z.f32() + img * lat * h * w, enc.moments.f32() + img * 2 * lat * h * w, s,
+          lat * h * w, nullptr);
   return enc;
 }
 
@@ -335,8 +337,8 @@ Result<Tensor> DifixVae::decode(const TensorView& z, const std::vector<TensorVie
   const int64_t lat = cfg_.latent_channels, f = downscale();
   if (z.dtype != DType::kF32 || z.rank != 4 || !z.is_contiguous() || z.dim(0) != 1 ||
       z.dim(1) != lat || z.dim(2) < 1 || z.dim(3) < 1)
-    return Status::error("vae: z: expected contiguous F32 [1," + std::to_string(lat) + ",h,w], found " +
-                         z.describe());
+    return Status::error("vae: z: expected contiguous F32 [1," + std::to_string(lat) +
+                         ",h,w], found " + z.describe());
   const int64_t h = z.dim(2), w = z.dim(3);
   if (int(skips.size()) != levels())
     return Status::error("vae: expected " + std::to_string(levels()) + " skip tensors, found " +

@@ -12,7 +12,8 @@
 //
 // Every GroupNorm has eps 1e-6; the mid attention is one head with biases, scale 1/sqrt(C). The
 // encoder downsample pads right/bottom only. The decoder's PEFT LoRA (Difix release layout) is
-// merged at load by the WeightStore with VaeConfig::lora_scale; gamma is folded into the skip convs.
+// merged at load by the WeightStore with VaeConfig::lora_scale; gamma is folded into the skip
+// convs.
 #pragma once
 
 #include <memory>
