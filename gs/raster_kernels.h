@@ -1,4 +1,7 @@
-// Blend kernels of the splat rasterizer: one pixel row of a 16x16 tile against a list of Gaussians.
+// Kernel table of the splat rasterizer, one entry per hot loop, each with a scalar twin:
+//   project_geometry  Gaussians -> screen-space records (raster_project.cpp / _avx512.cpp)
+//   build_rows        a batch of a tile's records -> per-row lists (raster_blend.cpp / _avx512)
+//   blend_row         one pixel row of a 16x16 tile against a list (raster_blend*.cpp)
 //
 // The tile driver (raster_blend.cpp) gathers a batch of the tile's depth-sorted Gaussians into
 // TileSplat records, lists for every row the ones whose culling ellipse crosses that row, and calls
