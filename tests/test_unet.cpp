@@ -425,4 +425,13 @@ TEST_CASE("nn-run unet folder: golden case through the library entry point",
   Status bad = nn_run(opt);
   REQUIRE_FALSE(bad.is_ok());
   CHECK_THAT(bad.message(), Catch::Contains("input.z") && Catch::Contains("NaN"));
+  // A context of the wrong width is refused naming the tensor and the expected layout.
+  z.f32()[5] = 0.0f;
+  Tensor ctx40 = Tensor::f32({1, 77, 40});
+  REQUIRE(write_safetensors(in, {{"input.z", DType::kF32, z.shape(), z.f32()},
+                                 {"input.ctx", DType::kF32, ctx40.shape(), ctx40.f32()}})
+              .is_ok());
+  Status bad_ctx = nn_run(opt);
+  REQUIRE_FALSE(bad_ctx.is_ok());
+  CHECK_THAT(bad_ctx.message(), Catch::Contains("input.ctx") && Catch::Contains("48"));
 }

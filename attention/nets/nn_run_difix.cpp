@@ -100,6 +100,24 @@ Status read_masks(const SafeTensors& f, const UNet2DConditionModel& unet, int64_
   return Status::ok();
 }
 
+// The tensor's dims against `want` (-1 = any); the error names the file, the tensor and `layout`.
+Status expect_dims(const SafeTensors& f, const std::string& name, const Tensor& t,
+                   const std::vector<int64_t>& want, const std::string& layout) {
+  bool ok = int64_t(t.shape().size()) == int64_t(want.size());
+  for (size_t i = 0; ok && i < want.size(); ++i) ok = want[i] < 0 || t.dim(int(i)) == want[i];
+  if (ok) return Status::ok();
+  return Status::error(f.path() + ": tensor '" + name + "': expected " + layout + ", found " +
+                       shape_to_string(t.shape()));
+}
+
+// ctx [V or 1, L, Dc] for V views.
+Status expect_ctx(const SafeTensors& f, const Tensor& ctx, int64_t views, int64_t dc) {
+  if (ctx.dim(2) == dc && (ctx.dim(0) == views || ctx.dim(0) == 1)) return Status::ok();
+  return Status::error(f.path() + ": tensor 'input.ctx': expected [" + std::to_string(views) +
+                       " or 1, L, " + std::to_string(dc) + "], found " +
+                       shape_to_string(ctx.shape()));
+}
+
 std::map<std::string, std::string> meta(const char* model, Precision p) {
   return {{"model", model}, {"precision", precision_name(p)}};
 }
@@ -110,6 +128,10 @@ Status nn_run_unet(const NnRunOptions& opt, const SafeTensors& in) {
   MACRO_TRY(check_allowed(in, {"input.z", "input.ctx", "input.timestep"}, true, "unet"));
   MACRO_ASSIGN_OR_RETURN(Tensor z, read_float(in, "input.z", 4));
   MACRO_ASSIGN_OR_RETURN(Tensor ctx, read_float(in, "input.ctx", 3));
+  MACRO_ASSIGN_OR_RETURN(UNetConfig cfg, load_unet_config(opt.model + "/config.json"));
+  MACRO_TRY(expect_dims(in, "input.z", z, {-1, cfg.in_channels, -1, -1},
+                        "[V," + std::to_string(cfg.in_channels) + ",h,w]"));
+  MACRO_TRY(expect_ctx(in, ctx, z.dim(0), cfg.cross_attention_dim));
   MACRO_ASSIGN_OR_RETURN(auto unet, UNet2DConditionModel::load(opt.model, opt.precision));
   MACRO_ASSIGN_OR_RETURN(int t, read_timestep(in, 1000));
   std::vector<BlockSparseMask> store;
@@ -123,6 +145,13 @@ Status nn_run_unet(const NnRunOptions& opt, const SafeTensors& in) {
 Status nn_run_vae(const NnRunOptions& opt, const SafeTensors& in) {
   MACRO_TRY(check_allowed(in, {"input.image"}, false, "vae"));
   MACRO_ASSIGN_OR_RETURN(Tensor image, read_float(in, "input.image", 4));
+  MACRO_ASSIGN_OR_RETURN(VaeConfig cfg, load_vae_config(opt.model + "/config.json"));
+  const int64_t f = int64_t(1) << (cfg.block_out_channels.size() - 1);
+  MACRO_TRY(expect_dims(in, "input.image", image, {-1, cfg.in_channels, -1, -1},
+                        "[N," + std::to_string(cfg.in_channels) + ",H,W]"));
+  if (image.dim(2) % f || image.dim(3) % f)
+    return Status::error(in.path() + ": tensor 'input.image': expected H and W multiples of " +
+                         std::to_string(f) + ", found " + shape_to_string(image.shape()));
   MACRO_ASSIGN_OR_RETURN(auto vae, DifixVae::load(opt.model, opt.precision));
   MACRO_ASSIGN_OR_RETURN(VaeEncoding enc, vae->encode(image, image.dim(0), opt.pool));
   std::vector<TensorView> skips0;
@@ -142,6 +171,13 @@ Status nn_run_difix(const NnRunOptions& opt, const SafeTensors& in) {
   MACRO_TRY(check_allowed(in, {"input.images", "input.ctx", "input.timestep"}, true, "pipeline"));
   MACRO_ASSIGN_OR_RETURN(Tensor images, read_float(in, "input.images", 4));
   MACRO_ASSIGN_OR_RETURN(Tensor ctx, read_float(in, "input.ctx", 3));
+  {
+    MACRO_ASSIGN_OR_RETURN(UNetConfig ucfg, load_unet_config(opt.model + "/unet/config.json"));
+    MACRO_ASSIGN_OR_RETURN(VaeConfig vcfg, load_vae_config(opt.model + "/vae/config.json"));
+    MACRO_TRY(expect_dims(in, "input.images", images, {-1, vcfg.in_channels, -1, -1},
+                          "[V," + std::to_string(vcfg.in_channels) + ",H,W] in [-1,1]"));
+    MACRO_TRY(expect_ctx(in, ctx, images.dim(0), ucfg.cross_attention_dim));
+  }
   MACRO_ASSIGN_OR_RETURN(auto pipe, DifixPipeline::load(opt.model, opt.precision));
   MACRO_ASSIGN_OR_RETURN(int t, read_timestep(in, pipe->schedule().num_train_timesteps));
   const int64_t f = pipe->vae().downscale();
