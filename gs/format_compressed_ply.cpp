@@ -29,7 +29,9 @@ float unorm(uint32_t v, int bits) {
   const uint32_t max = (1u << bits) - 1u;
   return static_cast<float>(v & max) / static_cast<float>(max);
 }
-float lerp(float a, float b, float t) { return a * (1.f - t) + b * t; }
+float lerp(float a, float b, float t) {
+  return a * (1.f - t) + b * t;
+}
 
 }  // namespace
 
@@ -59,11 +61,10 @@ Result<GaussianCloud> decode_compressed_ply(const ply::Header& header, const uin
                          " chunks of 256, found " + std::to_string(chunk.count));
 
   // Chunk columns by name: 12 required, 6 optional colour bounds.
-  const char* kChunkNames[18] = {"min_x",       "min_y",       "min_z",       "max_x",
-                                 "max_y",       "max_z",       "min_scale_x", "min_scale_y",
-                                 "min_scale_z", "max_scale_x", "max_scale_y", "max_scale_z",
-                                 "min_r",       "min_g",       "min_b",       "max_r",
-                                 "max_g",       "max_b"};
+  const char* kChunkNames[18] = {
+      "min_x",       "min_y",       "min_z",       "max_x",       "max_y",       "max_z",
+      "min_scale_x", "min_scale_y", "min_scale_z", "max_scale_x", "max_scale_y", "max_scale_z",
+      "min_r",       "min_g",       "min_b",       "max_r",       "max_g",       "max_b"};
   int chunk_prop[18];
   int colour_props = 0;
   for (int k = 0; k < 18; ++k) {
@@ -91,7 +92,8 @@ Result<GaussianCloud> decode_compressed_ply(const ply::Header& header, const uin
                            "': expected uint, found " + ply::type_name(t));
   }
   if (vertex.has_lists() || chunk.has_lists())
-    return Status::error(file + ": compressed PLY elements 'chunk' and 'vertex' must not have "
+    return Status::error(file +
+                         ": compressed PLY elements 'chunk' and 'vertex' must not have "
                          "list properties");
 
   // Optional SH element.
@@ -103,13 +105,16 @@ Result<GaussianCloud> decode_compressed_ply(const ply::Header& header, const uin
       return Status::error(file + ": element 'sh': expected " + std::to_string(vertex.count) +
                            " rows (one per vertex), found " + std::to_string(sh->count));
     while (true) {
-      MACRO_ASSIGN_OR_RETURN(int i, ply::find_scalar(*sh, "f_rest_" + std::to_string(rest.size()), file));
+      MACRO_ASSIGN_OR_RETURN(int i,
+                             ply::find_scalar(*sh, "f_rest_" + std::to_string(rest.size()), file));
       if (i < 0) break;
       rest.push_back(i);
     }
     if (rest.size() % 3 != 0)
-      return Status::error(file + ": element 'sh': expected a multiple of 3 f_rest_* properties, "
-                           "found " + std::to_string(rest.size()));
+      return Status::error(file +
+                           ": element 'sh': expected a multiple of 3 f_rest_* properties, "
+                           "found " +
+                           std::to_string(rest.size()));
     per_channel = rest.size() / 3;
   }
   const int degree = sh_degree_for_rest(per_channel);
@@ -126,7 +131,8 @@ Result<GaussianCloud> decode_compressed_ply(const ply::Header& header, const uin
   float bounds[18] = {};
   for (size_t ch = 0; ch < n_chunks; ++ch) {
     for (int k = 0; k < 18; ++k)
-      bounds[k] = chunk_prop[k] >= 0 ? static_cast<float>(chunk_rows.value(ch, chunk_prop[k])) : 0.f;
+      bounds[k] =
+          chunk_prop[k] >= 0 ? static_cast<float>(chunk_rows.value(ch, chunk_prop[k])) : 0.f;
     const size_t end = std::min(N, (ch + 1) * kChunkSize);
     for (size_t i = ch * kChunkSize; i < end; ++i) {
       uint32_t v[4];
@@ -137,7 +143,8 @@ Result<GaussianCloud> decode_compressed_ply(const ply::Header& header, const uin
       bool finite = true;
       for (int a = 0; a < 3; ++a) {
         cloud.position[i * 3 + static_cast<size_t>(a)] = lerp(bounds[a], bounds[3 + a], tp[a]);
-        cloud.scale[i * 3 + static_cast<size_t>(a)] = std::exp(lerp(bounds[6 + a], bounds[9 + a], ts[a]));
+        cloud.scale[i * 3 + static_cast<size_t>(a)] =
+            std::exp(lerp(bounds[6 + a], bounds[9 + a], ts[a]));
       }
       for (int k = 0; k < 12 + (chunk_colour ? 6 : 0); ++k) finite &= std::isfinite(bounds[k]);
       // Colour.
@@ -151,7 +158,8 @@ Result<GaussianCloud> decode_compressed_ply(const ply::Header& header, const uin
       const float abc[3] = {(unorm(v[1] >> 20, 10) - 0.5f) * kSqrt2,
                             (unorm(v[1] >> 10, 10) - 0.5f) * kSqrt2,
                             (unorm(v[1], 10) - 0.5f) * kSqrt2};
-      const float m = std::sqrt(std::max(0.f, 1.f - (abc[0] * abc[0] + abc[1] * abc[1] + abc[2] * abc[2])));
+      const float m =
+          std::sqrt(std::max(0.f, 1.f - (abc[0] * abc[0] + abc[1] * abc[1] + abc[2] * abc[2])));
       const int largest = static_cast<int>(v[1] >> 30);
       float* q = &cloud.rotation[i * 4];
       for (int a = 0, j = 0; a < 4; ++a) q[a] = a == largest ? m : abc[j++];

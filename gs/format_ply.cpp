@@ -2,8 +2,8 @@
 // properties and elements ignored, SH degree 0-3 from the f_rest count, Mip-Splatting filter_3D
 // folded in) and encode (binary little-endian, the Inria layout, raw values).
 //
-// Legend: N Gaussians, K = (degree+1)^2 coefficients per channel, R = rest values per channel in the
-// file (K-1 normally; more when the file holds extra bands we do not load).
+// Legend: N Gaussians, K = (degree+1)^2 coefficients per channel, R = rest values per channel in
+// the file (K-1 normally; more when the file holds extra bands we do not load).
 //   file f_rest_j, j = c*R + (k-1), c in {R,G,B}, k = 1..K-1   (channel-major)
 //   cloud sh[n][k][c]                                          (coefficient-major, RGB fastest)
 #include <algorithm>
@@ -42,13 +42,20 @@ bool comment_says_antialiased(const std::vector<std::string>& comments) {
 // Divisor that maps a stored colour to [0, 1]: 255 for uchar, 65535 for ushort, 1 for floats.
 float colour_range(ply::Type t) {
   switch (t) {
-    case ply::Type::kUint8: return 255.f;
-    case ply::Type::kInt8: return 127.f;
-    case ply::Type::kUint16: return 65535.f;
-    case ply::Type::kInt16: return 32767.f;
-    case ply::Type::kUint32: return 4294967295.f;
-    case ply::Type::kInt32: return 2147483647.f;
-    default: return 1.f;
+    case ply::Type::kUint8:
+      return 255.f;
+    case ply::Type::kInt8:
+      return 127.f;
+    case ply::Type::kUint16:
+      return 65535.f;
+    case ply::Type::kInt16:
+      return 32767.f;
+    case ply::Type::kUint32:
+      return 4294967295.f;
+    case ply::Type::kInt32:
+      return 2147483647.f;
+    default:
+      return 1.f;
   }
 }
 
@@ -134,17 +141,18 @@ Result<GaussianCloud> decode_ply(const ply::Header& header, const uint8_t* data,
                          std::to_string(n_rest_named - 1) + " without gaps; 'f_rest_" +
                          std::to_string(n_rest) + "' is missing");
   if (n_rest % 3 != 0)
-    return Status::error(file + ": element 'vertex': expected a multiple of 3 f_rest_* properties "
-                         "(R, G, B), found " + std::to_string(n_rest));
+    return Status::error(file +
+                         ": element 'vertex': expected a multiple of 3 f_rest_* properties "
+                         "(R, G, B), found " +
+                         std::to_string(n_rest));
   const size_t per_channel = n_rest / 3;
   const int degree = sh_degree_for_rest(per_channel);
   const size_t K = static_cast<size_t>((degree + 1) * (degree + 1));
   if (per_channel != K - 1) {
     report.ignored_sh_coeffs = per_channel - (K - 1);
     log_info("load", file + ": " + std::to_string(per_channel) +
-                         " f_rest values per channel; loading SH degree " +
-                         std::to_string(degree) + " and ignoring " +
-                         std::to_string(report.ignored_sh_coeffs));
+                         " f_rest values per channel; loading SH degree " + std::to_string(degree) +
+                         " and ignoring " + std::to_string(report.ignored_sh_coeffs));
   }
 
   MACRO_ASSIGN_OR_RETURN(auto elements, ply::locate_elements(header, data, size, file));
@@ -220,12 +228,14 @@ Result<GaussianCloud> decode_ply(const ply::Header& header, const uint8_t* data,
   };
 
   bool all_float = !rows.variable_rows && !rows.swap_bytes;
-  for (int prop : columns) all_float &= rows.stored_type[static_cast<size_t>(prop)] == ply::Type::kFloat32;
+  for (int prop : columns)
+    all_float &= rows.stored_type[static_cast<size_t>(prop)] == ply::Type::kFloat32;
   std::vector<float> v(n_cols);
   if (all_float) {
     // The common layout (every used property a little-endian float): straight from each row.
     std::vector<size_t> offset(n_cols);
-    for (size_t c = 0; c < n_cols; ++c) offset[c] = rows.stored_offset[static_cast<size_t>(columns[c])];
+    for (size_t c = 0; c < n_cols; ++c)
+      offset[c] = rows.stored_offset[static_cast<size_t>(columns[c])];
     const uint8_t* row = rows.begin;
     for (size_t i = 0; i < N; ++i, row += rows.stride) {
       for (size_t c = 0; c < n_cols; ++c) std::memcpy(&v[c], row + offset[c], 4);
@@ -258,8 +268,9 @@ Result<GaussianCloud> decode_ply(const ply::Header& header, const uint8_t* data,
     std::fill(cloud.scale.begin(), cloud.scale.end(), s);
   }
   if (point_cloud)
-    log_info("load", file + ": a point cloud (red/green/blue, no f_dc): using default opacity, "
-                            "scale and rotation where absent (docs/formats.md)");
+    log_info("load", file +
+                         ": a point cloud (red/green/blue, no f_dc): using default opacity, "
+                         "scale and rotation where absent (docs/formats.md)");
   return cloud;
 }
 
@@ -273,8 +284,8 @@ Result<std::vector<uint8_t>> encode_ply(const GaussianCloud& cloud, const std::s
   for (const char* name : {"x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"})
     h += std::string("property float ") + name + "\n";
   for (size_t j = 0; j < 3 * R; ++j) h += "property float f_rest_" + std::to_string(j) + "\n";
-  for (const char* name : {"opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2",
-                           "rot_3"})
+  for (const char* name :
+       {"opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"})
     h += std::string("property float ") + name + "\n";
   h += "end_header\n";
   const size_t floats = 9 + 3 * R + 8;

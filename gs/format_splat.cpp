@@ -1,4 +1,5 @@
-// antimatter15 .splat: no header, N = file size / 32, one 32-byte little-endian record per Gaussian:
+// antimatter15 .splat: no header, N = file size / 32, one 32-byte little-endian record per
+// Gaussian:
 //   bytes  0..11  position      3 x f32
 //   bytes 12..23  scale         3 x f32, linear (already exponentiated)
 //   bytes 24..27  R G B A       4 x u8: RGB = (0.5 + C0*f_dc)*255, A = opacity*255 (after sigmoid)
@@ -45,10 +46,12 @@ Result<GaussianCloud> decode_splat(const uint8_t* data, size_t size, const std::
     std::copy(f, f + 3, &cloud.position[i * 3]);
     std::copy(f + 3, f + 6, &cloud.scale[i * 3]);
     const uint8_t* rgba = rec + 24;
-    for (int c = 0; c < 3; ++c) cloud.sh[i * 3 + static_cast<size_t>(c)] = (rgba[c] / 255.f - 0.5f) / kShC0;
+    for (int c = 0; c < 3; ++c)
+      cloud.sh[i * 3 + static_cast<size_t>(c)] = (rgba[c] / 255.f - 0.5f) / kShC0;
     cloud.opacity[i] = finite ? rgba[3] / 255.f : nan;
     for (int a = 0; a < 4; ++a)
-      cloud.rotation[i * 4 + static_cast<size_t>(a)] = (static_cast<float>(rec[28 + a]) - 128.f) / 128.f;
+      cloud.rotation[i * 4 + static_cast<size_t>(a)] =
+          (static_cast<float>(rec[28 + a]) - 128.f) / 128.f;
   }
   return cloud;
 }
@@ -66,7 +69,8 @@ Result<std::vector<uint8_t>> encode_splat(const GaussianCloud& cloud, const std:
     rec[27] = to_u8(cloud.opacity[i] * 255.f);
     const float* q = &cloud.rotation[i * 4];
     const float norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-    for (int a = 0; a < 4; ++a) rec[28 + a] = to_u8(norm > 0 ? q[a] / norm * 128.f + 128.f : (a == 0 ? 255.f : 128.f));
+    for (int a = 0; a < 4; ++a)
+      rec[28 + a] = to_u8(norm > 0 ? q[a] / norm * 128.f + 128.f : (a == 0 ? 255.f : 128.f));
   }
   (void)file;
   return out;

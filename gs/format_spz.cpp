@@ -41,7 +41,9 @@ constexpr float kSqrtHalf = 0.70710678118654752f;
 constexpr bool kFlipRest[15] = {true, true,  false, true, false, false, true, false,
                                 true, false, true,  true, false, true,  false};
 
-int rest_dim(int degree) { return (degree + 1) * (degree + 1) - 1; }
+int rest_dim(int degree) {
+  return (degree + 1) * (degree + 1) - 1;
+}
 
 uint32_t le32(const uint8_t* p) {
   return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
@@ -131,8 +133,8 @@ Result<GaussianCloud> decode_spz(const uint8_t* data, size_t size, const std::st
   const uint64_t payload = per_point * N;
   if (payload + kHeaderBytes > static_cast<uint64_t>(size) * kMaxDeflateRatio + 1024)
     return Status::error(file + ": .spz header: numPoints " + std::to_string(N) + " needs " +
-                         std::to_string(payload) + " bytes, more than the " +
-                         std::to_string(size) + "-byte gzip stream can hold (corrupt header?)");
+                         std::to_string(payload) + " bytes, more than the " + std::to_string(size) +
+                         "-byte gzip stream can hold (corrupt header?)");
   std::vector<uint8_t> body(static_cast<size_t>(payload));
   const size_t have = inflate_into(zs, body.data(), body.size(), &ended, &zerr);
   if (!zerr.empty()) return Status::error(file + ": corrupt gzip stream: " + zerr);
@@ -253,8 +255,8 @@ Result<std::vector<uint8_t>> encode_spz(const GaussianCloud& cloud, const std::s
     // wxyz (RDF) -> xyzw (RUB), normalised, then smallest three with the largest made positive.
     const float* q = &cloud.rotation[i * 4];
     float xyzw[4] = {q[1], -q[2], -q[3], q[0]};
-    float norm = std::sqrt(xyzw[0] * xyzw[0] + xyzw[1] * xyzw[1] + xyzw[2] * xyzw[2] +
-                           xyzw[3] * xyzw[3]);
+    float norm =
+        std::sqrt(xyzw[0] * xyzw[0] + xyzw[1] * xyzw[1] + xyzw[2] * xyzw[2] + xyzw[3] * xyzw[3]);
     if (!(norm > 0)) xyzw[0] = xyzw[1] = xyzw[2] = 0, xyzw[3] = norm = 1;
     int largest = 0;
     for (int c = 0; c < 4; ++c) {
@@ -266,7 +268,8 @@ Result<std::vector<uint8_t>> encode_spz(const GaussianCloud& cloud, const std::s
     for (int c = 0; c < 4; ++c) {
       if (c == largest) continue;
       const float v = negate ? -xyzw[c] : xyzw[c];
-      uint32_t mag = static_cast<uint32_t>(std::min(511.f, std::round(std::abs(v) / kSqrtHalf * 511.f)));
+      uint32_t mag =
+          static_cast<uint32_t>(std::min(511.f, std::round(std::abs(v) / kSqrtHalf * 511.f)));
       bits = bits << 10 | (v < 0 ? 0x200u : 0u) | mag;
     }
     put32(rot + i * 4, bits);
@@ -279,8 +282,8 @@ Result<std::vector<uint8_t>> encode_spz(const GaussianCloud& cloud, const std::s
 
   // gzip with zlib (windowBits 16+15 selects the gzip wrapper).
   z_stream zs{};
-  if (deflateInit2(&zs, Z_DEFAULT_COMPRESSION, Z_DEFLATED, 16 + MAX_WBITS, 8,
-                   Z_DEFAULT_STRATEGY) != Z_OK)
+  if (deflateInit2(&zs, Z_DEFAULT_COMPRESSION, Z_DEFLATED, 16 + MAX_WBITS, 8, Z_DEFAULT_STRATEGY) !=
+      Z_OK)
     return Status::error(file + ": cannot start gzip encoding");
   std::vector<uint8_t> out(deflateBound(&zs, static_cast<uLong>(raw.size())) + 64);
   constexpr size_t kChunk = 1u << 30;  // zlib counts in 32-bit uInt

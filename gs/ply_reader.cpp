@@ -9,7 +9,8 @@
 namespace macro::gs::ply {
 namespace {
 
-constexpr size_t kMaxHeaderBytes = 16u << 20;  // a header is a few KB; anything past this is not PLY
+constexpr size_t kMaxHeaderBytes = 16u
+                                   << 20;  // a header is a few KB; anything past this is not PLY
 
 struct TypeInfo {
   const char* name;
@@ -18,9 +19,9 @@ struct TypeInfo {
   size_t size;
 };
 constexpr TypeInfo kTypes[] = {
-    {"char", "int8", Type::kInt8, 1},       {"uchar", "uint8", Type::kUint8, 1},
-    {"short", "int16", Type::kInt16, 2},    {"ushort", "uint16", Type::kUint16, 2},
-    {"int", "int32", Type::kInt32, 4},      {"uint", "uint32", Type::kUint32, 4},
+    {"char", "int8", Type::kInt8, 1},        {"uchar", "uint8", Type::kUint8, 1},
+    {"short", "int16", Type::kInt16, 2},     {"ushort", "uint16", Type::kUint16, 2},
+    {"int", "int32", Type::kInt32, 4},       {"uint", "uint32", Type::kUint32, 4},
     {"float", "float32", Type::kFloat32, 4}, {"double", "float64", Type::kFloat64, 8},
 };
 
@@ -59,14 +60,22 @@ T load(const uint8_t* p, bool swap) {
 
 double read_value(const uint8_t* p, Type t, bool swap) {
   switch (t) {
-    case Type::kInt8: return load<int8_t>(p, false);
-    case Type::kUint8: return load<uint8_t>(p, false);
-    case Type::kInt16: return load<int16_t>(p, swap);
-    case Type::kUint16: return load<uint16_t>(p, swap);
-    case Type::kInt32: return load<int32_t>(p, swap);
-    case Type::kUint32: return load<uint32_t>(p, swap);
-    case Type::kFloat32: return load<float>(p, swap);
-    case Type::kFloat64: return load<double>(p, swap);
+    case Type::kInt8:
+      return load<int8_t>(p, false);
+    case Type::kUint8:
+      return load<uint8_t>(p, false);
+    case Type::kInt16:
+      return load<int16_t>(p, swap);
+    case Type::kUint16:
+      return load<uint16_t>(p, swap);
+    case Type::kInt32:
+      return load<int32_t>(p, swap);
+    case Type::kUint32:
+      return load<uint32_t>(p, swap);
+    case Type::kFloat32:
+      return load<float>(p, swap);
+    case Type::kFloat64:
+      return load<double>(p, swap);
   }
   return 0;
 }
@@ -91,18 +100,28 @@ void gather(const uint8_t* base, size_t stride, size_t n, float* out) {
 template <bool kSwap>
 void gather_any(Type t, const uint8_t* base, size_t stride, size_t n, float* out) {
   switch (t) {
-    case Type::kInt8: return gather<int8_t, kSwap>(base, stride, n, out);
-    case Type::kUint8: return gather<uint8_t, kSwap>(base, stride, n, out);
-    case Type::kInt16: return gather<int16_t, kSwap>(base, stride, n, out);
-    case Type::kUint16: return gather<uint16_t, kSwap>(base, stride, n, out);
-    case Type::kInt32: return gather<int32_t, kSwap>(base, stride, n, out);
-    case Type::kUint32: return gather<uint32_t, kSwap>(base, stride, n, out);
-    case Type::kFloat32: return gather<float, kSwap>(base, stride, n, out);
-    case Type::kFloat64: return gather<double, kSwap>(base, stride, n, out);
+    case Type::kInt8:
+      return gather<int8_t, kSwap>(base, stride, n, out);
+    case Type::kUint8:
+      return gather<uint8_t, kSwap>(base, stride, n, out);
+    case Type::kInt16:
+      return gather<int16_t, kSwap>(base, stride, n, out);
+    case Type::kUint16:
+      return gather<uint16_t, kSwap>(base, stride, n, out);
+    case Type::kInt32:
+      return gather<int32_t, kSwap>(base, stride, n, out);
+    case Type::kUint32:
+      return gather<uint32_t, kSwap>(base, stride, n, out);
+    case Type::kFloat32:
+      return gather<float, kSwap>(base, stride, n, out);
+    case Type::kFloat64:
+      return gather<double, kSwap>(base, stride, n, out);
   }
 }
 
-std::string element_label(const Element& e) { return "element '" + e.name + "'"; }
+std::string element_label(const Element& e) {
+  return "element '" + e.name + "'";
+}
 
 // Bytes a binary list row's item count says it holds; fails on negative or non-integer counts.
 bool list_count(const uint8_t* p, Type count_type, bool swap, uint64_t* out) {
@@ -114,8 +133,8 @@ bool list_count(const uint8_t* p, Type count_type, bool swap, uint64_t* out) {
 
 // Walks one binary row with lists starting at p; fills offsets of scalar properties (relative to
 // p) and returns the row size, or 0 with *error set when the row runs past `end`.
-size_t walk_row(const Element& e, const uint8_t* p, const uint8_t* end, bool swap,
-                size_t* offsets, std::string* error) {
+size_t walk_row(const Element& e, const uint8_t* p, const uint8_t* end, bool swap, size_t* offsets,
+                std::string* error) {
   size_t pos = 0;
   const size_t left = static_cast<size_t>(end - p);
   for (size_t k = 0; k < e.properties.size(); ++k) {
@@ -163,7 +182,9 @@ const char* type_name(Type t) {
     if (i.type == t) return i.name;
   return "?";
 }
-bool is_integer(Type t) { return t != Type::kFloat32 && t != Type::kFloat64; }
+bool is_integer(Type t) {
+  return t != Type::kFloat32 && t != Type::kFloat64;
+}
 
 bool Element::has_lists() const {
   for (const Property& p : properties)
@@ -233,12 +254,17 @@ Result<Header> parse_header(const uint8_t* data, size_t size, const std::string&
     if (key == "obj_info") continue;
     if (key == "format") {
       if (words.size() < 2) return Status::error(where + ": 'format' without a value");
-      if (words[1] == "ascii") h.encoding = Encoding::kAscii;
-      else if (words[1] == "binary_little_endian") h.encoding = Encoding::kBinaryLittleEndian;
-      else if (words[1] == "binary_big_endian") h.encoding = Encoding::kBinaryBigEndian;
+      if (words[1] == "ascii")
+        h.encoding = Encoding::kAscii;
+      else if (words[1] == "binary_little_endian")
+        h.encoding = Encoding::kBinaryLittleEndian;
+      else if (words[1] == "binary_big_endian")
+        h.encoding = Encoding::kBinaryBigEndian;
       else
-        return Status::error(where + ": format: expected ascii, binary_little_endian or "
-                             "binary_big_endian, found '" + std::string(words[1]) + "'");
+        return Status::error(where +
+                             ": format: expected ascii, binary_little_endian or "
+                             "binary_big_endian, found '" +
+                             std::string(words[1]) + "'");
       have_format = true;
       continue;
     }
@@ -266,8 +292,8 @@ Result<Header> parse_header(const uint8_t* data, size_t size, const std::string&
           return Status::error(where + ": list count type: expected an integer type, found '" +
                                std::string(words[2]) + "'");
         if (!parse_type(words[3], &p.type))
-          return Status::error(where + ": list item type: unknown type '" +
-                               std::string(words[3]) + "'");
+          return Status::error(where + ": list item type: unknown type '" + std::string(words[3]) +
+                               "'");
         p.name = std::string(words[4]);
       } else if (words.size() == 3) {
         if (!parse_type(words[1], &p.type))
@@ -275,8 +301,10 @@ Result<Header> parse_header(const uint8_t* data, size_t size, const std::string&
                                "': unknown type '" + std::string(words[1]) + "'");
         p.name = std::string(words[2]);
       } else {
-        return Status::error(where + ": expected 'property TYPE NAME' or 'property list "
-                             "COUNT_TYPE ITEM_TYPE NAME', found '" + std::string(line) + "'");
+        return Status::error(where +
+                             ": expected 'property TYPE NAME' or 'property list "
+                             "COUNT_TYPE ITEM_TYPE NAME', found '" +
+                             std::string(line) + "'");
       }
       e.properties.push_back(std::move(p));
       continue;
@@ -433,8 +461,10 @@ Status ElementRows::for_each_block(const std::vector<int>& columns, const BlockF
       for (size_t c = 0; c < nc; ++c) {
         const size_t k = static_cast<size_t>(columns[c]);
         float* out = buffer.data() + c * kBlockRows;
-        if (swap_bytes) gather_any<true>(stored_type[k], base + stored_offset[k], stride, n, out);
-        else gather_any<false>(stored_type[k], base + stored_offset[k], stride, n, out);
+        if (swap_bytes)
+          gather_any<true>(stored_type[k], base + stored_offset[k], stride, n, out);
+        else
+          gather_any<false>(stored_type[k], base + stored_offset[k], stride, n, out);
       }
     } else {
       for (size_t r = 0; r < n; ++r) {

@@ -32,14 +32,15 @@ enum class Type : uint8_t { kInt8, kUint8, kInt16, kUint16, kInt32, kUint32, kFl
 enum class Encoding : uint8_t { kAscii, kBinaryLittleEndian, kBinaryBigEndian };
 
 size_t type_size(Type t);
-const char* type_name(Type t);  // the canonical PLY spelling: char uchar short ushort int uint float double
+const char* type_name(
+    Type t);  // the canonical PLY spelling: char uchar short ushort int uint float double
 bool is_integer(Type t);
 
 struct Property {
   std::string name;
-  Type type = Type::kFloat32;        // scalar type, or the item type of a list
+  Type type = Type::kFloat32;  // scalar type, or the item type of a list
   bool is_list = false;
-  Type count_type = Type::kUint8;    // lists only: type of the leading item count
+  Type count_type = Type::kUint8;  // lists only: type of the leading item count
 };
 
 struct Element {
@@ -47,7 +48,7 @@ struct Element {
   uint64_t count = 0;
   std::vector<Property> properties;
   bool has_lists() const;
-  size_t scalar_row_bytes() const;   // bytes of one binary row if it has no lists
+  size_t scalar_row_bytes() const;            // bytes of one binary row if it has no lists
   int find(std::string_view property) const;  // index in properties, or -1
 };
 
@@ -74,19 +75,19 @@ struct ElementRows {
   ElementRows(const ElementRows&) = delete;
   ElementRows& operator=(const ElementRows&) = delete;
 
-  std::string file;                 // for messages
+  std::string file;  // for messages
   const Element* element = nullptr;
   uint64_t count = 0;
   // Storage layout of each property in a row (index = property index). For lists the offset is
   // meaningless; they cannot be read as columns.
   std::vector<Type> stored_type;
   std::vector<size_t> stored_offset;
-  bool swap_bytes = false;          // big-endian body on this little-endian host
-  bool variable_rows = false;       // binary rows with lists: walked row by row
-  const uint8_t* begin = nullptr;   // first byte of the first row
-  const uint8_t* end = nullptr;     // one past the last byte of the last row
-  size_t stride = 0;                // bytes per row when !variable_rows
-  std::vector<double> table;        // ASCII only: [count][scalar properties], begin points into it
+  bool swap_bytes = false;         // big-endian body on this little-endian host
+  bool variable_rows = false;      // binary rows with lists: walked row by row
+  const uint8_t* begin = nullptr;  // first byte of the first row
+  const uint8_t* end = nullptr;    // one past the last byte of the last row
+  size_t stride = 0;               // bytes per row when !variable_rows
+  std::vector<double> table;       // ASCII only: [count][scalar properties], begin points into it
 
   static constexpr size_t kBlockRows = 1024;
 

@@ -43,7 +43,9 @@ Result<GaussianCloud> decode_spz(const uint8_t* data, size_t size, const std::st
 Result<std::vector<uint8_t>> encode_spz(const GaussianCloud& cloud, const std::string& file);
 
 // Shared numeric helpers.
-inline float sigmoid(float x) { return 1.f / (1.f + std::exp(-x)); }
+inline float sigmoid(float x) {
+  return 1.f / (1.f + std::exp(-x));
+}
 // Degree whose (K-1) coefficients per channel fit in `per_channel` rest values (0..3).
 inline int sh_degree_for_rest(size_t per_channel) {
   int d = 0;

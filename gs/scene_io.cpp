@@ -24,7 +24,8 @@ std::string lower_extension(const std::string& name) {
   const size_t dot = name.find_last_of('.');
   if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
   std::string ext = name.substr(dot);
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
   return ext;
 }
 
@@ -55,8 +56,8 @@ void sanitize(GaussianCloud& c, LoadReport& report, const std::string& file) {
       c.opacity[kept] = c.opacity[i];
     }
     float* q = &c.rotation[kept * 4];
-    const double n2 = double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2] +
-                      double(q[3]) * q[3];
+    const double n2 =
+        double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2] + double(q[3]) * q[3];
     if (!(n2 > 1e-30)) {
       q[0] = 1.f, q[1] = q[2] = q[3] = 0.f;
       ++report.fixed_quaternions;
@@ -83,12 +84,11 @@ void sanitize(GaussianCloud& c, LoadReport& report, const std::string& file) {
     c.opacity.resize(kept);
   }
   if (report.dropped_nonfinite || report.fixed_quaternions || report.clamped_scales) {
-    log_info("load", file + ": dropped " + std::to_string(report.dropped_nonfinite) +
-                         " Gaussians with NaN/Inf values, set " +
-                         std::to_string(report.fixed_quaternions) +
-                         " zero quaternions to identity, clamped " +
-                         std::to_string(report.clamped_scales) +
-                         " Gaussians' zero/negative scales (docs/formats.md)");
+    log_info("load",
+             file + ": dropped " + std::to_string(report.dropped_nonfinite) +
+                 " Gaussians with NaN/Inf values, set " + std::to_string(report.fixed_quaternions) +
+                 " zero quaternions to identity, clamped " + std::to_string(report.clamped_scales) +
+                 " Gaussians' zero/negative scales (docs/formats.md)");
   }
 }
 
@@ -96,10 +96,14 @@ void sanitize(GaussianCloud& c, LoadReport& report, const std::string& file) {
 
 const char* scene_format_name(SceneFormat format) {
   switch (format) {
-    case SceneFormat::kPly: return "ply";
-    case SceneFormat::kCompressedPly: return "compressed.ply";
-    case SceneFormat::kSplat: return "splat";
-    case SceneFormat::kSpz: return "spz";
+    case SceneFormat::kPly:
+      return "ply";
+    case SceneFormat::kCompressedPly:
+      return "compressed.ply";
+    case SceneFormat::kSplat:
+      return "splat";
+    case SceneFormat::kSpz:
+      return "spz";
   }
   return "?";
 }
@@ -114,8 +118,10 @@ Result<SceneFormat> detect_scene_format(const uint8_t* data, size_t size, const 
   }
   if (formats::is_gzip(data, size) || ext == ".spz") return SceneFormat::kSpz;
   if (ext == ".ply") return SceneFormat::kPly;  // the PLY parser names what is wrong
-  return Status::error(name + ": unknown scene format: expected a PLY header, a gzip .spz or the "
-                       "extension .splat (found extension '" + ext + "')");
+  return Status::error(name +
+                       ": unknown scene format: expected a PLY header, a gzip .spz or the "
+                       "extension .splat (found extension '" +
+                       ext + "')");
 }
 
 Result<GaussianCloud> load_scene_from_memory(const uint8_t* data, size_t size,
@@ -134,8 +140,12 @@ Result<GaussianCloud> load_scene_from_memory(const uint8_t* data, size_t size,
                   : formats::decode_compressed_ply(header, data, size, name, limits, report);
       break;
     }
-    case SceneFormat::kSplat: cloud = formats::decode_splat(data, size, name, limits); break;
-    case SceneFormat::kSpz: cloud = formats::decode_spz(data, size, name, limits, report); break;
+    case SceneFormat::kSplat:
+      cloud = formats::decode_splat(data, size, name, limits);
+      break;
+    case SceneFormat::kSpz:
+      cloud = formats::decode_spz(data, size, name, limits, report);
+      break;
   }
   if (!cloud) return cloud.status();
   sanitize(*cloud, report, name);
@@ -153,15 +163,17 @@ Result<GaussianCloud> load_scene(const std::string& path, const LoadLimits& limi
     const uint64_t size = static_cast<uint64_t>(st.st_size);
     if (size > limits.max_file_bytes) {
       ::close(fd);
-      return Status::error(path + ": file of " + std::to_string(size) + " bytes exceeds the limit "
-                           "of " + std::to_string(limits.max_file_bytes) + " bytes");
+      return Status::error(path + ": file of " + std::to_string(size) +
+                           " bytes exceeds the limit "
+                           "of " +
+                           std::to_string(limits.max_file_bytes) + " bytes");
     }
     void* map = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
     ::close(fd);
     if (map != MAP_FAILED) {
       ::madvise(map, size, MADV_SEQUENTIAL);
-      auto cloud = load_scene_from_memory(static_cast<const uint8_t*>(map), size, path, limits,
-                                          report);
+      auto cloud =
+          load_scene_from_memory(static_cast<const uint8_t*>(map), size, path, limits, report);
       ::munmap(map, size);
       return cloud;
     }
@@ -182,22 +194,31 @@ Result<std::vector<uint8_t>> encode_scene(const GaussianCloud& cloud, SceneForma
                          std::to_string(N) + " Gaussians of SH degree " +
                          std::to_string(cloud.sh_degree) + ")");
   switch (format) {
-    case SceneFormat::kPly: return formats::encode_ply(cloud, name);
-    case SceneFormat::kSplat: return formats::encode_splat(cloud, name);
-    case SceneFormat::kSpz: return formats::encode_spz(cloud, name);
-    case SceneFormat::kCompressedPly: break;
+    case SceneFormat::kPly:
+      return formats::encode_ply(cloud, name);
+    case SceneFormat::kSplat:
+      return formats::encode_splat(cloud, name);
+    case SceneFormat::kSpz:
+      return formats::encode_spz(cloud, name);
+    case SceneFormat::kCompressedPly:
+      break;
   }
-  return Status::error(name + ": writing compressed .ply is not supported (use .ply, .splat or "
+  return Status::error(name +
+                       ": writing compressed .ply is not supported (use .ply, .splat or "
                        ".spz)");
 }
 
 Status save_scene(const GaussianCloud& cloud, const std::string& path) {
   const std::string ext = lower_extension(path);
   SceneFormat format;
-  if (ends_with(path, ".compressed.ply")) format = SceneFormat::kCompressedPly;
-  else if (ext == ".ply") format = SceneFormat::kPly;
-  else if (ext == ".splat") format = SceneFormat::kSplat;
-  else if (ext == ".spz") format = SceneFormat::kSpz;
+  if (ends_with(path, ".compressed.ply"))
+    format = SceneFormat::kCompressedPly;
+  else if (ext == ".ply")
+    format = SceneFormat::kPly;
+  else if (ext == ".splat")
+    format = SceneFormat::kSplat;
+  else if (ext == ".spz")
+    format = SceneFormat::kSpz;
   else
     return Status::error(path + ": unknown output extension '" + ext +
                          "' (expected .ply, .splat or .spz)");

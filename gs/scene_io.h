@@ -1,6 +1,7 @@
 // Splat scene files: Inria/gsplat .ply (binary LE/BE, ascii), SuperSplat compressed .ply, .splat,
-// .spz (v2, v3). The format is detected from the content (PLY header, gzip magic) and the extension.
-// All loaders return an activated GaussianCloud (gs/gaussians.h) in the RDF frame of .ply files.
+// .spz (v2, v3). The format is detected from the content (PLY header, gzip magic) and the
+// extension. All loaders return an activated GaussianCloud (gs/gaussians.h) in the RDF frame of
+// .ply files.
 //
 // Bad input never crashes, hangs or allocates from a lying size: counts are checked against the
 // file size and LoadLimits before allocating, and messages name the file and the field. Values that
@@ -24,17 +25,17 @@ enum class SceneFormat { kPly, kCompressedPly, kSplat, kSpz };
 const char* scene_format_name(SceneFormat format);  // "ply", "compressed.ply", "splat", "spz"
 
 struct LoadLimits {
-  size_t max_gaussians = 50'000'000;  // checked before allocating (raise with --max-gaussians)
+  size_t max_gaussians = 50'000'000;     // checked before allocating (raise with --max-gaussians)
   uint64_t max_file_bytes = 1ull << 36;  // 64 GiB: files larger than this are refused unread
 };
 
 struct LoadReport {
-  size_t dropped_nonfinite = 0;   // Gaussians with NaN/Inf fields, dropped
-  size_t fixed_quaternions = 0;   // zero quaternions replaced by identity
-  size_t clamped_scales = 0;      // zero/negative linear scales replaced by max(|s|, kMinScale)
+  size_t dropped_nonfinite = 0;  // Gaussians with NaN/Inf fields, dropped
+  size_t fixed_quaternions = 0;  // zero quaternions replaced by identity
+  size_t clamped_scales = 0;     // zero/negative linear scales replaced by max(|s|, kMinScale)
   SceneFormat format = SceneFormat::kPly;  // what the file was read as
-  size_t ignored_sh_coeffs = 0;   // rest coefficients per channel beyond degree 3 (or a ragged
-                                  // f_rest count) that were not loaded
+  size_t ignored_sh_coeffs = 0;  // rest coefficients per channel beyond degree 3 (or a ragged
+                                 // f_rest count) that were not loaded
 };
 
 // Smallest linear scale a loader keeps (see LoadReport::clamped_scales).
@@ -45,8 +46,7 @@ Result<GaussianCloud> load_scene(const std::string& path, const LoadLimits& limi
 // The same from bytes already in memory; `name` is used for format detection (its extension) and
 // in messages.
 Result<GaussianCloud> load_scene_from_memory(const uint8_t* data, size_t size,
-                                             const std::string& name,
-                                             const LoadLimits& limits = {},
+                                             const std::string& name, const LoadLimits& limits = {},
                                              LoadReport* report = nullptr);
 // Format from the content first (PLY header, gzip magic), then the extension (.splat).
 Result<SceneFormat> detect_scene_format(const uint8_t* data, size_t size, const std::string& name);

@@ -24,12 +24,16 @@ using namespace macro::gs;
 
 namespace {
 
-std::string scene_dir() { return test::shared_dir() + "/scenes/metalsplatter"; }
+std::string scene_dir() {
+  return test::shared_dir() + "/scenes/metalsplatter";
+}
 std::string metal(const std::string& ext) {
   return scene_dir() + "/test-splat.3-points-from-train." + ext;
 }
 
-std::vector<uint8_t> bytes_of(const std::string& s) { return {s.begin(), s.end()}; }
+std::vector<uint8_t> bytes_of(const std::string& s) {
+  return {s.begin(), s.end()};
+}
 
 GaussianCloud must_load(const std::string& path, LoadReport* report = nullptr) {
   auto r = load_scene(path, {}, report);
@@ -51,7 +55,9 @@ std::string load_error(const std::vector<uint8_t>& b, const std::string& name,
   return r.status().message();
 }
 
-float sigmoid(float x) { return 1.f / (1.f + std::exp(-x)); }
+float sigmoid(float x) {
+  return 1.f / (1.f + std::exp(-x));
+}
 
 // ---- A small PLY writer for tests, independent of the library's. ----
 struct TProp {
@@ -75,14 +81,30 @@ size_t tsize(const std::string& t) {
 void put_binary(std::vector<uint8_t>& out, const std::string& t, double v, bool big_endian) {
   uint8_t b[8];
   size_t n = tsize(t);
-  if (t == "char") { int8_t x = static_cast<int8_t>(v); std::memcpy(b, &x, 1); }
-  else if (t == "uchar") { uint8_t x = static_cast<uint8_t>(v); std::memcpy(b, &x, 1); }
-  else if (t == "short") { int16_t x = static_cast<int16_t>(v); std::memcpy(b, &x, 2); }
-  else if (t == "ushort") { uint16_t x = static_cast<uint16_t>(v); std::memcpy(b, &x, 2); }
-  else if (t == "int") { int32_t x = static_cast<int32_t>(v); std::memcpy(b, &x, 4); }
-  else if (t == "uint") { uint32_t x = static_cast<uint32_t>(v); std::memcpy(b, &x, 4); }
-  else if (t == "float") { float x = static_cast<float>(v); std::memcpy(b, &x, 4); }
-  else { std::memcpy(b, &v, 8); }
+  if (t == "char") {
+    int8_t x = static_cast<int8_t>(v);
+    std::memcpy(b, &x, 1);
+  } else if (t == "uchar") {
+    uint8_t x = static_cast<uint8_t>(v);
+    std::memcpy(b, &x, 1);
+  } else if (t == "short") {
+    int16_t x = static_cast<int16_t>(v);
+    std::memcpy(b, &x, 2);
+  } else if (t == "ushort") {
+    uint16_t x = static_cast<uint16_t>(v);
+    std::memcpy(b, &x, 2);
+  } else if (t == "int") {
+    int32_t x = static_cast<int32_t>(v);
+    std::memcpy(b, &x, 4);
+  } else if (t == "uint") {
+    uint32_t x = static_cast<uint32_t>(v);
+    std::memcpy(b, &x, 4);
+  } else if (t == "float") {
+    float x = static_cast<float>(v);
+    std::memcpy(b, &x, 4);
+  } else {
+    std::memcpy(b, &v, 8);
+  }
   if (big_endian) std::reverse(b, b + n);
   out.insert(out.end(), b, b + n);
 }
@@ -94,8 +116,9 @@ std::vector<uint8_t> make_ply(const std::string& format, const std::vector<TElem
   for (const auto& e : elements) {
     h += "element " + e.name + " " + std::to_string(e.rows.size()) + "\n";
     for (const auto& p : e.props)
-      h += p.list_count.empty() ? "property " + p.type + " " + p.name + "\n"
-                                : "property list " + p.list_count + " " + p.type + " " + p.name + "\n";
+      h += p.list_count.empty()
+               ? "property " + p.type + " " + p.name + "\n"
+               : "property list " + p.list_count + " " + p.type + " " + p.name + "\n";
   }
   h += "end_header\n";
   std::vector<uint8_t> out(h.begin(), h.end());
@@ -108,8 +131,10 @@ std::vector<uint8_t> make_ply(const std::string& format, const std::vector<TElem
         size_t items = 1;
         if (!p.list_count.empty()) {
           items = static_cast<size_t>(row[at]);
-          if (ascii) line += std::to_string(items) + " ";
-          else put_binary(out, p.list_count, row[at], be);
+          if (ascii)
+            line += std::to_string(items) + " ";
+          else
+            put_binary(out, p.list_count, row[at], be);
           ++at;
         }
         for (size_t j = 0; j < items; ++j, ++at) {
@@ -145,7 +170,8 @@ RawPly read_raw_metal_ply() {
   raw.n = 3;
   REQUIRE(bytes->size() == body + 3 * 62 * 4);
   raw.rows.resize(3);
-  for (size_t i = 0; i < 3; ++i) std::memcpy(raw.rows[i].data(), bytes->data() + body + i * 248, 248);
+  for (size_t i = 0; i < 3; ++i)
+    std::memcpy(raw.rows[i].data(), bytes->data() + body + i * 248, 248);
   return raw;
 }
 
@@ -171,7 +197,8 @@ TElement shuffled_vertex(const std::vector<std::array<float, 62>>& raw) {
   for (size_t r = 0; r < raw.size(); ++r) {
     std::vector<double> row;
     for (auto& [p, idx] : layout) {
-      if (idx == -1) row.push_back(static_cast<double>(r % 200));
+      if (idx == -1)
+        row.push_back(static_cast<double>(r % 200));
       else if (idx == -2) {
         const size_t n = r % 4;  // variable-length list
         row.push_back(static_cast<double>(n));
@@ -195,7 +222,8 @@ TElement inria_vertex(const std::vector<std::array<float, 62>>& raw, int degree,
   for (const char* n : {"x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"})
     v.props.push_back({n, "float"});
   for (int j = 0; j < 3 * R; ++j) v.props.push_back({"f_rest_" + std::to_string(j), "float"});
-  for (const char* n : {"opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"})
+  for (const char* n :
+       {"opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"})
     v.props.push_back({n, "float"});
   if (filter) v.props.push_back({"filter_3D", "float"});
   for (size_t r = 0; r < raw.size(); ++r) {
@@ -373,8 +401,10 @@ TEST_CASE("formats: the same 3 Gaussians from .ply .splat and .spz agree within 
   CHECK(sign_checked >= 10);
 }
 
-TEST_CASE("formats: .ply layouts ascii and big endian with shuffled typed properties and lists "
-          "and extra elements over several blocks of rows", "[formats]") {
+TEST_CASE(
+    "formats: .ply layouts ascii and big endian with shuffled typed properties and lists "
+    "and extra elements over several blocks of rows",
+    "[formats]") {
   RawPly raw = read_raw_metal_ply();
   // 2600 rows (crosses the 1024-row blocks): the 3 Gaussians with shifted positions.
   std::vector<std::array<float, 62>> rows;
@@ -385,7 +415,8 @@ TEST_CASE("formats: .ply layouts ascii and big endian with shuffled typed proper
     rows.push_back(row);
   }
   // An element with a variable-length list before the vertices: skipping it must be exact.
-  TElement before{"camera_track", {{"id", "int"}, {"path", "float", "ushort"}, {"w", "double"}}, {}};
+  TElement before{
+      "camera_track", {{"id", "int"}, {"path", "float", "ushort"}, {"w", "double"}}, {}};
   for (int r = 0; r < 5; ++r) {
     std::vector<double> row = {double(r), double(r)};
     for (int j = 0; j < r; ++j) row.push_back(0.5 * j);
@@ -415,13 +446,13 @@ TEST_CASE("formats: SH degree 0-3 inferred from the f_rest count", "[formats]") 
   }
   // A ragged count (4 per channel) loads degree 1 and reports the extra coefficient.
   TElement ragged{"vertex", {}, {}};
-  for (const char* n : {"x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1",
-                        "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"})
+  for (const char* n : {"x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0",
+                        "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"})
     ragged.props.push_back({n, "float"});
   for (int j = 0; j < 12; ++j) ragged.props.push_back({"f_rest_" + std::to_string(j), "float"});
   for (auto& row : raw.rows) {
-    std::vector<double> vals = {row[0], row[1], row[2], row[6], row[7], row[8], row[54], row[55],
-                                row[56], row[57], row[58], row[59], row[60], row[61]};
+    std::vector<double> vals = {row[0],  row[1],  row[2],  row[6],  row[7],  row[8],  row[54],
+                                row[55], row[56], row[57], row[58], row[59], row[60], row[61]};
     for (int c = 0; c < 3; ++c)
       for (int k = 0; k < 4; ++k) vals.push_back(row[static_cast<size_t>(9 + c * 15 + k)]);
     ragged.rows.push_back(vals);
@@ -439,8 +470,8 @@ TEST_CASE("formats: SH degree 0-3 inferred from the f_rest count", "[formats]") 
 TEST_CASE("formats: Mip-Splatting filter_3D is folded into scale and opacity", "[formats]") {
   RawPly raw = read_raw_metal_ply();
   const std::vector<float> filter = {0.01f, 0.f, 0.2f};
-  auto r = load_bytes(make_ply("binary_little_endian", {inria_vertex(raw.rows, 3, &filter)}),
-                      "mip.ply");
+  auto r =
+      load_bytes(make_ply("binary_little_endian", {inria_vertex(raw.rows, 3, &filter)}), "mip.ply");
   REQUIRE(r.is_ok());
   CHECK(r->mip_filter_3d_applied);
   for (size_t i = 0; i < 3; ++i) {
@@ -460,8 +491,14 @@ TEST_CASE("formats: Mip-Splatting filter_3D is folded into scale and opacity", "
 
 TEST_CASE("formats: a point-cloud .ply with red green blue and no f_dc loads with defaults",
           "[formats]") {
-  TElement v{"vertex", {{"x", "float"}, {"y", "float"}, {"z", "float"}, {"red", "uchar"},
-                        {"green", "uchar"}, {"blue", "uchar"}}, {}};
+  TElement v{"vertex",
+             {{"x", "float"},
+              {"y", "float"},
+              {"z", "float"},
+              {"red", "uchar"},
+              {"green", "uchar"},
+              {"blue", "uchar"}},
+             {}};
   for (int i = 0; i < 100; ++i)
     v.rows.push_back({double(i % 10), double(i / 10), 0.0, 255.0, 0.0, double(i)});
   auto r = load_bytes(make_ply("binary_little_endian", {v}), "points.ply");
@@ -482,20 +519,28 @@ TEST_CASE("formats: a point-cloud .ply with red green blue and no f_dc loads wit
 
 // ---- SuperSplat compressed .ply, encoded here bit by bit. ----
 namespace {
-uint32_t pack111011(uint32_t x, uint32_t y, uint32_t z) { return x << 21 | y << 11 | z; }
+uint32_t pack111011(uint32_t x, uint32_t y, uint32_t z) {
+  return x << 21 | y << 11 | z;
+}
 }  // namespace
 
 TEST_CASE("formats: compressed .ply decodes the documented bit layout", "[formats]") {
   const size_t N = 300;  // two chunks
   TElement chunk{"chunk", {}, {}};
-  const char* names[18] = {"min_x", "min_y", "min_z", "max_x", "max_y", "max_z", "min_scale_x",
-                           "min_scale_y", "min_scale_z", "max_scale_x", "max_scale_y",
-                           "max_scale_z", "min_r", "min_g", "min_b", "max_r", "max_g", "max_b"};
+  const char* names[18] = {
+      "min_x",       "min_y",       "min_z",       "max_x",       "max_y",       "max_z",
+      "min_scale_x", "min_scale_y", "min_scale_z", "max_scale_x", "max_scale_y", "max_scale_z",
+      "min_r",       "min_g",       "min_b",       "max_r",       "max_g",       "max_b"};
   for (const char* n : names) chunk.props.push_back({n, "float"});
   chunk.rows.push_back({-1, -2, -3, 1, 2, 3, -5, -4, -3, 0, 1, 2, 0, 0, 0, 1, 1, 1});
-  chunk.rows.push_back({10, 20, 30, 14, 24, 38, -2, -2, -2, -1, -1, -1, 0.25, 0.5, -0.5, 0.75, 1, 1.5});
-  TElement vertex{"vertex", {{"packed_position", "uint"}, {"packed_rotation", "uint"},
-                             {"packed_scale", "uint"}, {"packed_color", "uint"}}, {}};
+  chunk.rows.push_back(
+      {10, 20, 30, 14, 24, 38, -2, -2, -2, -1, -1, -1, 0.25, 0.5, -0.5, 0.75, 1, 1.5});
+  TElement vertex{"vertex",
+                  {{"packed_position", "uint"},
+                   {"packed_rotation", "uint"},
+                   {"packed_scale", "uint"},
+                   {"packed_color", "uint"}},
+                  {}};
   TElement sh{"sh", {}, {}};
   for (int j = 0; j < 9; ++j) sh.props.push_back({"f_rest_" + std::to_string(j), "uchar"});
   // Rotation: largest y (index 2 in w,x,y,z) = 0.5; others w=0.5, x=-0.5, z=0.5 at u = 873 / 150.
@@ -516,20 +561,22 @@ TEST_CASE("formats: compressed .ply decodes the documented bit layout", "[format
   CHECK(report.format == SceneFormat::kCompressedPly);
   REQUIRE(r->size() == N);
   REQUIRE(r->sh_degree == 1);
-  const float a = (873.f / 1023.f - 0.5f) * std::sqrt(2.f), b = (150.f / 1023.f - 0.5f) * std::sqrt(2.f);
+  const float a = (873.f / 1023.f - 0.5f) * std::sqrt(2.f),
+              b = (150.f / 1023.f - 0.5f) * std::sqrt(2.f);
   const float m = std::sqrt(1.f - (a * a + b * b + a * a));
   // rotation after normalisation (already unit up to rounding): (w, x, y, z) = (a, b, m, a).
   for (size_t i : {size_t(0), size_t(255), size_t(256), size_t(299)}) {
     const auto& ch = chunk.rows[i / 256];
     const float tz = static_cast<float>(i % 2048) / 2047.f;
-    CHECK(r->position[i * 3 + 0] == Approx(ch[3]).margin(1e-5));            // x = max
-    CHECK(r->position[i * 3 + 1] == Approx(ch[1]).margin(1e-5));            // y = min
+    CHECK(r->position[i * 3 + 0] == Approx(ch[3]).margin(1e-5));  // x = max
+    CHECK(r->position[i * 3 + 1] == Approx(ch[1]).margin(1e-5));  // y = min
     CHECK(r->position[i * 3 + 2] == Approx(ch[2] + (ch[5] - ch[2]) * tz).margin(1e-5));
     CHECK(r->scale[i * 3 + 0] == Approx(std::exp(ch[6])).epsilon(1e-5));
     CHECK(r->scale[i * 3 + 1] == Approx(std::exp(ch[10])).epsilon(1e-5));
-    CHECK(r->scale[i * 3 + 2] == Approx(std::exp(ch[8] + (ch[11] - ch[8]) * (1024.f / 2047.f))).epsilon(1e-5));
+    CHECK(r->scale[i * 3 + 2] ==
+          Approx(std::exp(ch[8] + (ch[11] - ch[8]) * (1024.f / 2047.f))).epsilon(1e-5));
     const double rgb[3] = {ch[12] + (ch[15] - ch[12]) * 1.f, ch[13] + (ch[16] - ch[13]) * 0.f,
-                          ch[14] + (ch[17] - ch[14]) * 0.2f};
+                           ch[14] + (ch[17] - ch[14]) * 0.2f};
     for (size_t c = 0; c < 3; ++c)
       CHECK(0.5f + kShC0 * r->sh[i * 4 * 3 + c] == Approx(rgb[c]).margin(1e-5));
     CHECK(r->opacity[i] == Approx(static_cast<float>(i % 256) / 255.f).margin(1e-6));
@@ -541,7 +588,8 @@ TEST_CASE("formats: compressed .ply decodes the documented bit layout", "[format
     const double u[9] = {0, 255, 128, 64, 32, 16, 8, 4, 2};
     for (size_t k = 1; k < 4; ++k)
       for (size_t c = 0; c < 3; ++c)
-        CHECK(r->sh[(i * 4 + k) * 3 + c] == Approx(u[c * 3 + k - 1] * 8.0 / 255.0 - 4.0).margin(1e-6));
+        CHECK(r->sh[(i * 4 + k) * 3 + c] ==
+              Approx(u[c * 3 + k - 1] * 8.0 / 255.0 - 4.0).margin(1e-6));
   }
   // The quaternion we meant to encode: (w, x, y, z) = (0.5, -0.5, 0.5, 0.5).
   CHECK(r->rotation[0] == Approx(0.5f).margin(2e-3));
@@ -551,12 +599,14 @@ TEST_CASE("formats: compressed .ply decodes the documented bit layout", "[format
 
   SECTION("too few chunks") {
     chunk.rows.pop_back();
-    auto msg = load_error(make_ply("binary_little_endian", {chunk, vertex, sh}), "few.compressed.ply");
+    auto msg =
+        load_error(make_ply("binary_little_endian", {chunk, vertex, sh}), "few.compressed.ply");
     CHECK_THAT(msg, Catch::Contains("few.compressed.ply") && Catch::Contains("chunk"));
   }
   SECTION("packed field of the wrong type") {
     vertex.props[1].type = "float";
-    auto msg = load_error(make_ply("binary_little_endian", {chunk, vertex, sh}), "t.compressed.ply");
+    auto msg =
+        load_error(make_ply("binary_little_endian", {chunk, vertex, sh}), "t.compressed.ply");
     CHECK_THAT(msg, Catch::Contains("t.compressed.ply") && Catch::Contains("packed_rotation") &&
                         Catch::Contains("float"));
   }
@@ -589,7 +639,9 @@ TEST_CASE("formats: .ply -> .ply round trip is exact to float rounding", "[forma
     double n = 0;
     for (size_t j = 58; j < 62; ++j) n += double(raw.rows[i][j]) * raw.rows[i][j];
     for (size_t j = 0; j < 62; ++j) {
-      const double want = j >= 3 && j < 6 ? 0.0 : j >= 58 ? raw.rows[i][j] / std::sqrt(n) : raw.rows[i][j];
+      const double want = j >= 3 && j < 6 ? 0.0
+                          : j >= 58       ? raw.rows[i][j] / std::sqrt(n)
+                                          : raw.rows[i][j];
       CHECK(row[j] == Approx(want).margin(2e-6).epsilon(2e-6));
     }
   }
@@ -698,7 +750,8 @@ TEST_CASE("formats: bad .ply input fails with messages naming the file and the f
   const size_t body = text.find("end_header\n") + 11;
 
   SECTION("empty file") {
-    CHECK_THAT(load_error({}, "empty.ply"), Catch::Contains("empty.ply") && Catch::Contains("empty"));
+    CHECK_THAT(load_error({}, "empty.ply"),
+               Catch::Contains("empty.ply") && Catch::Contains("empty"));
   }
   SECTION("truncated body") {
     std::vector<uint8_t> cut(good->begin(), good->end() - 100);
@@ -715,7 +768,8 @@ TEST_CASE("formats: bad .ply input fails with messages naming the file and the f
     std::string t = text;
     t.replace(t.find("property float scale_0"), 22, "property list uchar float scale_0");
     auto msg = load_error(bytes_of(t), "list.ply");
-    CHECK_THAT(msg, Catch::Contains("list.ply") && Catch::Contains("scale_0") && Catch::Contains("list"));
+    CHECK_THAT(
+        msg, Catch::Contains("list.ply") && Catch::Contains("scale_0") && Catch::Contains("list"));
   }
   SECTION("missing required property") {
     std::string t = text;
@@ -726,7 +780,8 @@ TEST_CASE("formats: bad .ply input fails with messages naming the file and the f
   SECTION("unknown property type") {
     std::string t = text;
     t.replace(t.find("property float x"), 16, "property float128 x");
-    CHECK_THAT(load_error(bytes_of(t), "t.ply"), Catch::Contains("t.ply") && Catch::Contains("float128"));
+    CHECK_THAT(load_error(bytes_of(t), "t.ply"),
+               Catch::Contains("t.ply") && Catch::Contains("float128"));
   }
   SECTION("vertex count beyond the file, checked before allocating") {
     for (const char* count : {"1000000", "40000000", "18446744073709551615"}) {
@@ -747,20 +802,24 @@ TEST_CASE("formats: bad .ply input fails with messages naming the file and the f
                Catch::Contains("three.ply") && Catch::Contains("limit"));
     std::string t = text;
     t.replace(t.find("element vertex 3"), 16, "element vertex 900000000000");
-    CHECK_THAT(load_error(bytes_of(t), "huge.ply"), Catch::Contains("huge.ply") && Catch::Contains("limit"));
+    CHECK_THAT(load_error(bytes_of(t), "huge.ply"),
+               Catch::Contains("huge.ply") && Catch::Contains("limit"));
   }
   SECTION("ascii: bad number, missing rows") {
     auto ascii = make_ply("ascii", {inria_vertex(read_raw_metal_ply().rows, 0)});
     std::string t(ascii.begin(), ascii.end());
     std::string bad = t;
     bad.replace(bad.rfind(' ', bad.size() - 3) + 1, 1, "x");
-    CHECK_THAT(load_error(bytes_of(bad), "a.ply"), Catch::Contains("a.ply") && Catch::Contains("expected a number"));
+    CHECK_THAT(load_error(bytes_of(bad), "a.ply"),
+               Catch::Contains("a.ply") && Catch::Contains("expected a number"));
     std::string shortened = t.substr(0, t.size() - 40);
-    CHECK_THAT(load_error(bytes_of(shortened), "b.ply"), Catch::Contains("b.ply") && Catch::Contains("truncated"));
+    CHECK_THAT(load_error(bytes_of(shortened), "b.ply"),
+               Catch::Contains("b.ply") && Catch::Contains("truncated"));
   }
   SECTION("elements without properties and absurd counts are skipped in constant time") {
     for (const char* format : {"ascii", "binary_little_endian", "binary_big_endian"}) {
-      auto bytes = make_ply(format, {TElement{"nothing", {}, {}}, inria_vertex(read_raw_metal_ply().rows, 0)});
+      auto bytes = make_ply(
+          format, {TElement{"nothing", {}, {}}, inria_vertex(read_raw_metal_ply().rows, 0)});
       std::string t(bytes.begin(), bytes.end());
       t.replace(t.find("element nothing 0"), 17, "element nothing 18446744073709551615");
       auto r = load_bytes(bytes_of(t), "empty_rows.ply");
@@ -780,18 +839,20 @@ TEST_CASE("formats: bad .ply input fails with messages naming the file and the f
   }
 }
 
-TEST_CASE("formats: NaN and Inf Gaussians dropped and zero quaternions fixed and counted", "[formats]") {
+TEST_CASE("formats: NaN and Inf Gaussians dropped and zero quaternions fixed and counted",
+          "[formats]") {
   RawPly raw = read_raw_metal_ply();
   std::vector<std::array<float, 62>> rows;
   for (int r = 0; r < 8; ++r) rows.push_back(raw.rows[static_cast<size_t>(r % 3)]);
-  rows[1][0] = NAN;                     // position
-  rows[2][9 + 20] = INFINITY;           // an f_rest
-  rows[3][54] = -INFINITY;              // opacity logit (sigmoid would hide it)
-  rows[4][55] = 200.f;                  // log scale overflowing exp
-  for (int a = 0; a < 4; ++a) rows[5][static_cast<size_t>(58 + a)] = 0.f;  // zero quaternion
+  rows[1][0] = NAN;            // position
+  rows[2][9 + 20] = INFINITY;  // an f_rest
+  rows[3][54] = -INFINITY;     // opacity logit (sigmoid would hide it)
+  rows[4][55] = 200.f;         // log scale overflowing exp
+  for (int a = 0; a < 4; ++a) rows[5][static_cast<size_t>(58 + a)] = 0.f;   // zero quaternion
   for (int a = 0; a < 4; ++a) rows[6][static_cast<size_t>(58 + a)] *= 3.f;  // not normalised
   LoadReport report;
-  auto r = load_bytes(make_ply("binary_little_endian", {inria_vertex(rows, 3)}), "nan.ply", &report);
+  auto r =
+      load_bytes(make_ply("binary_little_endian", {inria_vertex(rows, 3)}), "nan.ply", &report);
   REQUIRE(r.is_ok());
   CHECK(report.dropped_nonfinite == 4);
   CHECK(report.fixed_quaternions == 1);
@@ -812,7 +873,8 @@ TEST_CASE("formats: bad .splat input", "[formats]") {
   REQUIRE(good.is_ok());
   CHECK_THAT(load_error({}, "e.splat"), Catch::Contains("e.splat") && Catch::Contains("empty"));
   std::vector<uint8_t> odd(good->begin(), good->end() - 5);
-  CHECK_THAT(load_error(odd, "odd.splat"), Catch::Contains("odd.splat") && Catch::Contains("multiple of"));
+  CHECK_THAT(load_error(odd, "odd.splat"),
+             Catch::Contains("odd.splat") && Catch::Contains("multiple of"));
   LoadLimits limits;
   limits.max_gaussians = 2;
   CHECK_THAT(load_error(*good, "g.splat", limits), Catch::Contains("limit"));
@@ -889,21 +951,29 @@ TEST_CASE("formats: mutated files never crash the loaders", "[formats]") {
   const RawPly raw = read_raw_metal_ply();
   inputs.push_back({"fuzz_ascii.ply", make_ply("ascii", {inria_vertex(raw.rows, 2)})});
   TElement track{"track", {{"path", "float", "uchar"}}, {{2, 1, 2}, {0}, {1, 3}}};
-  inputs.push_back({"fuzz_be.ply", make_ply("binary_big_endian", {track, shuffled_vertex(raw.rows)})});
+  inputs.push_back(
+      {"fuzz_be.ply", make_ply("binary_big_endian", {track, shuffled_vertex(raw.rows)})});
   {
     TElement chunk{"chunk", {}, {{-1, -1, -1, 1, 1, 1, -5, -5, -5, 0, 0, 0}}};
-    for (const char* n : {"min_x", "min_y", "min_z", "max_x", "max_y", "max_z", "min_scale_x",
-                          "min_scale_y", "min_scale_z", "max_scale_x", "max_scale_y", "max_scale_z"})
+    for (const char* n :
+         {"min_x", "min_y", "min_z", "max_x", "max_y", "max_z", "min_scale_x", "min_scale_y",
+          "min_scale_z", "max_scale_x", "max_scale_y", "max_scale_z"})
       chunk.props.push_back({n, "float"});
-    TElement vertex{"vertex", {{"packed_position", "uint"}, {"packed_rotation", "uint"},
-                               {"packed_scale", "uint"}, {"packed_color", "uint"}}, {}};
+    TElement vertex{"vertex",
+                    {{"packed_position", "uint"},
+                     {"packed_rotation", "uint"},
+                     {"packed_scale", "uint"},
+                     {"packed_color", "uint"}},
+                    {}};
     TElement sh{"sh", {}, {}};
     for (int j = 0; j < 9; ++j) sh.props.push_back({"f_rest_" + std::to_string(j), "uchar"});
     for (uint32_t i = 0; i < 5; ++i) {
-      vertex.rows.push_back({double(i * 123457u), double(i * 7654321u), double(i * 98765u), double(i * 3333333u)});
+      vertex.rows.push_back(
+          {double(i * 123457u), double(i * 7654321u), double(i * 98765u), double(i * 3333333u)});
       sh.rows.push_back(std::vector<double>(9, double(i * 40)));
     }
-    inputs.push_back({"fuzz.compressed.ply", make_ply("binary_little_endian", {chunk, vertex, sh})});
+    inputs.push_back(
+        {"fuzz.compressed.ply", make_ply("binary_little_endian", {chunk, vertex, sh})});
   }
   std::mt19937 rng(1234);
   for (const auto& [name, good] : inputs) {
@@ -924,7 +994,8 @@ TEST_CASE("formats: mutated files never crash the loaders", "[formats]") {
         double n = 0;
         for (size_t i = 0; i < r->size(); ++i) {
           n = 0;
-          for (size_t a = 0; a < 4; ++a) n += double(r->rotation[i * 4 + a]) * r->rotation[i * 4 + a];
+          for (size_t a = 0; a < 4; ++a)
+            n += double(r->rotation[i * 4 + a]) * r->rotation[i * 4 + a];
           REQUIRE(n == Approx(1.0).margin(1e-5));
         }
       } else {

@@ -1,16 +1,16 @@
 // bench formats [--n N] [--reps R]: decode time of a synthetic N-Gaussian scene (default 1M, SH 3)
 // in each format, from memory and (for .ply) from a file, against a same-run baseline: one memcpy
 // of the .ply's bytes (the least any loader must do to touch them).
+#include <unistd.h>
 #include <algorithm>
 #include <cmath>
-#include <ctime>
-#include <functional>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <ctime>
+#include <functional>
 #include <random>
 #include <string>
-#include <unistd.h>
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/progress.h"
@@ -62,13 +62,17 @@ int run(int argc, char** argv) {
   size_t n = 1'000'000;
   int reps = 5;
   for (int i = 1; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--n")) n = std::strtoull(argv[i + 1], nullptr, 10);
-    else if (!std::strcmp(argv[i], "--reps")) reps = std::atoi(argv[i + 1]);
+    if (!std::strcmp(argv[i], "--n"))
+      n = std::strtoull(argv[i + 1], nullptr, 10);
+    else if (!std::strcmp(argv[i], "--reps"))
+      reps = std::atoi(argv[i + 1]);
   }
   set_quiet(true);
   const gs::GaussianCloud cloud = synthetic(n);
-  std::printf("scene: %zu Gaussians, SH degree 3; medians of process CPU time (single-threaded "
-              "loaders)\n", n);
+  std::printf(
+      "scene: %zu Gaussians, SH degree 3; medians of process CPU time (single-threaded "
+      "loaders)\n",
+      n);
   auto ply = gs::encode_scene(cloud, gs::SceneFormat::kPly, "bench.ply");
   auto splat = gs::encode_scene(cloud, gs::SceneFormat::kSplat, "bench.splat");
   auto spz = gs::encode_scene(cloud, gs::SceneFormat::kSpz, "bench.spz");
@@ -77,7 +81,8 @@ int run(int argc, char** argv) {
     return 1;
   }
   std::vector<uint8_t> copy(ply->size());
-  const double base = median_cpu_seconds(reps, [&] { std::memcpy(copy.data(), ply->data(), ply->size()); });
+  const double base =
+      median_cpu_seconds(reps, [&] { std::memcpy(copy.data(), ply->data(), ply->size()); });
   std::printf("%-34s %9.1f ms  (%.0f MB)\n", "baseline: memcpy of the .ply bytes", base * 1e3,
               ply->size() / 1e6);
   auto report = [&](const char* name, const std::vector<uint8_t>& bytes, const char* file) {
