@@ -147,12 +147,12 @@ TEST_CASE("attention matches a double reference without a mask", "[attention]") 
   struct Case {
     int nq, nk, heads, d;
   };
-  const Case cases[] = {{1, 1, 1, 16},   {37, 53, 2, 16}, {130, 77, 3, 64}, {64, 64, 1, 64},
-                        {200, 129, 2, 32}, {65, 300, 1, 8}, {33, 70, 2, 40}, {70, 45, 1, 24},
+  const Case cases[] = {{1, 1, 1, 16},     {37, 53, 2, 16}, {130, 77, 3, 64}, {64, 64, 1, 64},
+                        {200, 129, 2, 32}, {65, 300, 1, 8}, {33, 70, 2, 40},  {70, 45, 1, 24},
                         {20, 150, 1, 512}, {9, 5, 2, 3}};
   uint32_t seed = 1;
-  for (const Case& c : cases) check_all_paths(make_problem(c.nq, c.nk, c.heads, c.d, seed++),
-                                              nullptr, nullptr, false);
+  for (const Case& c : cases)
+    check_all_paths(make_problem(c.nq, c.nk, c.heads, c.d, seed++), nullptr, nullptr, false);
   // Peaked softmax (large logits) stresses the running max and rescaling.
   check_all_paths(make_problem(150, 200, 2, 64, 99, 3.0f), nullptr, nullptr, false, 1e-5);
 }
@@ -194,9 +194,9 @@ TEST_CASE("dense masks with interleaved groups become block sparse when grouped"
   REQUIRE(grouped.is_ok());
   REQUIRE(grouped->to_dense() == dense);
   INFO("plain: " << plain->partial_tiles() << " partial of " << plain->entries()
-                  << "; grouped: " << grouped->partial_tiles() << " partial of "
-                  << grouped->entries() << ", computed " << grouped->computed_pairs()
-                  << " for allowed " << grouped->allowed_pairs());
+                 << "; grouped: " << grouped->partial_tiles() << " partial of "
+                 << grouped->entries() << ", computed " << grouped->computed_pairs()
+                 << " for allowed " << grouped->allowed_pairs());
   CHECK(plain->partial_tiles() * 4 >= plain->entries() * 3);
   CHECK(grouped->partial_tiles() * 3 < grouped->entries());
   CHECK(double(grouped->computed_pairs()) < 1.15 * double(grouped->allowed_pairs()));

@@ -6,8 +6,8 @@
 //   m = -inf, l = 0, O = 0                                  // per row, base-2 logits
 //   for each listed key block (ascending):
 //     S = (Q K^T) * scale * log2(e), -inf where masked or beyond Nk     // [BQ, BK]
-//     m' = max(m, rowmax S); alpha = 2^(m - m'); P = 2^(S - m')         // rows with m' = -inf: P = 0
-//     l = alpha l + rowsum P;  O = alpha O + P V;  m = m'
+//     m' = max(m, rowmax S); alpha = 2^(m - m'); P = 2^(S - m')         // rows with m' = -inf: P =
+//     0 l = alpha l + rowsum P;  O = alpha O + P V;  m = m'
 //   out = O / l, or 0 where l == 0 (a row that may attend to nothing).
 #include "attention/runtime/attention.h"
 
@@ -116,7 +116,9 @@ double fma_peak_scalar(int64_t iterations) {
 
 // ---- driver ------------------------------------------------------------------------------------
 
-size_t align_up(size_t n) { return (n + 15) & ~size_t(15); }  // floats, to 64 bytes
+size_t align_up(size_t n) {
+  return (n + 15) & ~size_t(15);
+}  // floats, to 64 bytes
 
 struct ScratchLayout {
   size_t qt, s, o, m, l, alpha, total;  // offsets in floats
@@ -207,8 +209,8 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, ThreadPool& po
   const int workers = pool.size();
   const size_t slots = size_t(workers) * size_t(group);
   std::unique_ptr<float[]> floats(new float[layout.total * slots + 16]);
-  float* base = reinterpret_cast<float*>((reinterpret_cast<uintptr_t>(floats.get()) + 63) &
-                                         ~uintptr_t(63));
+  float* base =
+      reinterpret_cast<float*>((reinterpret_cast<uintptr_t>(floats.get()) + 63) & ~uintptr_t(63));
   std::vector<Slot> slot(slots);
   for (auto& b : slot) {
     b.key_blocks.resize(size_t(std::max(nkb, 1)));
@@ -287,7 +289,7 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, ThreadPool& po
         for (int g = 0; g < group; ++g) {
           const size_t k = size_t(worker) * size_t(group) + size_t(g);
           float* w = base + layout.total * k;
-          scratch[g] = BlockScratch{w + layout.qt, w + layout.s,     w + layout.o, w + layout.m,
+          scratch[g] = BlockScratch{w + layout.qt, w + layout.s,     w + layout.o,  w + layout.m,
                                     w + layout.l,  w + layout.alpha, slot[k].v_rows};
         }
         for (size_t item = begin; item < end; ++item) {

@@ -66,15 +66,15 @@ inline constexpr int kMaxHeadDim = 512;
 
 // One (head, query block) work item, already resolved to row pointers in token order.
 struct BlockJob {
-  int rows = 0;  // valid query rows, 1..kAttnBlockQ
-  int d = 0;     // head dim
-  float scale_log2e = 0;              // scale * log2(e): scores are kept in base 2
-  const float* const* q_rows = nullptr;  // [rows] -> D floats of this head
-  float* const* out_rows = nullptr;      // [rows] -> D floats of this head
+  int rows = 0;                           // valid query rows, 1..kAttnBlockQ
+  int d = 0;                              // head dim
+  float scale_log2e = 0;                  // scale * log2(e): scores are kept in base 2
+  const float* const* q_rows = nullptr;   // [rows] -> D floats of this head
+  float* const* out_rows = nullptr;       // [rows] -> D floats of this head
   int entries = 0;                        // key blocks to visit
   const int32_t* key_blocks = nullptr;    // [entries]
   const uint8_t* const* tiles = nullptr;  // [entries] [BK, BQ] element tile, or null = full
-  const float* k = nullptr;  // head slice of row 0; key token j at k + j * k_stride
+  const float* k = nullptr;               // head slice of row 0; key token j at k + j * k_stride
   const float* v = nullptr;
   size_t k_stride = 0, v_stride = 0;
   const int32_t* key_index = nullptr;  // mask column -> key token, or null = identity

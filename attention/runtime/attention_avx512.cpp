@@ -35,8 +35,8 @@ struct Avx512 {
     V p = _mm512_set1_ps(kExp2Coef[7]);
     for (int k = 6; k >= 0; --k) p = _mm512_fmadd_ps(p, f, _mm512_set1_ps(kExp2Coef[k]));
     // 2^n from the exponent field; n = -127 gives the bit pattern of 0.0f.
-    const __m512i e = _mm512_slli_epi32(_mm512_add_epi32(_mm512_cvtps_epi32(n),
-                                                         _mm512_set1_epi32(127)), 23);
+    const __m512i e =
+        _mm512_slli_epi32(_mm512_add_epi32(_mm512_cvtps_epi32(n), _mm512_set1_epi32(127)), 23);
     return _mm512_mul_ps(p, _mm512_castsi512_ps(e));
   }
   static V mask_tile(V s, const uint8_t* t) {

@@ -12,7 +12,9 @@ constexpr int kBQ = kAttnBlockQ;
 constexpr int kBK = kAttnBlockK;
 constexpr size_t kTileElems = size_t(kBQ) * kBK;
 
-int blocks(int n, int b) { return (n + b - 1) / b; }
+int blocks(int n, int b) {
+  return (n + b - 1) / b;
+}
 
 enum class TileKind { kEmpty, kFull, kPartial };
 
@@ -219,7 +221,7 @@ Result<BlockSparseMask> mask_from_dense(const uint8_t* dense, int nq, int nk, si
           for (int c = kb * kBK; c < c1; ++c) ones += at(r, c);
         if (ones == 0) return TileKind::kEmpty;
         return ones == int64_t(r1 - qb * kBQ) * (c1 - kb * kBK) ? TileKind::kFull
-                                                                 : TileKind::kPartial;
+                                                                : TileKind::kPartial;
       },
       [&](int qb, int kb, uint8_t* t) {
         const int r1 = std::min(nq, (qb + 1) * kBQ), c1 = std::min(nk, (kb + 1) * kBK);
@@ -300,10 +302,12 @@ Result<BlockSparseMask> macro_closeup_mask(int tokens_per_view, int planes,
                                            const std::vector<uint8_t>& crop_valid) {
   const int n = tokens_per_view;
   const int crops = static_cast<int>(crop_plane.size());
-  auto fail = [](const std::string& what) { return Status::error("MACRO attention mask: " + what); };
+  auto fail = [](const std::string& what) {
+    return Status::error("MACRO attention mask: " + what);
+  };
   if (n <= 0 || planes <= 0)
-    return fail("tokens_per_view and planes must be positive, found " + std::to_string(n) + " and " +
-                std::to_string(planes));
+    return fail("tokens_per_view and planes must be positive, found " + std::to_string(n) +
+                " and " + std::to_string(planes));
   if (int64_t(n) * (1 + crops) > INT32_MAX / 2) return fail("too many tokens");
   if (closeup_plane.size() != size_t(n))
     return fail("closeup_plane: expected " + std::to_string(n) + " labels, found " +

@@ -39,17 +39,19 @@ inline constexpr int kAttnBlockQ = 64;
 inline constexpr int kAttnBlockK = 64;
 
 // Position of (query r, key c) inside an element tile (key-major).
-inline constexpr int tile_offset(int r, int c) { return c * kAttnBlockQ + r; }
+inline constexpr int tile_offset(int r, int c) {
+  return c * kAttnBlockQ + r;
+}
 
 struct BlockSparseMask {
-  int nq = 0;  // query tokens (mask rows)
-  int nk = 0;  // key tokens (mask columns)
+  int nq = 0;                        // query tokens (mask rows)
+  int nk = 0;                        // key tokens (mask columns)
   std::vector<int32_t> query_index;  // [nq] mask row -> query token; empty = identity
   std::vector<int32_t> key_index;    // [nk] mask column -> key token; empty = identity
   std::vector<int32_t> block_begin;  // [nqb + 1] query block b lists entries block_begin[b]..[b+1]
   std::vector<int32_t> key_block;    // [entries] key block seen by the query block (ascending)
   std::vector<int32_t> tile;         // [entries] -1 = full, else index of its element tile
-  std::vector<uint8_t> tiles;        // [partial, BK, BQ] element tiles, 1 = may attend (0 beyond edges)
+  std::vector<uint8_t> tiles;  // [partial, BK, BQ] element tiles, 1 = may attend (0 beyond edges)
 
   int query_blocks() const { return static_cast<int>(block_begin.size()) - 1; }
   size_t entries() const { return key_block.size(); }
@@ -60,7 +62,8 @@ struct BlockSparseMask {
 
   // Exact number of allowed (query, key) pairs (full tiles clipped to the Nq/Nk edges).
   int64_t allowed_pairs() const;
-  // Pairs inside listed tiles (what the kernel computes): sum over entries of the clipped tile area.
+  // Pairs inside listed tiles (what the kernel computes): sum over entries of the clipped tile
+  // area.
   int64_t computed_pairs() const;
   // The dense uint8 [nq, nk] mask in token order (for tests; materialises the full square).
   std::vector<uint8_t> to_dense() const;
@@ -76,9 +79,9 @@ Result<BlockSparseMask> mask_from_dense(const uint8_t* dense, int nq, int nk, si
 
 // Group-structured mask. query_group [nq] in [0, num_query_groups), key_group [nk] in
 // [0, num_key_groups), allowed [num_query_groups, num_key_groups] row-major (non-zero = may see).
-// Tokens are stably sorted by group (query_index / key_index), so each group is a contiguous run and
-// a tile is full, empty or partial only where runs meet a tile edge. Cost O(nq + nk + tiles * groups
-// meeting in a tile); the dense mask is never formed.
+// Tokens are stably sorted by group (query_index / key_index), so each group is a contiguous run
+// and a tile is full, empty or partial only where runs meet a tile edge. Cost O(nq + nk + tiles *
+// groups meeting in a tile); the dense mask is never formed.
 Result<BlockSparseMask> mask_from_groups(const std::vector<int32_t>& query_group,
                                          const std::vector<int32_t>& key_group,
                                          int num_query_groups, int num_key_groups,

@@ -5,16 +5,16 @@
 //
 // Traits T provide: using V; W (lanes); load/store (unaligned), set1, zero, fma(a, b, c) = a*b + c,
 // mul, add, sub, max, exp2 (flushes to 0 below 2^-126, exact 0 for -inf), mask_tile(s, t) (lanes
-// whose uint8 in t is 0 become -inf). Tiling constants of T: kScoreRows keys x kScoreVecs vectors of
-// queries for S^T = K Q^T, kPvRows query rows x kPvVecs vectors of channels for O += P V.
+// whose uint8 in t is 0 become -inf). Tiling constants of T: kScoreRows keys x kScoreVecs vectors
+// of queries for S^T = K Q^T, kPvRows query rows x kPvVecs vectors of channels for O += P V.
 //
 // Legend: BQ = BK = 64 (tile), D head dim, R register rows.
 #pragma once
 
 #include <algorithm>
 #include <climits>
-#include <cstring>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 
 #include "attention/runtime/attention.h"
@@ -120,8 +120,7 @@ inline void pv_chunk(int rows, const float* pt, int cols, const float* const* v_
   for (; r + R <= rows; r += R)
     pv_rows<T, R, DV>(pt + r, cols, v_rows, d0, o + size_t(r) * d, d, alpha + r);
   if (r < rows)
-    pv_rows_tail<T, DV, R - 1>(rows - r, pt + r, cols, v_rows, d0, o + size_t(r) * d, d,
-                               alpha + r);
+    pv_rows_tail<T, DV, R - 1>(rows - r, pt + r, cols, v_rows, d0, o + size_t(r) * d, d, alpha + r);
 }
 
 // O = alpha O + P V over all D columns.

@@ -61,9 +61,12 @@ Timing fma_peak_gflops(const AttentionKernels& k, ThreadPool& pool) {
   const int64_t iters = 20'000'000;
   const int threads = pool.size();
   const Timing t = median_timing(3, [&] {
-    pool.parallel_for(size_t(threads), [&](size_t b, size_t e, int) {
-      for (size_t i = b; i < e; ++i) k.fma_peak(iters);
-    }, 1);
+    pool.parallel_for(
+        size_t(threads),
+        [&](size_t b, size_t e, int) {
+          for (size_t i = b; i < e; ++i) k.fma_peak(iters);
+        },
+        1);
   });
   const double flop = k.fma_peak(1) * double(iters) * threads;
   return {flop / t.wall * 1e-9, flop / t.cpu * 1e-9};
@@ -186,19 +189,21 @@ int run(int argc, char** argv) {
   std::printf("attention: path %s, tile %d x %d, medians of %d runs\n", isa_name(kern.isa),
               kAttnBlockQ, kAttnBlockK, reps);
   for (const MaskCase& m : masks)
-    std::printf("  mask %-30s allowed %.4f, computed tiles cover %.4f of the square, %zu of %zu "
-                "listed tiles partial\n",
-                m.name.c_str(), double(m.mask.allowed_pairs()) / (double(n) * n),
-                double(m.mask.computed_pairs()) / (double(n) * n), m.mask.partial_tiles(),
-                m.mask.entries());
+    std::printf(
+        "  mask %-30s allowed %.4f, computed tiles cover %.4f of the square, %zu of %zu "
+        "listed tiles partial\n",
+        m.name.c_str(), double(m.mask.allowed_pairs()) / (double(n) * n),
+        double(m.mask.computed_pairs()) / (double(n) * n), m.mask.partial_tiles(),
+        m.mask.entries());
   const double tile_rate = score_tile_gflops(kern, d);
   for (int threads : thread_counts) {
     ThreadPool pool(threads);
     const Timing peak_t = fma_peak_gflops(kern, pool);
     const double peak = peak_t.cpu, gemm = tile_rate;  // per CPU-second (one core)
-    std::printf("\nthreads %d: FMA peak %.1f GFLOP/s per CPU-second (%.1f per wall second, all "
-                "threads); score micro-GEMM %.1f GFLOP/s per CPU-second (%.0f%% of peak)\n",
-                threads, peak, peak_t.wall, gemm, 100 * gemm / peak);
+    std::printf(
+        "\nthreads %d: FMA peak %.1f GFLOP/s per CPU-second (%.1f per wall second, all "
+        "threads); score micro-GEMM %.1f GFLOP/s per CPU-second (%.0f%% of peak)\n",
+        threads, peak, peak_t.wall, gemm, 100 * gemm / peak);
     std::printf("  %-44s %9s %9s %8s %8s %7s %7s\n", "case", "wall ms", "cpu ms", "GF/wall",
                 "GF/cpu", "%peak", "%gemm");
     auto time_case = [&](const char* what, Buffers& b, int tokens, int h,
@@ -230,10 +235,11 @@ int run(int argc, char** argv) {
       const double frac = double(m.mask.allowed_pairs()) / (double(n) * n);
       std::snprintf(label, sizeof label, "  masked: %s", m.name.c_str());
       const Timing t = time_case(label, buf, n, heads, &m.mask, double(m.mask.allowed_pairs()));
-      std::printf("    masked/dense: wall %.3f, cpu %.3f for allowed fraction %.3f -> ratio %.2f "
-                  "wall, %.2f cpu (target <= 1.30)\n",
-                  t.wall / dense.wall, t.cpu / dense.cpu, frac, t.wall / dense.wall / frac,
-                  t.cpu / dense.cpu / frac);
+      std::printf(
+          "    masked/dense: wall %.3f, cpu %.3f for allowed fraction %.3f -> ratio %.2f "
+          "wall, %.2f cpu (target <= 1.30)\n",
+          t.wall / dense.wall, t.cpu / dense.cpu, frac, t.wall / dense.wall / frac,
+          t.cpu / dense.cpu / frac);
     }
     std::snprintf(label, sizeof label, "U-Net L0 Difix-ref %d tok, %dx%d", un, uheads, d);
     time_case(label, ubuf, un, uheads, nullptr, double(un) * un);
