@@ -165,3 +165,35 @@ TEST_CASE("taesd: loader names missing, unused and mis-shaped tensors", "[nets][
   REQUIRE_FALSE(none.is_ok());
   CHECK(none.status().message().find("not a TAESD folder") != std::string::npos);
 }
+
+TEST_CASE("taesd: diffusers AutoencoderTiny names load through the conversion table",
+          "[nets][taesd]") {
+  // Re-key the published files into diffusers' layout: encoder.layers.{i}, decoder.layers.{i-1}.
+  test::TempDir dir("taesd-diffusers");
+  auto enc = SafeTensors::open(weights_dir() + "/taesd_encoder.safetensors");
+  auto dec = SafeTensors::open(weights_dir() + "/taesd_decoder.safetensors");
+  REQUIRE(enc.is_ok());
+  REQUIRE(dec.is_ok());
+  std::vector<TensorToWrite> ts;
+  std::vector<std::string> keep;  // names must outlive ts
+  keep.reserve(256);
+  for (auto* f : {&*enc, &*dec}) {
+    const bool is_dec = f == &*dec;
+    for (const std::string& n : f->names()) {
+      const size_t dot = n.find('.');
+      const int idx = std::stoi(n.substr(0, dot)) - (is_dec ? 1 : 0);
+      keep.push_back(std::string(is_dec ? "decoder" : "encoder") + ".layers." +
+                     std::to_string(idx) + n.substr(dot));
+      const TensorEntry* e = f->find(n);
+      ts.push_back({keep.back(), e->dtype, e->shape, e->data});
+    }
+  }
+  REQUIRE(write_safetensors(dir.file("diffusion_pytorch_model.safetensors"), ts).is_ok());
+  auto t = Taesd::load(dir.path);
+  REQUIRE(t.is_ok());
+  Case c = load_case("chelsea");
+  ThreadPool pool(2);
+  auto y = t->decode(TensorView::f32(c.latent.data(), {1, 4, 32, 32}), &pool);
+  REQUIRE(y.is_ok());
+  CHECK(test::compare(y->f32(), c.decoded.data(), c.decoded.size()).rel_l2 <= 1e-4);
+}
