@@ -10,7 +10,7 @@
 // PNG (8- or 16-bit, gray, gray+alpha, RGB, RGBA) and the other formats stb decodes (JPEG, BMP,
 // TGA) come back as float RGB in [0, 1] (value / 255 or / 65535; gray is copied to R, G, B; alpha
 // is dropped, not composited). Writing clamps to [0, 1] and rounds to 8 bits (round half up).
-// EXR holds 32-bit float channels under names (e.g. R, G, B, A, depth); OpenEXR stores channels
+// EXR holds 32-bit float channels under names (uncompressed unless asked) (e.g. R, G, B, A, depth); OpenEXR stores channels
 // sorted by name, so callers look channels up by name. All writes are atomic (temporary + rename).
 // No third-party type appears in this header (stb and OpenEXR live in image_io.cpp only).
 #pragma once
@@ -56,9 +56,13 @@ struct ExrChannel {
   std::string name;
   const float* data = nullptr;  // [H,W], must hold width * height values
 };
-// 32-bit float EXR, ZIP compressed, one scanline image with the given channels.
+// Lossless options. Float renders barely compress: for a 960x540 six-channel render (12.4 MB raw)
+// none took 13 ms CPU, ZIP level 1 300 ms for 10.5 MB, PIZ 310 ms for 8.7 MB (docs/PERFORMANCE.md).
+enum class ExrCompression { kNone, kZip, kPiz };
+// 32-bit float EXR, one scanline image with the given channels.
 Status write_exr(const std::string& path, int width, int height,
-                 const std::vector<ExrChannel>& channels);
+                 const std::vector<ExrChannel>& channels,
+                 ExrCompression compression = ExrCompression::kNone);
 
 struct ExrImage {
   int width = 0, height = 0;
