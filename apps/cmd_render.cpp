@@ -11,11 +11,12 @@ namespace macro::cli {
 namespace {
 
 constexpr const char* kUsage =
-    "usage: macro render --scene FILE --cameras FILE --camera NAME\n"
+    "usage: macro render --scene FILE|DIR [--cameras FILE] --camera NAME\n"
     "         [--out-png F.png] [--out-exr F.exr] [--out-tensors F.safetensors]\n"
     "         [--out-depth-png F.png] [--mode classic|antialiased|mip] [--background r,g,b]\n"
     "         [--sh-degree D] [--max-gaussians N] [--threads N] [--quiet]\n"
-    "  --scene      .ply (Inria/gsplat or SuperSplat compressed), .splat or .spz\n"
+    "  --scene      .ply (Inria/gsplat or SuperSplat compressed), .splat or .spz, or a folder\n"
+    "               holding scene.ply (and cameras.json), e.g. data/scenes/default\n"
     "  --cameras    our cameras.json, a COLMAP sparse folder, transforms.json or a DL3DV split\n"
     "  --out-exr    float channels R,G,B (colour), A (alpha), depth (depth_sum/alpha, 0 if empty),\n"
     "               invdepth (sum w/z)\n"
@@ -31,7 +32,7 @@ int run_render(std::vector<std::string> argv) {
   if (Status s = apply_common_flags(args); !s) return fail("render", s);
   gs::RenderJob job;
   job.scene_path = args.required("--scene");
-  job.cameras_path = args.required("--cameras");
+  job.cameras_path = args.value_or("--cameras", "");
   job.camera_name = args.required("--camera");
   job.outputs.png = args.value_or("--out-png", "");
   job.outputs.exr = args.value_or("--out-exr", "");

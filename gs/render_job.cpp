@@ -139,17 +139,39 @@ Status write_render_outputs(const RenderResult& r, const RenderOutputs& o, const
   return Status::ok();
 }
 
+Status resolve_scene_folder(std::string& scene_path, std::string& cameras_path) {
+  if (is_directory(scene_path)) {
+    const std::string folder = scene_path;
+    scene_path = folder + "/scene.ply";
+    if (!file_exists(scene_path)) {
+      return Status::error("--scene: folder " + folder + " has no scene.ply");
+    }
+    if (cameras_path.empty()) {
+      cameras_path = folder + "/cameras.json";
+      if (!file_exists(cameras_path)) {
+        return Status::error("--cameras: not given, and folder " + folder + " has no cameras.json");
+      }
+    }
+  }
+  if (cameras_path.empty()) {
+    return Status::error("--cameras: required unless --scene is a folder holding cameras.json");
+  }
+  return Status::ok();
+}
+
 Result<RenderJobResult> run_render_job(const RenderJob& job) {
   MACRO_TRY(check_render_outputs(job.outputs));
+  std::string scene_path = job.scene_path, cameras_path = job.cameras_path;
+  MACRO_TRY(resolve_scene_folder(scene_path, cameras_path));
   auto t0 = std::chrono::steady_clock::now();
   RenderJobResult out;
-  auto cloud = load_scene(job.scene_path, job.limits);
+  auto cloud = load_scene(scene_path, job.limits);
   if (!cloud) return cloud.status().with_context("--scene");
-  auto cameras = load_cameras(job.cameras_path);
+  auto cameras = load_cameras(cameras_path);
   if (!cameras) return cameras.status().with_context("--cameras");
   auto camera = cameras->find(job.camera_name);
   if (!camera) return camera.status().with_context("--camera " + job.camera_name);
-  if (Status s = camera->validate(); !s) return s.with_context(job.cameras_path);
+  if (Status s = camera->validate(); !s) return s.with_context(cameras_path);
   out.camera = *camera;
   out.gaussians = cloud->size();
   out.ms_load = ms_since(t0);
@@ -157,7 +179,7 @@ Result<RenderJobResult> run_render_job(const RenderJob& job) {
   MACRO_ASSIGN_OR_RETURN(out.image, render(*cloud, out.camera, job.options));
 
   auto t1 = std::chrono::steady_clock::now();
-  MACRO_TRY(write_render_outputs(out.image, job.outputs, job.scene_path, job.camera_name,
+  MACRO_TRY(write_render_outputs(out.image, job.outputs, scene_path, job.camera_name,
                                  job.options.mode, &out.written));
   out.ms_write = ms_since(t1);
   return out;

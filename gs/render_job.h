@@ -3,7 +3,7 @@
 //
 // Outputs (each optional, each written atomically; H x W image, row 0 at the top):
 //   png        8-bit RGB colour (background included), clamped to [0, 1] and rounded
-//   exr        32-bit float channels, linear values, no tone mapping:
+//   exr        32-bit float channels (uncompressed), linear values, no tone mapping:
 //                R, G, B    colour = sum c_i w_i + T * background      (w_i = alpha_i T_i)
 //                A          alpha = 1 - T
 //                depth      expected view depth = depth_sum / alpha where alpha >= kMinDepthAlpha,
@@ -37,8 +37,8 @@ struct RenderOutputs {
 };
 
 struct RenderJob {
-  std::string scene_path;    // any format load_scene reads
-  std::string cameras_path;  // any format load_cameras reads
+  std::string scene_path;    // any format load_scene reads, or a folder holding scene.ply
+  std::string cameras_path;  // any format load_cameras reads; empty = <scene folder>/cameras.json
   std::string camera_name;
   RenderOutputs outputs;
   RenderOptions options;
@@ -62,6 +62,10 @@ Status check_render_outputs(const RenderOutputs& outputs);
 Status write_render_outputs(const RenderResult& image, const RenderOutputs& outputs,
                             const std::string& scene, const std::string& camera,
                             RasterMode mode, std::vector<std::string>* written = nullptr);
+
+// A scene folder (as `macro synth` writes and data/scenes/default is) becomes its scene.ply, and
+// an empty cameras path its cameras.json. Errors name the folder and the missing file.
+Status resolve_scene_folder(std::string& scene_path, std::string& cameras_path);
 
 Result<RenderJobResult> run_render_job(const RenderJob& job);
 

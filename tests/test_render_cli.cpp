@@ -139,11 +139,17 @@ TEST_CASE("macro render --quiet prints nothing; modes and options run", "[render
   CHECK(r.rc == 0);
   CHECK(r.out.empty());
   CHECK(r.err.empty());
+  // A scene folder stands for its scene.ply and cameras.json.
+  Run f = run_macro("render --scene " + default_scene() + " --camera closeup_01 --out-png " +
+                        dir.file("f.png") + " --quiet",
+                    logs);
+  INFO(f.err);
+  CHECK(f.rc == 0);
   Run m = run_macro("render " + scene_flags("closeup_03") + " --out-tensors " + dir.file("m.safetensors") +
                         " --mode mip --quiet",
                     logs);
   CHECK(m.rc == 0);
-  CHECK(files_in(dir.path).size() == 2);
+  CHECK(files_in(dir.path).size() == 3);
 }
 
 TEST_CASE("macro render refuses bad input by name and leaves no files", "[render][render_cli]") {
@@ -175,6 +181,9 @@ TEST_CASE("macro render refuses bad input by name and leaves no files", "[render
       {"more Gaussians than allowed", scene_flags() + outs + " --max-gaussians 1000", {"scene.ply"}},
       {"unknown flag", scene_flags() + outs + " --colour red", {"--colour"}},
       {"no --scene", "--cameras x.json --camera closeup" + outs, {"--scene"}},
+      {"no --cameras with a scene file", "--scene " + default_scene() + "/scene.ply --camera closeup" + outs,
+       {"--cameras"}},
+      {"scene folder without scene.ply", "--scene " + dir.path + "/.. --camera closeup" + outs, {"scene.ply"}},
       {"no output", scene_flags(), {"--out-png"}},
       {"output folder missing", scene_flags() + outs + " --out-depth-png " + dir.file("missing/d.png"),
        {"missing/d.png"}},
