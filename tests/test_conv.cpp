@@ -62,10 +62,10 @@ void check_conv(const Conv2dShape& s, bool bias, bool residual, ThreadPool* pool
   const size_t ny = size_t(s.n * s.c_out * s.out_h() * s.out_w());
   auto r = random_vec(ny, 4);
   std::vector<float> ref(ny), y(ny, NAN);
-  conv2d_reference(s, x.data(), w.data(), bias ? b.data() : nullptr,
-                   residual ? r.data() : nullptr, ref.data());
-  ConvWeights cw = ConvWeights::pack(w.data(), bias ? b.data() : nullptr, s.c_out, s.c_in, s.kh,
-                                     s.kw);
+  conv2d_reference(s, x.data(), w.data(), bias ? b.data() : nullptr, residual ? r.data() : nullptr,
+                   ref.data());
+  ConvWeights cw =
+      ConvWeights::pack(w.data(), bias ? b.data() : nullptr, s.c_out, s.c_in, s.kh, s.kw);
   conv2d(s, x.data(), cw, residual ? r.data() : nullptr, y.data(), pool);
   INFO(isa_name(active_isa()) << " N=" << s.n << " Cin=" << s.c_in << " " << s.h << "x" << s.w
                               << " Cout=" << s.c_out << " k=" << s.kh << " s=" << s.stride
@@ -135,8 +135,8 @@ TEST_CASE("conv2d: bf16 weights and activations, every path", "[kernels][conv]")
       auto x16 = round(x), w16 = round(w);
       conv2d_reference(s, x16.data(), w16.data(), b.data(), r.data(), ref16.data());
       conv2d_reference(s, x.data(), w.data(), b.data(), r.data(), ref32.data());
-      ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, s.kh, s.kw,
-                                         WeightType::kBf16);
+      ConvWeights cw =
+          ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, s.kh, s.kw, WeightType::kBf16);
       conv2d(s, x.data(), cw, r.data(), y.data(), nullptr);
       INFO(isa_name(isa) << " Cin=" << s.c_in << " Cout=" << s.c_out << " k=" << s.kh
                          << " s=" << s.stride);

@@ -5,7 +5,8 @@
 // Error bounds:
 //   fp32      max |C - ref| <= 1e-5 * max |ref| (fp32 accumulation vs double; K <= 700)
 //   bf16      vs the bf16-rounded double reference: max err <= 1e-5 * max |ref| (only the fp32
-//             accumulation differs); vs the unrounded fp32 reference: rel L2 <= 1e-2 (bf16 operands)
+//             accumulation differs); vs the unrounded fp32 reference: rel L2 <= 1e-2 (bf16
+//             operands)
 //   threads   bit-identical results with 1 and 2 threads (the split never cuts K).
 #include <catch2/catch.hpp>
 
@@ -24,9 +25,10 @@ namespace {
 struct Shape {
   int64_t m, n, k;
 };
-const Shape kShapes[] = {{1, 1, 1},    {1, 17, 3},    {13, 1, 29},  {15, 33, 31},  {29, 65, 257},
-                         {97, 100, 600}, {200, 37, 513}, {31, 257, 7}, {3, 64, 700}, {43, 129, 64},
-                         {601, 45, 70}};  // M >= 3 row blocks: B packed once per call
+const Shape kShapes[] = {{1, 1, 1},     {1, 17, 3},     {13, 1, 29},    {15, 33, 31},
+                         {29, 65, 257}, {97, 100, 600}, {200, 37, 513}, {31, 257, 7},
+                         {3, 64, 700},  {43, 129, 64},  {601, 45, 70}};  // M >= 3 row blocks: B
+                                                                         // packed once per call
 
 std::vector<Isa> supported_isas() {
   std::vector<Isa> v;
@@ -120,8 +122,8 @@ TEST_CASE("gemm_f32: every path vs a double reference on odd shapes", "[kernels]
         p.trans_a = trans_a;
         p.trans_b = trans_b;
         gemm_f32(s.m, s.n, s.k, A.data(), lda, B.data(), ldb, C.data(), ldc, p);
-        auto ref = reference({s.m, s.n, s.k, A.data(), lda, trans_a, B.data(), ldb, trans_b,
-                              nullptr, ldc, p});
+        auto ref = reference(
+            {s.m, s.n, s.k, A.data(), lda, trans_a, B.data(), ldb, trans_b, nullptr, ldc, p});
         INFO(isa_name(isa) << " " << kernels().f32.name << " M=" << s.m << " N=" << s.n
                            << " K=" << s.k << " trans_a=" << trans_a << " trans_b=" << trans_b);
         REQUIRE(max_rel_err(C, ref, s.m, s.n, ldc) <= 1e-5);

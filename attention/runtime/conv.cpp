@@ -19,9 +19,9 @@ namespace {
 
 struct Im2colCtx {
   const Conv2dShape* s;
-  const float* x;        // fp32: one image [Cin, H, W]
-  const uint32_t* xp;    // bf16: one image's channel-pair planes [Cin2/2, H, W]
-  int64_t cin2;          // bf16: Cin rounded up to even
+  const float* x;      // fp32: one image [Cin, H, W]
+  const uint32_t* xp;  // bf16: one image's channel-pair planes [Cin2/2, H, W]
+  int64_t cin2;        // bf16: Cin rounded up to even
   int64_t oh, ow;
 };
 
@@ -201,8 +201,10 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
           }
         }
       };
-      if (pool) pool->parallel_for(size_t(cin2 / 2), convert, 1);
-      else convert(0, size_t(cin2 / 2), 0);
+      if (pool)
+        pool->parallel_for(size_t(cin2 / 2), convert, 1);
+      else
+        convert(0, size_t(cin2 / 2), 0);
     }
     Im2colCtx ctx{&s, xb, xp.data(), cin2, oh, ow};
     detail::Operand oa{nullptr, nullptr, w.packed().panels(), w.packed().k_padded()};

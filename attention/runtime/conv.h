@@ -1,7 +1,8 @@
 // 2-D convolution, NCHW activations with OIHW weights, as an implicit GEMM.
 //
 //   y[n, co, oy, ox] = bias[co] + residual[n, co, oy, ox]
-//                    + sum_{ci, dy, dx} w[co, ci, dy, dx] * x[n, ci, oy*s + dy - pad_top, ox*s + dx - pad_left]
+//                    + sum_{ci, dy, dx} w[co, ci, dy, dx] * x[n, ci, oy*s + dy - pad_top, ox*s + dx
+//                    - pad_left]
 //   (x outside [0, H) x [0, W) reads as zero)
 //   OH = (H + pad_top + pad_bottom - KH) / s + 1,  OW = (W + pad_left + pad_right - KW) / s + 1
 //
@@ -22,7 +23,7 @@
 namespace macro {
 
 struct Conv2dShape {
-  int64_t n = 1;            // batch
+  int64_t n = 1;  // batch
   int64_t c_in = 0, h = 0, w = 0;
   int64_t c_out = 0;
   int kh = 3, kw = 3;
@@ -67,7 +68,8 @@ class ConvWeights {
 };
 
 // y [N, Cout, OH, OW] = conv(x [N, Cin, H, W]) (+ bias) (+ residual [N, Cout, OH, OW], may be null;
-// it may alias y). The weights' shape must match `s` (MACRO_CHECK). pool == nullptr: calling thread.
+// it may alias y). The weights' shape must match `s` (MACRO_CHECK). pool == nullptr: calling
+// thread.
 void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const float* residual,
             float* y, ThreadPool* pool = nullptr);
 

@@ -110,9 +110,12 @@ inline uint16_t round_bf16(float f) {
 
 inline int64_t packed_index(PackLayout l, int64_t k, int64_t r, int w) {
   switch (l) {
-    case PackLayout::kF32: return k * w + r;
-    case PackLayout::kBf16Pairs: return (k >> 1) * w * 2 + r * 2 + (k & 1);
-    case PackLayout::kBf16Amx: return (k >> 5) * w * 32 + r * 32 + (k & 31);
+    case PackLayout::kF32:
+      return k * w + r;
+    case PackLayout::kBf16Pairs:
+      return (k >> 1) * w * 2 + r * 2 + (k & 1);
+    case PackLayout::kBf16Amx:
+      return (k >> 5) * w * 32 + r * 32 + (k & 31);
   }
   return 0;
 }
@@ -200,11 +203,21 @@ struct Tables {
       if (!isa_supported(isa)) continue;
       KernelTable& k = t[int(isa)];
       switch (isa) {
-        case Isa::kScalar: detail::fill_scalar_kernels(k); break;
-        case Isa::kAvx2: detail::fill_avx2_kernels(k); break;
-        case Isa::kAvx512: detail::fill_avx512_kernels(k); break;
-        case Isa::kAvx512Bf16: detail::fill_avx512bf16_kernels(k); break;
-        case Isa::kAmx: detail::fill_amx_kernels(k); break;
+        case Isa::kScalar:
+          detail::fill_scalar_kernels(k);
+          break;
+        case Isa::kAvx2:
+          detail::fill_avx2_kernels(k);
+          break;
+        case Isa::kAvx512:
+          detail::fill_avx512_kernels(k);
+          break;
+        case Isa::kAvx512Bf16:
+          detail::fill_avx512bf16_kernels(k);
+          break;
+        case Isa::kAmx:
+          detail::fill_amx_kernels(k);
+          break;
       }
       k.isa = isa;
       filled[int(isa)] = true;
@@ -237,8 +250,8 @@ namespace detail {
 
 void fill_scalar_kernels(KernelTable& t) {
   t.f32 = GemmKernel{kScalarMr, kScalarNr, 1, 256, PackLayout::kF32, scalar_f32, "scalar f32 4x16"};
-  t.bf16 = GemmKernel{kScalarMr, kScalarNr, 2, 256, PackLayout::kBf16Pairs, scalar_bf16,
-                      "scalar bf16 4x16"};
+  t.bf16 = GemmKernel{kScalarMr,   kScalarNr,         2, 256, PackLayout::kBf16Pairs,
+                      scalar_bf16, "scalar bf16 4x16"};
   t.probe_fma = scalar_probe;
   t.probe_bf16 = scalar_probe;
 }
@@ -287,7 +300,8 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
   const int64_t nc = s.nc > 0 ? s.nc : int64_t(nr) * std::max<int64_t>(1, nc_target / nr);
   const int64_t m_tasks = (M + mc - 1) / mc;
   // Split N across tasks only as far as needed to give every thread a few tasks.
-  int64_t n_tasks = std::clamp<int64_t>((4 * threads + m_tasks - 1) / m_tasks, 1, (N + nr - 1) / nr);
+  int64_t n_tasks =
+      std::clamp<int64_t>((4 * threads + m_tasks - 1) / m_tasks, 1, (N + nr - 1) / nr);
   if (threads == 1) n_tasks = 1;
   const int64_t n_per_task = round_up((N + n_tasks - 1) / n_tasks, nr);
   n_tasks = (N + n_per_task - 1) / n_per_task;
@@ -319,7 +333,8 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
       const unsigned char* abase;
       int64_t a_stride;  // bytes between A micro-panels
       if (a.prepacked) {
-        abase = static_cast<const unsigned char*>(a.prepacked) + ((i0 / mr) * a.kp * mr + pc * mr) * esz;
+        abase = static_cast<const unsigned char*>(a.prepacked) +
+                ((i0 / mr) * a.kp * mr + pc * mr) * esz;
         a_stride = a.kp * mr * esz;
       } else {
         void* buf = t_scratch_a.get(size_t(round_up(mrows, mr) * kcp * esz));
@@ -332,7 +347,8 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
         const unsigned char* bbase;
         int64_t b_stride;
         if (b.prepacked) {
-          bbase = static_cast<const unsigned char*>(b.prepacked) + ((jc / nr) * b.kp * nr + pc * nr) * esz;
+          bbase = static_cast<const unsigned char*>(b.prepacked) +
+                  ((jc / nr) * b.kp * nr + pc * nr) * esz;
           b_stride = b.kp * nr * esz;
         } else {
           void* buf = t_scratch_b.get(size_t(round_up(ncols, nr) * kcp * esz));
@@ -369,9 +385,12 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
   if (!pool || pool->size() == 1 || total == 1) {
     for (int64_t t = 0; t < total; ++t) task(t);
   } else {
-    pool->parallel_for(size_t(total), [&](size_t b0, size_t b1, int) {
-      for (size_t t = b0; t < b1; ++t) task(int64_t(t));
-    }, 1);
+    pool->parallel_for(
+        size_t(total),
+        [&](size_t b0, size_t b1, int) {
+          for (size_t t = b0; t < b1; ++t) task(int64_t(t));
+        },
+        1);
   }
 }
 
@@ -383,7 +402,9 @@ const KernelTable& kernels_for(Isa isa) {
   return t.t[int(isa)];
 }
 
-const KernelTable& kernels() { return kernels_for(active_isa()); }
+const KernelTable& kernels() {
+  return kernels_for(active_isa());
+}
 
 // ---- unpacked operands -------------------------------------------------------------------------
 
@@ -433,13 +454,13 @@ void gemm_any(const GemmKernel& kern, int64_t M, int64_t N, int64_t K, const voi
   // A as S[m][k]: row-major A is "not transposed"; B as S[n][k]: trans_b B ([N, K]) is row-major S.
   MatrixSrc ma{A, a_bf16, lda, p.trans_a, M, K};
   // With many row blocks, pack B once for the whole call instead of once per row block.
-  const int64_t row_blocks = (M + kern.mr * std::max(1, 192 / kern.mr) - 1) /
-                             (kern.mr * std::max(1, 192 / kern.mr));
+  const int64_t row_blocks =
+      (M + kern.mr * std::max(1, 192 / kern.mr) - 1) / (kern.mr * std::max(1, 192 / kern.mr));
   if (row_blocks >= 3 && (!b_bf16 || p.trans_b) && N >= 1 && K >= 1) {
     const WeightType t = kern.layout == PackLayout::kF32 ? WeightType::kF32 : WeightType::kBf16;
     const Isa isa = kernels().isa;
     PackedWeights pw =
-        b_bf16 ? PackedWeights::pack(static_cast<const uint16_t*>(B), N, K, ldb, isa)
+        b_bf16      ? PackedWeights::pack(static_cast<const uint16_t*>(B), N, K, ldb, isa)
         : p.trans_b ? PackedWeights::pack(static_cast<const float*>(B), N, K, ldb, t, isa)
                     : PackedWeights::pack_kn(static_cast<const float*>(B), K, N, ldb, t, isa);
     if (&pw.kernel() == &kern) {

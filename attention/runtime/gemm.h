@@ -31,13 +31,13 @@ namespace macro {
 
 struct GemmParams {
   float alpha = 1.0f;
-  float beta = 0.0f;               // 0: C is write-only (never read, NaNs in C do not leak)
-  bool trans_a = false;            // A given as [K, M] with lda >= M
-  bool trans_b = false;            // B given as [N, K] with ldb >= K (the Linear weight layout)
-  const float* bias_n = nullptr;   // [N], added to every row
-  const float* bias_m = nullptr;   // [M], added to every column
-  const float* residual = nullptr; // [M, ldr], added after everything else (may alias C only if
-  int64_t ldr = 0;                 //  beta == 0 and ldr == ldc)
+  float beta = 0.0f;                // 0: C is write-only (never read, NaNs in C do not leak)
+  bool trans_a = false;             // A given as [K, M] with lda >= M
+  bool trans_b = false;             // B given as [N, K] with ldb >= K (the Linear weight layout)
+  const float* bias_n = nullptr;    // [N], added to every row
+  const float* bias_m = nullptr;    // [M], added to every column
+  const float* residual = nullptr;  // [M, ldr], added after everything else (may alias C only if
+  int64_t ldr = 0;                  //  beta == 0 and ldr == ldc)
 };
 
 // fp32 GEMM with both operands given unpacked.
@@ -95,8 +95,9 @@ class PackedWeights {
   std::vector<float> data_;  // storage (bf16 panels are stored two per float slot)
 };
 
-// C[M, N] = alpha * A[M, K] . W^T + ... with W packed (N = w.n(), K = w.k()). For a bf16 W, A (fp32)
-// is rounded to bf16 while packing. p.trans_b is ignored (the packing fixed B's orientation).
+// C[M, N] = alpha * A[M, K] . W^T + ... with W packed (N = w.n(), K = w.k()). For a bf16 W, A
+// (fp32) is rounded to bf16 while packing. p.trans_b is ignored (the packing fixed B's
+// orientation).
 void gemm_packed(int64_t M, const float* A, int64_t lda, const PackedWeights& w, float* C,
                  int64_t ldc, const GemmParams& p = {}, ThreadPool* pool = nullptr);
 
@@ -127,8 +128,12 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
               const GemmParams& p, ThreadPool* pool);
 
 // Element size of packed operands for a layout (4 for fp32, 2 for bf16).
-inline int packed_elem_bytes(PackLayout l) { return l == PackLayout::kF32 ? 4 : 2; }
-inline int64_t round_up(int64_t x, int64_t m) { return (x + m - 1) / m * m; }
+inline int packed_elem_bytes(PackLayout l) {
+  return l == PackLayout::kF32 ? 4 : 2;
+}
+inline int64_t round_up(int64_t x, int64_t m) {
+  return (x + m - 1) / m * m;
+}
 
 // Pack rows [r0, r0+rows) x k [k0, k0+kc) of a row-major fp32 source S[r][k] = src[r*ld + k]
 // (or, transposed, S[r][k] = src[k*ld + r]) into panels of width w in `layout` (bf16 rounds).

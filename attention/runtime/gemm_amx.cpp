@@ -67,7 +67,7 @@ void micro_amx(const MicroTile& t) {
   _tile_stored(3, acc + 16 * kNr + 16, kNr * 4);
 
   const __mmask16 k0 = t.n >= 16 ? __mmask16(0xffff) : __mmask16((1u << t.n) - 1);
-  const __mmask16 k1 = t.n >= 32 ? __mmask16(0xffff)
+  const __mmask16 k1 = t.n >= 32   ? __mmask16(0xffff)
                        : t.n <= 16 ? __mmask16(0)
                                    : __mmask16((1u << (t.n - 16)) - 1);
   const __m512 alpha = _mm512_set1_ps(t.alpha), beta = _mm512_set1_ps(t.beta);

@@ -134,7 +134,12 @@ double probe_fma(int64_t iters) {
 namespace detail {
 void fill_avx2_kernels(KernelTable& t) {
   t.f32 = GemmKernel{kMrF32, kNr, 1, 256, PackLayout::kF32, micro_f32, "avx2 f32 6x16"};
-  t.bf16 = GemmKernel{kMrBf16, kNr, 2, 256, PackLayout::kBf16Pairs, micro_bf16_emulated,
+  t.bf16 = GemmKernel{kMrBf16,
+                      kNr,
+                      2,
+                      256,
+                      PackLayout::kBf16Pairs,
+                      micro_bf16_emulated,
                       "avx2 bf16 4x16 (shift-widened)"};
   t.probe_fma = probe_fma;
   t.probe_bf16 = probe_fma;

@@ -17,7 +17,7 @@ constexpr int kNr = 32;
 template <int MR>
 inline void store_tile(const MicroTile& t, const __m512* c0, const __m512* c1) {
   const __mmask16 k0 = t.n >= 16 ? __mmask16(0xffff) : __mmask16((1u << t.n) - 1);
-  const __mmask16 k1 = t.n >= 32 ? __mmask16(0xffff)
+  const __mmask16 k1 = t.n >= 32   ? __mmask16(0xffff)
                        : t.n <= 16 ? __mmask16(0)
                                    : __mmask16((1u << (t.n - 16)) - 1);
   const __m512 alpha = _mm512_set1_ps(t.alpha), beta = _mm512_set1_ps(t.beta);
@@ -143,7 +143,12 @@ double probe_fma(int64_t iters) {
 namespace detail {
 void fill_avx512_kernels(KernelTable& t) {
   t.f32 = GemmKernel{kMrF32, kNr, 1, 384, PackLayout::kF32, micro_f32, "avx512 f32 12x32"};
-  t.bf16 = GemmKernel{kMrBf16, kNr, 2, 384, PackLayout::kBf16Pairs, micro_bf16_emulated,
+  t.bf16 = GemmKernel{kMrBf16,
+                      kNr,
+                      2,
+                      384,
+                      PackLayout::kBf16Pairs,
+                      micro_bf16_emulated,
                       "avx512 bf16 12x32 (shift-widened)"};
   t.probe_fma = probe_fma;
   t.probe_bf16 = probe_fma;

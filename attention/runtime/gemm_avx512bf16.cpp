@@ -15,7 +15,7 @@ constexpr int kMr = 14, kNr = 32;
 template <int MR>
 inline void store_tile(const MicroTile& t, const __m512* c0, const __m512* c1) {
   const __mmask16 k0 = t.n >= 16 ? __mmask16(0xffff) : __mmask16((1u << t.n) - 1);
-  const __mmask16 k1 = t.n >= 32 ? __mmask16(0xffff)
+  const __mmask16 k1 = t.n >= 32   ? __mmask16(0xffff)
                        : t.n <= 16 ? __mmask16(0)
                                    : __mmask16((1u << (t.n - 16)) - 1);
   const __m512 alpha = _mm512_set1_ps(t.alpha), beta = _mm512_set1_ps(t.beta);
@@ -79,8 +79,8 @@ void micro_bf16(const MicroTile& t) {
 // A panel [kcp/2][w] of pair words from row-major fp32 rows: 32 floats -> 16 pair words with one
 // vcvtne2ps2bf16 (nearest even; like the hardware, fp32 denormal inputs become zero), then scalar
 // stores into the panel's column r.
-void pack_a_pairs(const float* src, int64_t ld, int valid_rows, int64_t valid_k, int64_t kcp,
-                  int w, void* dst) {
+void pack_a_pairs(const float* src, int64_t ld, int valid_rows, int64_t valid_k, int64_t kcp, int w,
+                  void* dst) {
   uint32_t* d = static_cast<uint32_t*>(dst);
   const int64_t pairs = kcp / 2;
   alignas(64) uint32_t words[16];
@@ -132,8 +132,8 @@ double probe_bf16(int64_t iters) {
 namespace detail {
 void fill_avx512bf16_kernels(KernelTable& t) {
   fill_avx512_kernels(t);
-  t.bf16 = GemmKernel{kMr, kNr, 2, 384, PackLayout::kBf16Pairs, micro_bf16, "avx512bf16 14x32",
-                      pack_a_pairs};
+  t.bf16 = GemmKernel{
+      kMr, kNr, 2, 384, PackLayout::kBf16Pairs, micro_bf16, "avx512bf16 14x32", pack_a_pairs};
   t.probe_bf16 = probe_bf16;
 }
 }  // namespace detail

@@ -28,10 +28,10 @@ enum class PackLayout { kF32, kBf16Pairs, kBf16Amx };
 //   alpha * (A_panel . B_panel) + (load_c ? beta * C : 0) + bias_n[j] + bias_m[i] + res[i, j]
 // where the optional terms are skipped when their pointer is null (already offset to this tile).
 struct MicroTile {
-  int64_t kc = 0;        // reduction length of this call, a multiple of k_align
+  int64_t kc = 0;           // reduction length of this call, a multiple of k_align
   const void* a = nullptr;  // packed A micro-panel, slice start
   const void* b = nullptr;  // packed B micro-panel, slice start
-  float* c = nullptr;    // [m, ldc]
+  float* c = nullptr;       // [m, ldc]
   int64_t ldc = 0;
   int m = 0, n = 0;
   float alpha = 1, beta = 0;
@@ -50,9 +50,9 @@ using PackPanelF32 = void (*)(const float* src, int64_t ld, int valid_rows, int6
                               int64_t kcp, int w, void* dst);
 
 struct GemmKernel {
-  int mr = 0, nr = 0;    // register tile
-  int k_align = 1;       // packed K is padded to a multiple of this
-  int kc = 256;          // cache block over K (a multiple of k_align)
+  int mr = 0, nr = 0;  // register tile
+  int k_align = 1;     // packed K is padded to a multiple of this
+  int kc = 256;        // cache block over K (a multiple of k_align)
   PackLayout layout = PackLayout::kF32;
   MicroKernel micro = nullptr;
   const char* name = "";

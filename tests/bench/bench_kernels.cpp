@@ -68,9 +68,12 @@ Rate probe_peak(double (*probe)(int64_t), ThreadPool* pool, int reps) {
       probe(iters);
       return;
     }
-    pool->parallel_for(size_t(threads), [&](size_t b, size_t e, int) {
-      for (size_t i = b; i < e; ++i) probe(iters);
-    }, 1);
+    pool->parallel_for(
+        size_t(threads),
+        [&](size_t b, size_t e, int) {
+          for (size_t i = b; i < e; ++i) probe(iters);
+        },
+        1);
   });
   const double flop = probe(1) * double(iters) * threads;  // probe(n) returns its flop count
   return {flop / t.wall * 1e-9, flop / t.cpu * 1e-9};
@@ -95,10 +98,11 @@ Timing row(const char* what, const std::string& shape, double flop, int reps,
   const Rate peak{0.5 * (p0.wall + p1.wall), 0.5 * (p0.cpu + p1.cpu)};
   const int threads = pool ? pool->size() : 1;
   const double gw = flop / t.wall * 1e-9, gc = flop / t.cpu * 1e-9;
-  std::printf("  %-34s %-17s thr %d %9.2f ms %7.1f GFLOP/s %5.1f%% | cpu %7.1f GFLOP/cpu-s %5.1f%%"
-              " | peak %6.1f\n",
-              what, shape.c_str(), threads, t.wall * 1e3, gw, 100.0 * gw / peak.wall, gc,
-              100.0 * gc / peak.cpu, peak.wall);
+  std::printf(
+      "  %-34s %-17s thr %d %9.2f ms %7.1f GFLOP/s %5.1f%% | cpu %7.1f GFLOP/cpu-s %5.1f%%"
+      " | peak %6.1f\n",
+      what, shape.c_str(), threads, t.wall * 1e3, gw, 100.0 * gw / peak.wall, gc,
+      100.0 * gc / peak.cpu, peak.wall);
   return t;
 }
 
@@ -107,12 +111,18 @@ int run(int argc, char** argv) {
   int reps = 7;
   bool quick = false, do_conv = true, do_gemm = true;
   for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threads = std::atoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--reps") && i + 1 < argc) reps = std::atoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--quick")) quick = true;
-    else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) g_only = argv[++i];
-    else if (!std::strcmp(argv[i], "--no-conv")) do_conv = false;
-    else if (!std::strcmp(argv[i], "--no-gemm")) do_gemm = false;
+    if (!std::strcmp(argv[i], "--threads") && i + 1 < argc)
+      threads = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--reps") && i + 1 < argc)
+      reps = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--quick"))
+      quick = true;
+    else if (!std::strcmp(argv[i], "--only") && i + 1 < argc)
+      g_only = argv[++i];
+    else if (!std::strcmp(argv[i], "--no-conv"))
+      do_conv = false;
+    else if (!std::strcmp(argv[i], "--no-gemm"))
+      do_gemm = false;
     else {
       std::fprintf(stderr, "bench kernels: unknown flag '%s'\n", argv[i]);
       return 2;
@@ -130,20 +140,23 @@ int run(int argc, char** argv) {
   peakN.fma = probe_peak(kt.probe_fma, pool, 5);
   peak1.bf16 = probe_peak(kt.probe_bf16, nullptr, 5);
   peakN.bf16 = probe_peak(kt.probe_bf16, pool, 5);
-  std::printf("peak fp32 FMA loop: %.1f GFLOP/s (1 thread), %.1f GFLOP/s (%d threads); "
-              "%.1f GFLOP/cpu-s\n", peak1.fma.wall, peakN.fma.wall, threads, peakN.fma.cpu);
-  std::printf("peak bf16 dot loop: %.1f GFLOP/s (1 thread), %.1f GFLOP/s (%d threads); "
-              "%.1f GFLOP/cpu-s%s\n", peak1.bf16.wall, peakN.bf16.wall, threads, peakN.bf16.cpu,
-              isa_supported(Isa::kAvx512Bf16) ? "" : " (no native bf16: FMA loop)");
+  std::printf(
+      "peak fp32 FMA loop: %.1f GFLOP/s (1 thread), %.1f GFLOP/s (%d threads); "
+      "%.1f GFLOP/cpu-s\n",
+      peak1.fma.wall, peakN.fma.wall, threads, peakN.fma.cpu);
+  std::printf(
+      "peak bf16 dot loop: %.1f GFLOP/s (1 thread), %.1f GFLOP/s (%d threads); "
+      "%.1f GFLOP/cpu-s%s\n",
+      peak1.bf16.wall, peakN.bf16.wall, threads, peakN.bf16.cpu,
+      isa_supported(Isa::kAvx512Bf16) ? "" : " (no native bf16: FMA loop)");
   if (isa_supported(Isa::kAmx)) {
     peakN.amx = probe_peak(kernels_for(Isa::kAmx).probe_bf16, pool, 5);
     std::printf("peak AMX loop: %.1f GFLOP/s (%d threads)\n", peakN.amx.wall, threads);
   } else {
     std::printf("peak AMX loop: not available (no AMX on this CPU)\n");
   }
-  double (*bf16_probe)(int64_t) = kt.bf16.layout == PackLayout::kBf16Amx
-                                      ? kernels_for(Isa::kAmx).probe_bf16
-                                      : kt.probe_bf16;
+  double (*bf16_probe)(int64_t) =
+      kt.bf16.layout == PackLayout::kBf16Amx ? kernels_for(Isa::kAmx).probe_bf16 : kt.probe_bf16;
 
   {
     // The micro-kernels alone on cache-resident panels (one thread): the ceiling for everything
@@ -166,9 +179,12 @@ int run(int argc, char** argv) {
       t.m = gk->mr;
       t.n = gk->nr;
       const double flop = 2.0 * gk->mr * gk->nr * kc * 1000;
-      row(gk->name, "1000 calls K256", flop, reps, [&] {
-        for (int i = 0; i < 1000; ++i) gk->micro(t);
-      }, gk == &kt.f32 ? kt.probe_fma : bf16_probe, nullptr);
+      row(
+          gk->name, "1000 calls K256", flop, reps,
+          [&] {
+            for (int i = 0; i < 1000; ++i) gk->micro(t);
+          },
+          gk == &kt.f32 ? kt.probe_fma : bf16_probe, nullptr);
     }
   }
 
@@ -180,11 +196,16 @@ int run(int argc, char** argv) {
       const char* what;
     };
     const G shapes[] = {
-        {4096, 320, 320, "L0 q/k/v/o, proj (C=320)"},  {4096, 320, 2560, "L0 ff.net.0 (GEGLU 8C)"},
-        {4096, 1280, 320, "L0 ff.net.2 (4C->C)"},      {1024, 640, 640, "L1 q/k/v/o (C=640)"},
-        {1024, 640, 5120, "L1 ff.net.0"},              {1024, 2560, 640, "L1 ff.net.2"},
-        {256, 1280, 1280, "L2 q/k/v/o (C=1280)"},      {8040, 320, 320, "L0 q/k/v/o at 536x960"},
-        {8040, 320, 2560, "L0 ff.net.0 at 536x960"},   {2040, 640, 5120, "L1 ff.net.0 at 536x960"},
+        {4096, 320, 320, "L0 q/k/v/o, proj (C=320)"},
+        {4096, 320, 2560, "L0 ff.net.0 (GEGLU 8C)"},
+        {4096, 1280, 320, "L0 ff.net.2 (4C->C)"},
+        {1024, 640, 640, "L1 q/k/v/o (C=640)"},
+        {1024, 640, 5120, "L1 ff.net.0"},
+        {1024, 2560, 640, "L1 ff.net.2"},
+        {256, 1280, 1280, "L2 q/k/v/o (C=1280)"},
+        {8040, 320, 320, "L0 q/k/v/o at 536x960"},
+        {8040, 320, 2560, "L0 ff.net.0 at 536x960"},
+        {2040, 640, 5120, "L1 ff.net.0 at 536x960"},
     };
     std::printf("\nGEMM, packed weights (Linear y = x W^T + b):\n");
     for (const G& g : shapes) {
@@ -199,7 +220,8 @@ int run(int argc, char** argv) {
       std::snprintf(shape, sizeof shape, "M%ld K%ld N%ld", long(g.m), long(g.k), long(g.n));
       PackedWeights w32 = PackedWeights::pack(w.data(), g.n, g.k, g.k, WeightType::kF32);
       row((std::string("f32  ") + g.what).c_str(), shape, flop, reps,
-          [&] { gemm_packed(g.m, x.data(), g.k, w32, y.data(), g.n, p, pool); }, kt.probe_fma, pool);
+          [&] { gemm_packed(g.m, x.data(), g.k, w32, y.data(), g.n, p, pool); }, kt.probe_fma,
+          pool);
       PackedWeights w16 = PackedWeights::pack(w.data(), g.n, g.k, g.k, WeightType::kBf16);
       row((std::string("bf16 ") + g.what).c_str(), shape, flop, reps,
           [&] { gemm_packed(g.m, x.data(), g.k, w16, y.data(), g.n, p, pool); }, bf16_probe, pool);
@@ -219,8 +241,8 @@ int run(int argc, char** argv) {
           row("f32 gemm_f32 trans_b", "M1024 K640 N640", flop, reps, call, kt.probe_fma, pool);
       const Isa saved = active_isa();
       (void)set_isa(Isa::kScalar);
-      const Timing ts = row("f32 gemm_f32 trans_b, SCALAR twin", "M1024 K640 N640", flop, 3, call, kt.probe_fma,
-          pool);
+      const Timing ts = row("f32 gemm_f32 trans_b, SCALAR twin", "M1024 K640 N640", flop, 3, call,
+                            kt.probe_fma, pool);
       (void)set_isa(saved);
       if (t.wall > 0 && ts.wall > 0)
         std::printf("  speed-up of %s over the scalar twin: %.1fx (wall), %.1fx (cpu)\n",
@@ -262,8 +284,8 @@ int run(int argc, char** argv) {
       auto b = random_vec(size_t(s.c_out), 8);
       std::vector<float> y(size_t(s.c_out * s.out_h() * s.out_w()));
       ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, s.kh, s.kw);
-      ConvWeights cw16 = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, s.kh, s.kw,
-                                           WeightType::kBf16);
+      ConvWeights cw16 =
+          ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, s.kh, s.kw, WeightType::kBf16);
       const double flop = 2.0 * double(s.out_h()) * s.out_w() * s.c_in * s.c_out * s.kh * s.kw;
       const int r = flop > 5e10 ? std::max(3, reps / 2) : reps;
       char shape[64];
@@ -279,7 +301,8 @@ int run(int argc, char** argv) {
 }
 
 const bool registered = register_benchmark(
-    {"kernels", "GEMM fp32/bf16 and conv2d vs the measured FMA/bf16 peak and the scalar twin", run});
+    {"kernels", "GEMM fp32/bf16 and conv2d vs the measured FMA/bf16 peak and the scalar twin",
+     run});
 
 }  // namespace
 }  // namespace macro::bench
