@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <charconv>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 
@@ -373,6 +374,11 @@ Result<std::vector<ElementRows>> locate_elements(const Header& header, const uin
           if (!next_token(&tok)) return fail_end();
           double v = 0;
           auto [ptr, ec] = std::from_chars(tok.data(), tok.data() + tok.size(), v);
+          if (ec == std::errc::result_out_of_range && ptr == tok.data() + tok.size()) {
+            // "1e999" is infinite, "1e-999" zero: values for the NaN/Inf policy, not bad syntax.
+            v = std::strtod(std::string(tok).c_str(), nullptr);
+            ec = std::errc();
+          }
           if (ec != std::errc() || ptr != tok.data() + tok.size())
             return Status::error(label + ": row " + std::to_string(r) + ", property '" + p.name +
                                  "': expected a number, found '" + std::string(tok.substr(0, 32)) +

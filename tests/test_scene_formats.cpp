@@ -812,6 +812,16 @@ TEST_CASE("formats: bad .ply input fails with messages naming the file and the f
     bad.replace(bad.rfind(' ', bad.size() - 3) + 1, 1, "x");
     CHECK_THAT(load_error(bytes_of(bad), "a.ply"),
                Catch::Contains("a.ply") && Catch::Contains("expected a number"));
+    // An out-of-range literal is an infinity: that Gaussian is dropped, not a syntax error.
+    LoadReport report;
+    std::string inf_x = t;
+    const size_t body = inf_x.find('\n', inf_x.find("end_header")) + 1;
+    inf_x.replace(body, inf_x.find(' ', body) - body, "1e999");
+    auto inf_r = load_bytes(bytes_of(inf_x), "inf.ply", &report);
+    INFO(inf_r.status().message());
+    REQUIRE(inf_r.is_ok());
+    CHECK(inf_r->size() == 2);
+    CHECK(report.dropped_nonfinite == 1);
     std::string shortened = t.substr(0, t.size() - 40);
     CHECK_THAT(load_error(bytes_of(shortened), "b.ply"),
                Catch::Contains("b.ply") && Catch::Contains("truncated"));
