@@ -13,8 +13,9 @@
 //   T' = T (1 - alpha);  if T' <= kTransmittanceStop the lane stops (this one not blended)
 //   else: rgb += c alpha T, depth += z alpha T, inv_depth += alpha T / z, T = T'
 //
-// Paths: scalar (std::exp, the reference twin), AVX2 (2 x 8 lanes), AVX-512 (16 lanes), each with
-// a polynomial exp (relative error ~2e-7); the table is picked from active_isa(). The row lists
+// Paths: scalar (the reference twin: sigma, exp, alpha and the stop test in double), AVX2
+// (2 x 8 lanes), AVX-512 (16 lanes), each in float with a polynomial exp (relative error ~2e-7);
+// the table is picked from active_isa(). The row lists
 // come from build_rows: scalar (also used by the AVX2 table) or AVX-512 (16 Gaussians per step,
 // compress-stored). Row lists only cull: an entry kept near the cutoff contributes < 1/255 and is
 // skipped by the exact per-pixel test, so the two builders give identical images.
