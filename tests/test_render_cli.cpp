@@ -130,7 +130,7 @@ TEST_CASE("macro render writes PNG, EXR, safetensors and inverse-depth PNG that 
   CHECK(depth_png->height == H);
 }
 
-TEST_CASE("macro render --quiet prints nothing; modes and options run", "[render][render_cli]") {
+TEST_CASE("macro render --quiet prints nothing, and every mode and a scene folder render", "[render][render_cli]") {
   test::TempDir dir("render_cli"), logs("render_cli_logs");
   Run r = run_macro("render " + scene_flags("train_03") + " --out-png " + dir.file("a.png") +
                         " --mode antialiased --sh-degree 0 --threads 1 --quiet",
