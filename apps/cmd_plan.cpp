@@ -1,0 +1,99 @@
+// macro plan: MACRO's planning stage for one close-up (enhance/plan.h) -> plan.json [+ debug
+// images].
+#include <cstdio>
+
+#include "apps/args.h"
+#include "attention/runtime/progress.h"
+#include "enhance/plan.h"
+
+namespace macro::cli {
+namespace {
+
+constexpr const char* kUsage =
+    "usage: macro plan --closeup FRAME --out plan.json (--scene-dir DIR | --scene PLY --cameras C\n"
+    "         --images DIR [--closeups SPLIT]) [--refs K] [--planes P|auto] [--max-planes P]\n"
+    "         [--mask released|paper|none] [--scale axis|per-plane] [--crop full|tight]\n"
+    "         [--occlusion] [--upsampler lanczos|pft-sr] [--debug-dir D]\n"
+    "  DIR is a DL3DV-Closeup scene folder: images/, sparse/0 (or transforms.json), split.json "
+    "and\n"
+    "  the trained splat (docs/macro.md lists where it is looked for). Defaults are the released\n"
+    "  MACRO: K=3, P=3, masks 'released', optical-axis scale, full crops, no occlusion test.\n";
+
+int run_plan(std::vector<std::string> argv) {
+  Args args(std::move(argv));
+  if (args.flag("--help")) {
+    std::printf("%s", kUsage);
+    return 0;
+  }
+  if (Status s = apply_common_flags(args); !s) return fail("plan", s);
+  enhance::SceneInputOptions in;
+  in.scene_dir = args.value_or("--scene-dir", "");
+  in.closeup = args.required("--closeup");
+  in.scene = args.value_or("--scene", "");
+  in.cameras = args.value_or("--cameras", "");
+  in.closeups = args.value_or("--closeups", "");
+  in.images = args.value_or("--images", "");
+  const std::string out = args.required("--out");
+  const std::string debug_dir = args.value_or("--debug-dir", "");
+  enhance::PlanOptions o;
+  o.refs = args.int_or("--refs", 3, 1, 64);
+  const std::string planes = args.value_or("--planes", "3");
+  const int max_planes = args.int_or("--max-planes", 5, 1, 64);
+  const std::string mask = args.value_or("--mask", "released");
+  const std::string scale = args.value_or("--scale", "axis");
+  const std::string crop = args.value_or("--crop", "full");
+  const std::string upsampler = args.value_or("--upsampler", "lanczos");
+  o.occlusion = args.flag("--occlusion");
+  if (Status s = args.finish(); !s)
+    return fail("plan", Status::error(s.message() + " (macro plan --help for usage)"));
+  if (planes == "auto") {
+    o.planes.automatic = true;
+    o.planes.planes = max_planes;
+  } else {
+    char* end = nullptr;
+    const long p = std::strtol(planes.c_str(), &end, 10);
+    if (!end || *end || p < 1 || p > 64)
+      return fail("plan",
+                  Status::error("--planes: expected 1..64 or auto, found '" + planes + "'"));
+    o.planes.planes = int(p);
+  }
+  auto m = enhance::parse_mask_mode(mask);
+  if (!m) return fail("plan", m.status());
+  o.mask = *m;
+  auto sc = enhance::parse_scale_mode(scale);
+  if (!sc) return fail("plan", sc.status());
+  o.crops.scale = *sc;
+  auto cr = enhance::parse_crop_mode(crop);
+  if (!cr) return fail("plan", cr.status());
+  o.crops.crop = *cr;
+  auto up = enhance::make_upsampler(upsampler);
+  if (!up) return fail("plan", up.status());
+
+  auto inputs = enhance::load_scene_inputs(in);
+  if (!inputs) return fail("plan", inputs.status());
+  for (const std::string& note : inputs->notes) log_info("plan", note);
+  auto plan = enhance::build_plan(*inputs, o);
+  if (!plan) return fail("plan", plan.status());
+  if (!debug_dir.empty()) {
+    auto views = enhance::build_views(*plan, *inputs, **up);
+    if (!views) return fail("plan", views.status());
+    if (Status s = enhance::write_plan_debug(*plan, *views, debug_dir); !s) return fail("plan", s);
+  }
+  if (Status s = enhance::write_plan_json(*plan, out); !s) return fail("plan", s);
+  if (!quiet()) {
+    std::printf("plan: %s (%s pose), %zu candidates -> refs", in.closeup.c_str(),
+                plan->closeup_pose_source.c_str(), inputs->candidates.size());
+    for (const auto& r : plan->selection.refs) std::printf(" %s", r.name.c_str());
+    std::printf(
+        " (coverage %.1f%%), %zu planes, %zu crops (%zu rejected), model %dx%d, %.0f ms -> %s\n",
+        100.0 * plan->selection.coverage_fraction(), plan->planes.planes.size(), plan->crops.size(),
+        plan->rejected.size(), plan->model.w, plan->model.h, plan->timings.ms_total, out.c_str());
+  }
+  return 0;
+}
+
+const bool registered = register_command(
+    {"plan", "MACRO planning stage: references, depth planes, crops, masks", run_plan});
+
+}  // namespace
+}  // namespace macro::cli

@@ -1,0 +1,238 @@
+// MACRO attention masks per token grid (see plane_masks.h).
+#include "enhance/plane_masks.h"
+
+#include <algorithm>
+
+namespace macro::enhance {
+
+const char* mask_mode_name(MaskMode mode) {
+  switch (mode) {
+    case MaskMode::kReleased:
+      return "released";
+    case MaskMode::kPaper:
+      return "paper";
+    case MaskMode::kNone:
+      return "none";
+  }
+  return "?";
+}
+
+Result<MaskMode> parse_mask_mode(const std::string& text) {
+  if (text == "released") return MaskMode::kReleased;
+  if (text == "paper") return MaskMode::kPaper;
+  if (text == "none") return MaskMode::kNone;
+  return Status::error("--mask: expected released, paper or none, found '" + text + "'");
+}
+
+std::vector<TokenGrid> unet_token_grids(int latent_h, int latent_w, int levels) {
+  std::vector<TokenGrid> g;
+  TokenGrid t{latent_h, latent_w};
+  for (int l = 0; l < levels; ++l) {
+    g.push_back(t);
+    t = TokenGrid{(t.h + 1) / 2, (t.w + 1) / 2};
+  }
+  return g;
+}
+
+std::vector<int32_t> latent_plane_map(const std::vector<int32_t>& labels, int width, int height,
+                                      int planes) {
+  const int lh = height / kLatentPatch, lw = width / kLatentPatch;
+  std::vector<int32_t> out(size_t(lh) * size_t(lw), 0);
+  std::vector<int> votes(size_t(std::max(planes, 1)));
+  for (int ci = 0; ci < lh; ++ci)
+    for (int cj = 0; cj < lw; ++cj) {
+      std::fill(votes.begin(), votes.end(), 0);
+      for (int di = 0; di < kLatentPatch; ++di)
+        for (int dj = 0; dj < kLatentPatch; ++dj) {
+          const int32_t l =
+              labels[size_t(ci * kLatentPatch + di) * width + size_t(cj * kLatentPatch + dj)];
+          if (l >= 0 && l < planes) ++votes[size_t(l)];
+        }
+      int best = 0;
+      for (int p = 1; p < planes; ++p)
+        if (votes[size_t(p)] > votes[size_t(best)]) best = p;
+      out[size_t(ci) * lw + cj] = best;  // all invalid: every count 0 -> bin 0 (farthest)
+    }
+  return out;
+}
+
+namespace {
+
+Status check_inputs(int n_tok, int planes, const std::vector<int32_t>& closeup_plane,
+                    const std::vector<int32_t>& crop_plane,
+                    const std::vector<uint8_t>& crop_valid) {
+  auto fail = [](const std::string& w) { return Status::error("plane mask: " + w); };
+  if (n_tok <= 0 || planes <= 0) return fail("tokens per view and planes must be positive");
+  if (closeup_plane.size() != size_t(n_tok))
+    return fail("closeup_plane: expected " + std::to_string(n_tok) + " labels, found " +
+                std::to_string(closeup_plane.size()));
+  if (crop_valid.size() != crop_plane.size() * size_t(n_tok))
+    return fail("crop_valid: expected " + std::to_string(crop_plane.size() * size_t(n_tok)) +
+                " values, found " + std::to_string(crop_valid.size()));
+  for (size_t i = 0; i < closeup_plane.size(); ++i)
+    if (closeup_plane[i] < 0 || closeup_plane[i] >= planes)
+      return fail("closeup_plane[" + std::to_string(i) + "] = " + std::to_string(closeup_plane[i]) +
+                  ": expected a plane in [0, " + std::to_string(planes) + ")");
+  for (size_t c = 0; c < crop_plane.size(); ++c)
+    if (crop_plane[c] < 0 || crop_plane[c] >= planes)
+      return fail("crop_plane[" + std::to_string(c) + "] = " + std::to_string(crop_plane[c]) +
+                  ": expected a plane in [0, " + std::to_string(planes) + ")");
+  if (int64_t(n_tok) * int64_t(1 + crop_plane.size()) > (int64_t(1) << 30))
+    return fail("too many tokens");
+  return Status::ok();
+}
+
+}  // namespace
+
+Result<BlockSparseMask> build_level_mask(MaskMode mode, int n_tok, int planes,
+                                         const std::vector<int32_t>& closeup_plane,
+                                         const std::vector<int32_t>& crop_plane,
+                                         const std::vector<uint8_t>& crop_valid) {
+  MACRO_TRY(check_inputs(n_tok, planes, closeup_plane, crop_plane, crop_valid));
+  const int n = int(crop_plane.size());
+  // Query groups: close-up plane p -> p; crop c -> planes + c (paper) or planes + its plane.
+  // Key groups: close-up -> 0; crop c valid -> 1 + 2c, padding -> 2 + 2c.
+  const int gq = planes + std::max(n, planes), gk = 1 + 2 * n;
+  std::vector<int32_t> qg(size_t(n_tok) * size_t(1 + n)), kg(qg.size());
+  for (int t = 0; t < n_tok; ++t) {
+    qg[size_t(t)] = closeup_plane[size_t(t)];
+    kg[size_t(t)] = 0;
+  }
+  auto crop_row_group = [&](int c) {
+    return planes + (mode == MaskMode::kPaper ? c : crop_plane[size_t(c)]);
+  };
+  for (int c = 0; c < n; ++c)
+    for (int t = 0; t < n_tok; ++t) {
+      const size_t i = size_t(1 + c) * size_t(n_tok) + size_t(t);
+      qg[i] = crop_row_group(c);
+      kg[i] = crop_valid[size_t(c) * n_tok + size_t(t)] ? 1 + 2 * c : 2 + 2 * c;
+    }
+  std::vector<uint8_t> allowed(size_t(gq) * size_t(gk), 0);
+  auto allow = [&](int q, int k) { allowed[size_t(q) * gk + size_t(k)] = 1; };
+  for (int p = 0; p < planes; ++p) {
+    allow(p, 0);
+    for (int c = 0; c < n; ++c) {
+      if (mode == MaskMode::kNone) {
+        allow(p, 1 + 2 * c);
+        allow(p, 2 + 2 * c);
+      } else if (crop_plane[size_t(c)] == p) {
+        allow(p, 1 + 2 * c);
+      }
+    }
+  }
+  for (int c = 0; c < n; ++c)
+    for (int d = 0; d < n; ++d) {
+      const bool sees =
+          mode == MaskMode::kPaper ? c == d : crop_plane[size_t(c)] == crop_plane[size_t(d)];
+      if (!sees) continue;
+      allow(crop_row_group(c), 1 + 2 * d);
+      allow(crop_row_group(c), 2 + 2 * d);
+    }
+  return mask_from_groups(qg, kg, gq, gk, allowed);
+}
+
+std::vector<uint8_t> build_level_mask_dense(MaskMode mode, int n_tok,
+                                            const std::vector<int32_t>& closeup_plane,
+                                            const std::vector<int32_t>& crop_plane,
+                                            const std::vector<uint8_t>& crop_valid) {
+  const int n = int(crop_plane.size());
+  const size_t total = size_t(n_tok) * size_t(1 + n);
+  std::vector<uint8_t> m(total * total, 0);
+  for (int qv = 0; qv <= n; ++qv)
+    for (int qt = 0; qt < n_tok; ++qt) {
+      uint8_t* row = &m[(size_t(qv) * n_tok + size_t(qt)) * total];
+      for (int kv = 0; kv <= n; ++kv)
+        for (int kt = 0; kt < n_tok; ++kt) {
+          bool a;
+          if (qv == 0 && kv == 0) {
+            a = true;
+          } else if (qv == 0) {
+            const int c = kv - 1;
+            a = mode == MaskMode::kNone || (crop_plane[size_t(c)] == closeup_plane[size_t(qt)] &&
+                                            crop_valid[size_t(c) * n_tok + size_t(kt)] != 0);
+          } else if (kv == 0) {
+            a = false;
+          } else {
+            a = mode == MaskMode::kPaper ? qv == kv
+                                         : crop_plane[size_t(qv - 1)] == crop_plane[size_t(kv - 1)];
+          }
+          row[size_t(kv) * n_tok + size_t(kt)] = a;
+        }
+    }
+  return m;
+}
+
+double PlaneMaskSet::density() const {
+  double allowed = 0, total = 0;
+  for (const BlockSparseMask& m : masks) {
+    allowed += double(m.allowed_pairs());
+    total += double(m.nq) * double(m.nk);
+  }
+  return total > 0 ? allowed / total : 0;
+}
+
+std::vector<int64_t> PlaneMaskSet::view_pair_counts(int level) const {
+  const int n = int(crop_plane.size()), V = 1 + n;
+  const int64_t N = grids[size_t(level)].tokens();
+  const auto& cp = closeup_plane[size_t(level)];
+  const auto& valid = crop_valid[size_t(level)];
+  std::vector<int64_t> per_plane(size_t(planes), 0);
+  for (int32_t l : cp) ++per_plane[size_t(l)];
+  std::vector<int64_t> out(size_t(V) * V, 0);
+  out[0] = N * N;
+  for (int c = 0; c < n; ++c) {
+    int64_t nv = 0;
+    for (int64_t t = 0; t < N; ++t) nv += valid[size_t(c) * size_t(N) + size_t(t)] != 0;
+    out[size_t(1 + c)] =
+        mode == MaskMode::kNone ? N * N : per_plane[size_t(crop_plane[size_t(c)])] * nv;
+    for (int d = 0; d < n; ++d) {
+      const bool sees =
+          mode == MaskMode::kPaper ? c == d : crop_plane[size_t(c)] == crop_plane[size_t(d)];
+      out[size_t(1 + c) * V + size_t(1 + d)] = sees ? N * N : 0;
+    }
+  }
+  return out;
+}
+
+Result<PlaneMaskSet> build_plane_masks(MaskMode mode, int planes,
+                                       const std::vector<int32_t>& crop_plane,
+                                       const std::vector<int32_t>& plane_src, int src_h, int src_w,
+                                       const std::vector<std::vector<uint8_t>>& valid_src,
+                                       int valid_h, int valid_w,
+                                       const std::vector<TokenGrid>& grids) {
+  if (src_h <= 0 || src_w <= 0 || plane_src.size() != size_t(src_h) * size_t(src_w))
+    return Status::error("plane mask: plane map has " + std::to_string(plane_src.size()) +
+                         " values, expected " + std::to_string(src_h) + "x" +
+                         std::to_string(src_w));
+  if (valid_src.size() != crop_plane.size())
+    return Status::error("plane mask: " + std::to_string(valid_src.size()) +
+                         " crop validity maps for " + std::to_string(crop_plane.size()) + " crops");
+  for (size_t c = 0; c < valid_src.size(); ++c)
+    if (valid_h <= 0 || valid_w <= 0 || valid_src[c].size() != size_t(valid_h) * size_t(valid_w))
+      return Status::error("plane mask: crop " + std::to_string(c) + " validity has " +
+                           std::to_string(valid_src[c].size()) + " values, expected " +
+                           std::to_string(valid_h) + "x" + std::to_string(valid_w));
+  PlaneMaskSet s;
+  s.mode = mode;
+  s.planes = planes;
+  s.crop_plane = crop_plane;
+  s.grids = grids;
+  for (const TokenGrid& g : grids) {
+    if (g.h <= 0 || g.w <= 0) return Status::error("plane mask: empty token grid");
+    s.closeup_plane.push_back(resize_nearest(plane_src, src_h, src_w, g.h, g.w));
+    std::vector<uint8_t> valid;
+    valid.reserve(crop_plane.size() * size_t(g.tokens()));
+    for (const auto& v : valid_src) {
+      const std::vector<uint8_t> r = resize_nearest(v, valid_h, valid_w, g.h, g.w);
+      valid.insert(valid.end(), r.begin(), r.end());
+    }
+    MACRO_ASSIGN_OR_RETURN(
+        BlockSparseMask m,
+        build_level_mask(mode, g.tokens(), planes, s.closeup_plane.back(), crop_plane, valid));
+    s.crop_valid.push_back(std::move(valid));
+    s.masks.push_back(std::move(m));
+  }
+  return s;
+}
+
+}  // namespace macro::enhance

@@ -1,0 +1,100 @@
+// Image resampling for MACRO's planning stage: Pillow-exact Lanczos, the model size rule, and the
+// upsampler interface (Lanczos by default; a super-resolution network when its weights exist).
+//
+// Legend: H x W pixels, C channels, images row-major [H,W,C] (gs::Image).
+//
+// Lanczos (a = 3) reproduces Pillow's Image.resize(..., LANCZOS) (no reducing_gap):
+//  - separable, horizontal pass first, then vertical;
+//  - output pixel x samples centre = (x + 0.5) * scale, scale = in / out; when shrinking the
+//    kernel support (3) and argument are widened by scale (filterscale = max(scale, 1));
+//  - taps xmin = int(centre - support + 0.5) clamped at 0, xmax = int(centre + support + 0.5)
+//    clamped at in; weights lanczos((x + xmin - centre + 0.5) / filterscale) normalised to sum 1;
+//  - float mode (Pillow mode "F"): double accumulation, float intermediate and output;
+//  - 8-bit mode: weights in fixed point with 22 fractional bits (rounded half away from zero),
+//    integer accumulation starting at half a unit, each pass clipped to [0, 255] after the shift,
+//    so the intermediate image is 8-bit too.
+// Facts from Pillow's libImaging/Resample.c, re-implemented; tested against Pillow outputs
+// (golden metrics/lanczos.safetensors).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "attention/runtime/status.h"
+#include "attention/runtime/thread_pool.h"
+#include "gs/image_io.h"
+
+namespace macro::enhance {
+
+inline constexpr double kLanczosSupport = 3.0;   // Pillow LANCZOS: a = 3
+inline constexpr int kPillowPrecisionBits = 22;  // 32 - 8 - 2: fixed-point weight bits (8-bit mode)
+inline constexpr int kMaxModelSide = 960;        // MACRO _MAX_MODEL_SIDE (macro-method.md §5)
+inline constexpr int kModelMultiple = 8;         // VAE downsampling factor
+
+// One output sample's taps: input indices [first, first + count), weights at k[offset ...].
+struct ResampleTaps {
+  int out_size = 0, in_size = 0;
+  int max_taps = 0;               // row stride of `weights`
+  std::vector<int> first, count;  // [out]
+  std::vector<double> weights;    // [out, max_taps], normalised to sum 1 (if the sum is non-zero)
+};
+ResampleTaps lanczos_taps(int in_size, int out_size);
+
+// Float mode per channel (Pillow "F"). out_w, out_h >= 1; src must be non-empty.
+gs::Image resize_lanczos(const gs::Image& src, int out_w, int out_h,
+                         ThreadPool& pool = ThreadPool::global());
+// 8-bit mode (Pillow "RGB"/"L"): src [H,W,C] uint8, returns [out_h, out_w, C] uint8.
+std::vector<uint8_t> resize_lanczos_u8(const uint8_t* src, int w, int h, int c, int out_w,
+                                       int out_h, ThreadPool& pool = ThreadPool::global());
+
+// Nearest index of output i among `out` samples over `in` inputs: floor(i * in / out) (the
+// top-left sample of each cell; torch nearest for integer-ratio and most other sizes).
+inline int nearest_index(int i, int in, int out) {
+  return static_cast<int>((int64_t(i) * in) / out);
+}
+
+// MACRO model size (macro-method.md §5): floor both sides to multiples of 8; if the longer side is
+// then above 960, scale so it is 960, round each side and floor it to a multiple of 8.
+// 960x540 -> 960x536, 1071x1428 -> 712x960. Sizes must be >= 8.
+struct Size2 {
+  int w = 0, h = 0;
+  bool operator==(const Size2& o) const { return w == o.w && h == o.h; }
+};
+Result<Size2> model_size(int width, int height, int max_side = kMaxModelSide);
+
+// ---- Upsampler: how a reference crop canvas becomes a model-size view ---------------------------
+class Upsampler {
+ public:
+  virtual ~Upsampler() = default;
+  virtual const char* name() const = 0;
+  // src [H,W,3] float in [0,1] -> [out_h, out_w, 3].
+  virtual Result<gs::Image> resize(const gs::Image& src, int out_w, int out_h) const = 0;
+};
+
+// Float Lanczos (above). The default.
+class LanczosUpsampler final : public Upsampler {
+ public:
+  const char* name() const override { return "lanczos"; }
+  Result<gs::Image> resize(const gs::Image& src, int out_w, int out_h) const override;
+};
+
+// PFT-SR light (the released pipeline's super-resolution, macro-method.md §3). The network is not
+// part of this engine yet: resize() fails, naming the weight files and where they would go.
+class PftSrUpsampler final : public Upsampler {
+ public:
+  explicit PftSrUpsampler(std::string weights_dir) : weights_dir_(std::move(weights_dir)) {}
+  const char* name() const override { return "pft-sr"; }
+  Result<gs::Image> resize(const gs::Image& src, int out_w, int out_h) const override;
+  const std::string& weights_dir() const { return weights_dir_; }
+
+ private:
+  std::string weights_dir_;
+};
+
+// "lanczos" or "pft-sr" (weights_dir: where the PFT-SR weights would be; "" = data/weights/pft-sr).
+Result<std::unique_ptr<Upsampler>> make_upsampler(const std::string& name,
+                                                  const std::string& weights_dir = "");
+
+}  // namespace macro::enhance

@@ -1,0 +1,33 @@
+// A synthetic scene (gs/synth.h) written as a DL3DV-Closeup scene folder, so the MACRO planning
+// stage, the enhancer and the benchmark harness run on data with analytic answers.
+//
+// DIR/
+//   images/<train>.png        the training cameras rendered from the scene ("ground truth")
+//   closeup_gt/<closeup>.png  each close-up rendered likewise (optional)
+//   sparse/0/                 COLMAP text model of the training cameras (gs save_colmap_text)
+//   split.json                scene, data_factor 1, intrinsics (first training camera),
+//   training_frames,
+//                             closeup_eval_pairs (training_frame = the camera the close-up zoomed
+//                             from, depth_ratio = zoom), closeup_poses (OpenGL c2w), counts
+//   scene.ply                 the splat (the "trained" model)
+//   geometry.json             the analytic geometry (planes, spheres, rods, close-up targets)
+// Frame names are the camera names plus ".png". Every file is written atomically.
+#pragma once
+
+#include <string>
+
+#include "attention/runtime/status.h"
+#include "gs/synth.h"
+
+namespace macro::enhance {
+
+struct SynthFolderOptions {
+  bool closeup_gt = true;          // render closeup_gt/
+  bool register_closeups = false;  // also put the close-ups into sparse/0 (tests the COLMAP path)
+  std::string ply_name = "scene.ply";
+};
+
+Status write_closeup_scene_folder(const gs::SynthScene& scene, const std::string& dir,
+                                  const SynthFolderOptions& options = {});
+
+}  // namespace macro::enhance

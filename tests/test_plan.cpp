@@ -1,0 +1,139 @@
+// The whole planning stage on a synthetic DL3DV-Closeup folder: inputs, determinism across thread
+// counts, JSON fields, views and debug images, the CLI.
+#include <catch2/catch.hpp>
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "attention/runtime/file_io.h"
+#include "enhance/plan.h"
+#include "enhance/synth_scene_folder.h"
+#include "test_support.h"
+
+using namespace macro;
+using namespace macro::enhance;
+
+namespace {
+
+gs::SynthScene small_scene() {
+  gs::SynthParams p;
+  p.seed = 3;
+  p.kind = gs::SynthKind::kMixed;
+  p.gaussians = 40'000;
+  p.width = 240;
+  p.height = 136;
+  p.training_views = 6;
+  p.closeup_views = 2;
+  auto s = gs::generate_synthetic_scene(p);
+  MACRO_CHECK(s.is_ok());
+  return std::move(s).value();
+}
+
+std::string without_timings(const std::string& json_text) {
+  auto j = nlohmann::json::parse(json_text);
+  j.erase("timings_ms");
+  return j.dump();
+}
+
+}  // namespace
+
+TEST_CASE("synthetic scene folder loads as DL3DV-Closeup; plan is thread-count invariant",
+          "[macro][plan]") {
+  test::TempDir tmp("macro-plan");
+  const auto scene = small_scene();
+  REQUIRE(write_closeup_scene_folder(scene, tmp.path).is_ok());
+  for (const char* f : {"split.json", "scene.ply", "sparse/0/cameras.txt", "sparse/0/images.txt",
+                        "images/train_00.png", "closeup_gt/closeup.png", "geometry.json"})
+    CHECK(file_exists(tmp.file(f)));
+  auto ply = find_scene_ply(tmp.path);
+  REQUIRE(ply.is_ok());
+  CHECK(std::filesystem::path(*ply).filename() == "scene.ply");
+
+  SceneInputOptions o;
+  o.scene_dir = tmp.path;
+  o.closeup = "closeup.png";
+  auto in = load_scene_inputs(o);
+  REQUIRE(in.is_ok());
+  CHECK(in->closeup_pose_source == "split");
+  CHECK(in->candidates.size() == 6);
+  // The split pose converts back to the generator's camera.
+  const gs::Camera& truth = scene.cameras.cameras[size_t(scene.cameras.index_of("closeup"))];
+  CHECK((in->closeup.R - truth.R).norm() < 1e-9);
+  CHECK((in->closeup.t - truth.t).norm() < 1e-9);
+
+  ThreadPool one(1), two(2);
+  PlanOptions po;
+  po.pool = &one;
+  auto a = build_plan(*in, po);
+  REQUIRE(a.is_ok());
+  po.pool = &two;
+  auto b = build_plan(*in, po);
+  REQUIRE(b.is_ok());
+  CHECK(without_timings(plan_to_json(*a)) == without_timings(plan_to_json(*b)));
+  REQUIRE(a->masks_built);
+  for (size_t l = 0; l < a->masks.masks.size(); ++l)
+    CHECK(a->masks.masks[l].to_dense() == b->masks.masks[l].to_dense());
+
+  // JSON fields and the released defaults.
+  auto j = nlohmann::json::parse(plan_to_json(*a));
+  CHECK(j["references"].size() == 3);
+  CHECK(j["model_size"] == nlohmann::json::array({240, 136}));
+  CHECK(j["planes"].size() >= 1);
+  CHECK(j["planes"].size() <= 3);
+  REQUIRE(j["crops"].size() >= 1);
+  for (const auto& c : j["crops"]) {
+    CHECK(c["box"].size() == 4);
+    CHECK(c["valid_fraction"].get<double>() > 0);
+  }
+  CHECK(j["masks"].size() == 4);
+  CHECK(j["masks"][0]["grid"] == nlohmann::json::array({17, 30}));
+  // Views: close-up + crops at the model size, padding black.
+  auto up = make_upsampler("lanczos");
+  auto views = build_views(*a, *in, **up);
+  REQUIRE(views.is_ok());
+  REQUIRE(views->images.size() == 1 + a->crops.size());
+  for (const auto& img : views->images) {
+    CHECK(img.width == 240);
+    CHECK(img.height == 136);
+  }
+  test::TempDir dbg("macro-plan-debug");
+  REQUIRE(write_plan_debug(*a, *views, dbg.path).is_ok());
+  for (const char* f : {"plane_map.png", "closeup.png", "closeup_depth.png", "latent_planes.png",
+                        "mask_level0.png", "crop_00_p0_r0.png"})
+    CHECK(file_exists(dbg.file(f)));
+  // A PFT-SR request fails clearly.
+  auto pft = make_upsampler("pft-sr");
+  auto bad = build_views(*a, *in, **pft);
+  REQUIRE_FALSE(bad.is_ok());
+  CHECK(bad.status().message().find("not available") != std::string::npos);
+}
+
+TEST_CASE("macro plan CLI: plan.json, debug images, clear errors", "[macro][plan][cli]") {
+  test::TempDir tmp("macro-plan-cli");
+  REQUIRE(write_closeup_scene_folder(small_scene(), tmp.path + "/scene").is_ok());
+  const std::string exe = test::macro_exe();
+  const std::string out = tmp.file("plan.json");
+  const int rc = test::run_command(exe + " plan --quiet --scene-dir " + tmp.path +
+                                   "/scene --closeup closeup_01.png --out " + out +
+                                   " --planes auto --mask paper --debug-dir " + tmp.file("dbg") +
+                                   " 2>" + tmp.file("err.txt"));
+  REQUIRE(rc == 0);
+  auto text = read_text_file(out);
+  REQUIRE(text.is_ok());
+  auto j = nlohmann::json::parse(*text);
+  CHECK(j["options"]["mask"] == "paper");
+  CHECK(j["options"]["planes"] == "auto");
+  CHECK(file_exists(tmp.file("dbg/plane_map.png")));
+  // Unknown close-up, bad mode, missing folder: exit 1 with a message naming the problem.
+  CHECK(test::run_command(exe + " plan --quiet --scene-dir " + tmp.path +
+                          "/scene --closeup nope.png --out " + out + " 2>" + tmp.file("e1")) == 1);
+  auto e1 = read_text_file(tmp.file("e1"));
+  REQUIRE(e1.is_ok());
+  CHECK(e1->find("nope.png") != std::string::npos);
+  CHECK(test::run_command(exe + " plan --quiet --scene-dir " + tmp.path +
+                          "/scene --closeup closeup.png --mask bogus --out " + out + " 2>" +
+                          tmp.file("e2")) == 1);
+  CHECK(test::run_command(exe + " plan --quiet --scene-dir " + tmp.path +
+                          "/missing --closeup closeup.png --out " + out + " 2>" + tmp.file("e3")) ==
+        1);
+}

@@ -1,0 +1,94 @@
+// Pillow-exact Lanczos against the Pillow goldens (metrics/lanczos.safetensors), model size rule,
+// upsampler selection.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+
+#include "attention/runtime/safetensors.h"
+#include "enhance/resample.h"
+#include "test_support.h"
+
+using namespace macro;
+using namespace macro::enhance;
+
+TEST_CASE("lanczos float and 8-bit match Pillow", "[macro][resample]") {
+  auto st = SafeTensors::open(test::golden_dir() + "/metrics/lanczos.safetensors");
+  REQUIRE(st.is_ok());
+  auto in = st->read_f32("input.image", {256, 256, 3});
+  REQUIRE(in.is_ok());
+  gs::Image src(256, 256, 3);
+  src.data = *in;
+  std::vector<uint8_t> src_u8(in->size());
+  for (size_t i = 0; i < src_u8.size(); ++i)
+    src_u8[i] = uint8_t(std::lround(std::clamp((*in)[i], 0.f, 1.f) * 255.f));
+  for (const char* name : {"up_3p1", "down_to_mult8", "down_0p37", "up_2x_nonsquare"}) {
+    const TensorEntry* e = st->find(std::string("output.") + name);
+    REQUIRE(e != nullptr);
+    const int h = int(e->shape[0]), w = int(e->shape[1]);
+    auto want = st->read_f32(std::string("output.") + name);
+    REQUIRE(want.is_ok());
+    const gs::Image got = resize_lanczos(src, w, h);
+    const test::Diff d = test::compare(got.data, *want);
+    INFO(name << " float max abs " << d.max_abs);
+    CHECK(d.max_abs <= 1e-4);
+    auto want8 = st->read_f32(std::string("output_u8.") + name);
+    REQUIRE(want8.is_ok());
+    const std::vector<uint8_t> got8 = resize_lanczos_u8(src_u8.data(), 256, 256, 3, w, h);
+    REQUIRE(got8.size() == want8->size());
+    int worst = 0;
+    size_t exact = 0;
+    for (size_t i = 0; i < got8.size(); ++i) {
+      const int diff = std::abs(int(got8[i]) - int((*want8)[i]));
+      worst = std::max(worst, diff);
+      exact += diff == 0;
+    }
+    INFO(name << " u8 worst " << worst << ", exact " << exact << "/" << got8.size());
+    CHECK(worst <= 1);
+  }
+}
+
+TEST_CASE("lanczos taps are normalised and sized like Pillow", "[macro][resample]") {
+  const ResampleTaps up = lanczos_taps(10, 31);
+  CHECK(up.max_taps == 7);  // ceil(3) * 2 + 1
+  const ResampleTaps down = lanczos_taps(100, 37);
+  CHECK(down.max_taps == int(std::ceil(3.0 * 100 / 37)) * 2 + 1);
+  for (int x = 0; x < 37; ++x) {
+    double s = 0;
+    for (int i = 0; i < down.count[size_t(x)]; ++i)
+      s += down.weights[size_t(x) * down.max_taps + i];
+    CHECK(s == Approx(1.0).margin(1e-12));
+  }
+  // Same size: identity weights at integer centres.
+  const ResampleTaps id = lanczos_taps(9, 9);
+  for (int x = 0; x < 9; ++x)
+    for (int i = 0; i < id.count[size_t(x)]; ++i)
+      CHECK(id.weights[size_t(x) * id.max_taps + i] ==
+            Approx(id.first[size_t(x)] + i == x ? 1.0 : 0.0).margin(1e-12));
+}
+
+TEST_CASE("model size follows the released rule", "[macro][resample]") {
+  CHECK(*model_size(960, 540) == Size2{960, 536});
+  CHECK(*model_size(1071, 1428) == Size2{712, 960});
+  CHECK(*model_size(480, 270) == Size2{480, 264});
+  CHECK(*model_size(1920, 1080) == Size2{960, 536});
+  CHECK_FALSE(model_size(7, 100).is_ok());
+}
+
+TEST_CASE("upsampler choice: lanczos works, pft-sr fails clearly", "[macro][resample]") {
+  auto l = make_upsampler("lanczos");
+  REQUIRE(l.is_ok());
+  CHECK(std::string((*l)->name()) == "lanczos");
+  gs::Image img(16, 12, 3);
+  for (size_t i = 0; i < img.data.size(); ++i) img.data[i] = float(i % 7) / 7.f;
+  auto r = (*l)->resize(img, 40, 24);
+  REQUIRE(r.is_ok());
+  CHECK(r->width == 40);
+  CHECK(r->height == 24);
+  auto p = make_upsampler("pft-sr", "/nowhere/pft");
+  REQUIRE(p.is_ok());
+  auto pr = (*p)->resize(img, 40, 24);
+  REQUIRE_FALSE(pr.is_ok());
+  CHECK(pr.status().message().find("/nowhere/pft") != std::string::npos);
+  CHECK(pr.status().message().find("PFT_light_SRx4") != std::string::npos);
+  CHECK_FALSE(make_upsampler("bicubic").is_ok());
+}
