@@ -377,6 +377,7 @@ Status convert_to_f32(const TensorEntry& e, float* dst, size_t n) {
   if (n * es != e.bytes)
     return Status::error("tensor '" + e.name + "': expected " + std::to_string(n) +
                          " elements, found " + std::to_string(e.bytes / es));
+  if (n == 0) return Status::ok();  // empty tensors: no pointer is touched
   const uint8_t* p = e.data;
   switch (e.dtype) {
     case DType::kF32:
