@@ -267,3 +267,36 @@ TEST_CASE("a failed render job removes the outputs it already wrote", "[render][
     CHECK(gs::parse_raster_mode(gs::raster_mode_name(m)).value() == m);
   }
 }
+
+// End to end against the rasterizer goldens: the CLI's tensors are the golden render.
+TEST_CASE("macro render --out-tensors reproduces the raster goldens", "[render][render_cli]") {
+  test::TempDir dir("render_cli"), logs("render_cli_logs");
+  const std::string g = test::golden_dir() + "/raster/random-sh3";
+  for (const char* cam : {"front", "closeup"}) {
+    Run r = run_macro("render --scene " + g + "/scene.ply --cameras " + g + "/cameras.json --camera " +
+                          cam + " --out-tensors " + dir.file(std::string(cam) + ".safetensors") + " --quiet",
+                      logs);
+    INFO(cam << ": " << r.err);
+    REQUIRE(r.rc == 0);
+    auto got = SafeTensors::open(dir.file(std::string(cam) + ".safetensors"));
+    auto want = SafeTensors::open(g + "/expected-" + cam + ".safetensors");
+    REQUIRE(got);
+    REQUIRE(want);
+    for (const char* t : {"color", "alpha", "depth_sum", "inv_depth_sum"}) {
+      auto a = got->read_f32(t);
+      auto b = want->read_f32(t);
+      REQUIRE(a);
+      REQUIRE(b);
+      REQUIRE(a->size() == b->size());
+      REQUIRE(got->find(t)->shape == want->find(t)->shape);
+      const test::Diff d = test::compare(*a, *b);
+      INFO(t << ": max abs " << d.max_abs << ", PSNR " << d.psnr);
+      if (std::string(t) == "color" || std::string(t) == "alpha") {
+        CHECK(d.max_abs <= 2e-3);
+        CHECK(d.psnr >= 60);
+      } else {
+        CHECK(d.rel_l2 <= 1e-3);  // depth sums are in scene units, not [0, 1]
+      }
+    }
+  }
+}
