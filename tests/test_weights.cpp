@@ -17,7 +17,7 @@
 using namespace macro;
 using namespace macro::nets;
 
-TEST_CASE("diffusers configs: tiny goldens and manifests parse; bad fields are named", "[nets][config]") {
+TEST_CASE("diffusers configs: tiny goldens and manifests parse, bad fields are named", "[nets][config]") {
   const std::string g = test::golden_dir();
   auto unet = load_unet_config(g + "/unet-tiny/config.json");
   INFO(unet.status().message());
@@ -55,7 +55,7 @@ TEST_CASE("diffusers configs: tiny goldens and manifests parse; bad fields are n
   REQUIRE(bad_type.status().message().find("layers_per_block") != std::string::npos);
 }
 
-TEST_CASE("DDPM: abar_199 matches the golden constant; x0 step", "[nets][scheduler]") {
+TEST_CASE("DDPM: abar_199 matches the golden constant, x0 step", "[nets][scheduler]") {
   auto st = SafeTensors::open(test::golden_dir() + "/difix-tiny/case-ref2.safetensors");
   REQUIRE(st.is_ok());
   auto golden = st->read_f32("const.alpha_bar_199");

@@ -82,7 +82,9 @@ Result<std::string> read_text_file(const std::string& path, uint64_t max_bytes) 
 
 std::string temp_path_for(const std::string& path) {
   static std::atomic<unsigned> counter{0};
-  return path + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(counter++);
+  std::string temp = path + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(counter++);
+  register_temp(temp);  // removed on SIGINT/SIGTERM until committed or removed
+  return temp;
 }
 
 Status commit_temp_file(const std::string& temp, const std::string& path) {
@@ -117,7 +119,6 @@ Status AtomicFile::open(const std::string& path) {
   discard();
   path_ = path;
   temp_path_ = temp_path_for(path);
-  register_temp(temp_path_);
   file_ = std::fopen(temp_path_.c_str(), "wb");
   if (!file_) {
     Status s = Status::error(path + ": cannot create output: " + errno_text());
