@@ -46,6 +46,7 @@ Result<std::unique_ptr<DifixPipeline>> DifixPipeline::load(const std::string& fo
   if (!is_pipeline_folder(folder))
     return Status::error(folder + ": expected a pipeline folder (model_index.json, unet/, vae/)");
   auto p = std::make_unique<DifixPipeline>();
+  p->folder_ = folder;
   const std::string sched = folder + "/scheduler/scheduler_config.json";
   if (file_exists(sched)) {
     MACRO_ASSIGN_OR_RETURN(p->schedule_, load_ddpm_schedule(sched));
@@ -78,6 +79,24 @@ Result<DifixOutputs> DifixPipeline::step(const TensorView& images, const TensorV
   for (const Tensor& s : enc.skips) skips.push_back(s.view());
   MACRO_ASSIGN_OR_RETURN(o.image, vae_->decode(z0_view0, skips, pool));
   return o;
+}
+
+Result<Tensor> DifixPipeline::prompt_context(const std::string& prompt, ThreadPool* pool,
+                                             PromptCacheInfo* info) const {
+  MACRO_ASSIGN_OR_RETURN(Tensor ctx, prompt_embedding(folder_, prompt, pool, {}, info));
+  if (ctx.dim(2) != unet_->config().cross_attention_dim)
+    return Status::error(folder_ + "/text_encoder/config.json: field 'hidden_size': expected " +
+                         std::to_string(unet_->config().cross_attention_dim) +
+                         " (the unet's cross_attention_dim), found " + std::to_string(ctx.dim(2)));
+  return ctx;
+}
+
+Result<DifixOutputs> DifixPipeline::step_with_prompt(const TensorView& images,
+                                                     const UNetMasks& masks, ThreadPool* pool,
+                                                     int timestep,
+                                                     const std::string& prompt) const {
+  MACRO_ASSIGN_OR_RETURN(Tensor ctx, prompt_context(prompt, pool));
+  return step(images, ctx, masks, pool, timestep);
 }
 
 }  // namespace macro::nets

@@ -5,8 +5,9 @@
 //
 // Folder: model_index.json, unet/ (UNet2DConditionModel), vae/ (Difix AutoencoderKL),
 // scheduler/scheduler_config.json (optional: num_train_timesteps, beta_start, beta_end; the
-// schedule must be scaled_linear with epsilon prediction), text_encoder/ and tokenizer/ (not read
-// here: the caller supplies the text embedding `ctx`).
+// schedule must be scaled_linear with epsilon prediction), text_encoder/ and tokenizer/ (optional:
+// read only by prompt_context(), which computes the prompt's CLIP embedding once and caches it on
+// disk, see prompt_cache.h; otherwise the caller supplies the text embedding `ctx`).
 //
 // step(images [V,3,H,W] in [-1,1], ctx [V or 1, Lc, Dc], masks):
 //   z   = vae.encode(images).z                      [V, 4, h, w]   (posterior mean, scaled)
@@ -19,6 +20,7 @@
 #include <memory>
 #include <string>
 
+#include "attention/nets/prompt_cache.h"
 #include "attention/nets/scheduler.h"
 #include "attention/nets/unet.h"
 #include "attention/nets/vae.h"
@@ -43,7 +45,18 @@ class DifixPipeline {
   Result<DifixOutputs> step(const TensorView& images, const TensorView& ctx, const UNetMasks& masks,
                             ThreadPool* pool, int timestep = kDefaultTimestep) const;
 
+  // The text context [1, Lc, Dc] of `prompt` from the folder's text_encoder/ and tokenizer/
+  // (computed in fp32 once, then read from the prompt cache); its width must be the U-Net's
+  // cross_attention_dim. `info` (optional) reports whether the cache was hit.
+  Result<Tensor> prompt_context(const std::string& prompt, ThreadPool* pool,
+                                PromptCacheInfo* info = nullptr) const;
+  // step() with ctx = prompt_context(prompt).
+  Result<DifixOutputs> step_with_prompt(const TensorView& images, const UNetMasks& masks,
+                                        ThreadPool* pool, int timestep = kDefaultTimestep,
+                                        const std::string& prompt = kDifixPrompt) const;
+
   static constexpr int kDefaultTimestep = 199;
+  const std::string& folder() const { return folder_; }
   const UNet2DConditionModel& unet() const { return *unet_; }
   const DifixVae& vae() const { return *vae_; }
   const DdpmSchedule& schedule() const { return schedule_; }
@@ -52,6 +65,7 @@ class DifixPipeline {
   std::unique_ptr<UNet2DConditionModel> unet_;
   std::unique_ptr<DifixVae> vae_;
   DdpmSchedule schedule_;
+  std::string folder_;
 };
 
 // scheduler/scheduler_config.json: fields present override the SD-Turbo defaults; an unsupported

@@ -1,8 +1,10 @@
 #include "attention/nets/nn_run.h"
 
 #include <cmath>
+#include <cstring>
 #include <set>
 
+#include "attention/nets/clip_text.h"
 #include "attention/nets/difix.h"
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/safetensors.h"
@@ -20,6 +22,8 @@ const char* model_kind_name(ModelKind k) {
       return "vae";
     case ModelKind::kDifix:
       return "difix";
+    case ModelKind::kClipText:
+      return "clip_text";
   }
   return "?";
 }
@@ -32,9 +36,10 @@ Result<ModelKind> detect_model_kind(const std::string& folder) {
     MACRO_ASSIGN_OR_RETURN(std::string cls, config_class_name(folder + "/config.json"));
     if (cls == "UNet2DConditionModel") return ModelKind::kUNet;
     if (cls == "AutoencoderKL") return ModelKind::kVae;
+    if (cls == "CLIPTextModel") return ModelKind::kClipText;
     return Status::error(folder +
-                         "/config.json: field '_class_name': expected "
-                         "UNet2DConditionModel or AutoencoderKL, found '" +
+                         "/config.json: field '_class_name' / 'architectures': expected "
+                         "UNet2DConditionModel, AutoencoderKL or CLIPTextModel, found '" +
                          cls + "'");
   }
   return Status::error(folder +
@@ -100,6 +105,44 @@ Status run_taesd(const NnRunOptions& opt, const SafeTensors& in) {
                            {{"model", "taesd"}, {"precision", precision_name(opt.precision)}});
 }
 
+// input.ids [B, L] (I64 or I32) -> output.hidden [B, L, D].
+Status run_clip_text(const NnRunOptions& opt, const SafeTensors& in) {
+  MACRO_TRY(check_names(in, {"input.ids"}, "clip_text"));
+  const TensorEntry* e = in.find("input.ids");
+  if (!e) return Status::error(in.path() + ": missing input tensor 'input.ids'");
+  if (e->dtype != DType::kI64 && e->dtype != DType::kI32)
+    return Status::error(in.path() + ": tensor 'input.ids': expected I64 or I32, found " +
+                         dtype_name(e->dtype));
+  if (e->shape.size() != 2 || e->shape[0] < 1 || e->shape[1] < 1)
+    return Status::error(in.path() + ": tensor 'input.ids': expected [B,L], found " +
+                         shape_to_string(e->shape));
+  MACRO_ASSIGN_OR_RETURN(auto model, ClipTextModel::load(opt.model, opt.precision));
+  if (e->shape[1] > model->config().max_position_embeddings)
+    return Status::error(in.path() + ": tensor 'input.ids': expected at most " +
+                         std::to_string(model->config().max_position_embeddings) +
+                         " tokens per row, found " + shape_to_string(e->shape));
+  const size_t n = size_t(e->numel());
+  std::vector<int32_t> ids(n);
+  for (size_t i = 0; i < n; ++i) {
+    int64_t v = 0;
+    if (e->dtype == DType::kI64) {
+      std::memcpy(&v, e->data + 8 * i, 8);
+    } else {
+      int32_t v32 = 0;
+      std::memcpy(&v32, e->data + 4 * i, 4);
+      v = v32;
+    }
+    if (v < 0 || v >= model->config().vocab_size)
+      return Status::error(in.path() + ": tensor 'input.ids': element " + std::to_string(i) +
+                           ": expected an id in [0, " + std::to_string(model->config().vocab_size) +
+                           "), found " + std::to_string(v));
+    ids[i] = int32_t(v);
+  }
+  MACRO_ASSIGN_OR_RETURN(Tensor hidden, model->forward(ids, e->shape[0], opt.pool, in.path()));
+  return write_safetensors(opt.out, {{"output.hidden", DType::kF32, hidden.shape(), hidden.f32()}},
+                           {{"model", "clip_text"}, {"precision", precision_name(opt.precision)}});
+}
+
 }  // namespace
 
 Status nn_run(const NnRunOptions& opt) {
@@ -114,6 +157,8 @@ Status nn_run(const NnRunOptions& opt) {
       return nn_run_vae(opt, in);
     case ModelKind::kDifix:
       return nn_run_difix(opt, in);
+    case ModelKind::kClipText:
+      return run_clip_text(opt, in);
   }
   return Status::error("internal: unhandled model kind");
 }

@@ -7,6 +7,8 @@
 //                                               clamped)
 //   unet / vae / difix (config.json UNet2DConditionModel / AutoencoderKL; a pipeline folder with
 //          model_index.json, unet/, vae/): see attention/nets/nn_run_difix.cpp
+//   clip_text (config.json architectures CLIPTextModel + model.safetensors)
+//          input.ids [B,L] I64 or I32 (L <= 77)  ->  output.hidden [B,L,D] (last_hidden_state)
 // Inputs are validated before anything runs: only the listed names, the documented rank and
 // channel count, finite values (a NaN or infinity is refused naming the tensor and the element).
 // Float inputs of any float dtype (F32/F16/BF16/F64) are widened to fp32. Outputs are F32, written
@@ -21,7 +23,7 @@
 
 namespace macro::nets {
 
-enum class ModelKind { kTaesd, kUNet, kVae, kDifix };
+enum class ModelKind { kTaesd, kUNet, kVae, kDifix, kClipText };
 const char* model_kind_name(ModelKind k);
 // Which network a folder holds; the error lists what was looked for.
 Result<ModelKind> detect_model_kind(const std::string& folder);

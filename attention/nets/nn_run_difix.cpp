@@ -4,8 +4,9 @@
 //             mask.levelL (optional, uint8/bool [V*N_L, V*N_L], 1 = may attend)  ->  output.eps
 //   vae       input.image [N,3,H,W] in [-1,1]  ->  output.moments, output.z, output.skip0..n-1,
 //             output.decoded_view0 (view 0 decoded from its own z and skips, not clamped)
-//   pipeline  input.images [V,3,H,W] in [-1,1], input.ctx, input.timestep?, mask.levelL?  ->
-//             output.z, output.eps, output.z0, output.image (not clamped)
+//   pipeline  input.images [V,3,H,W] in [-1,1], input.ctx? (default: the cached embedding of
+//             "remove degradation" from text_encoder/ + tokenizer/), input.timestep?, mask.levelL?
+//             -> output.z, output.eps, output.z0, output.image (not clamped)
 #include <cmath>
 #include <set>
 
@@ -170,15 +171,26 @@ Status nn_run_vae(const NnRunOptions& opt, const SafeTensors& in) {
 Status nn_run_difix(const NnRunOptions& opt, const SafeTensors& in) {
   MACRO_TRY(check_allowed(in, {"input.images", "input.ctx", "input.timestep"}, true, "pipeline"));
   MACRO_ASSIGN_OR_RETURN(Tensor images, read_float(in, "input.images", 4));
-  MACRO_ASSIGN_OR_RETURN(Tensor ctx, read_float(in, "input.ctx", 3));
+  // Without input.ctx the folder's text encoder gives the "remove degradation" embedding (cached).
+  const bool has_ctx = in.find("input.ctx") != nullptr;
+  if (!has_ctx && !has_text_encoder(opt.model))
+    return Status::error(in.path() + ": missing input tensor 'input.ctx' (and " + opt.model +
+                         " has no text_encoder/ + tokenizer/ to compute it)");
+  Tensor ctx;
+  if (has_ctx) {
+    MACRO_ASSIGN_OR_RETURN(ctx, read_float(in, "input.ctx", 3));
+  }
   {
     MACRO_ASSIGN_OR_RETURN(UNetConfig ucfg, load_unet_config(opt.model + "/unet/config.json"));
     MACRO_ASSIGN_OR_RETURN(VaeConfig vcfg, load_vae_config(opt.model + "/vae/config.json"));
     MACRO_TRY(expect_dims(in, "input.images", images, {-1, vcfg.in_channels, -1, -1},
                           "[V," + std::to_string(vcfg.in_channels) + ",H,W] in [-1,1]"));
-    MACRO_TRY(expect_ctx(in, ctx, images.dim(0), ucfg.cross_attention_dim));
+    if (has_ctx) MACRO_TRY(expect_ctx(in, ctx, images.dim(0), ucfg.cross_attention_dim));
   }
   MACRO_ASSIGN_OR_RETURN(auto pipe, DifixPipeline::load(opt.model, opt.precision));
+  if (!has_ctx) {
+    MACRO_ASSIGN_OR_RETURN(ctx, pipe->prompt_context(kDifixPrompt, opt.pool));
+  }
   MACRO_ASSIGN_OR_RETURN(int t, read_timestep(in, pipe->schedule().num_train_timesteps));
   const int64_t f = pipe->vae().downscale();
   if (images.dim(2) % f || images.dim(3) % f)
