@@ -23,7 +23,7 @@ namespace macro::enhance {
 
 inline constexpr int kKMeansMaxIterations = 20;        // depth_planes.py
 inline constexpr double kKMeansTolerance = 1e-6;       // max centre shift to stop
-inline constexpr double kAutoPlaneSpreadRatio = 1.25;  // --planes auto: max z90/z10 per plane
+inline constexpr double kAutoPlaneSpreadRatio = 1.5;  // --planes auto: max z90/z10 per plane
 
 struct DepthPlane {
   int index = 0;                        // 0 = farthest
