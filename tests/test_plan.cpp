@@ -137,3 +137,49 @@ TEST_CASE("macro plan CLI: plan.json, debug images, clear errors", "[macro][plan
                           "/missing --closeup closeup.png --out " + out + " 2>" + tmp.file("e3")) ==
         1);
 }
+
+TEST_CASE("scene inputs: splat search order, registered close-up, bad folders", "[macro][plan]") {
+  namespace fs = std::filesystem;
+  test::TempDir tmp("macro-inputs");
+  auto touch = [&](const std::string& rel) {
+    fs::create_directories(fs::path(tmp.file(rel)).parent_path());
+    REQUIRE(write_file_atomic(tmp.file(rel), std::string("x")).is_ok());
+  };
+  touch("a/points3D.ply");
+  CHECK_FALSE(find_scene_ply(tmp.file("a")).is_ok());  // COLMAP points are never the splat
+  touch("a/results/ply/step_0999.ply");
+  touch("a/results/ply/step_1999.ply");
+  CHECK(*find_scene_ply(tmp.file("a")) == tmp.file("a/results/ply/step_1999.ply"));
+  touch("a/one.splat");
+  CHECK(*find_scene_ply(tmp.file("a")) == tmp.file("a/one.splat"));
+  touch("a/two.ply");
+  auto several = find_scene_ply(tmp.file("a"));
+  REQUIRE_FALSE(several.is_ok());
+  CHECK(several.status().message().find("two.ply") != std::string::npos);
+  touch("a/point_cloud/iteration_7000/point_cloud.ply");
+  touch("a/point_cloud/iteration_30000/point_cloud.ply");
+  CHECK(*find_scene_ply(tmp.file("a")) ==
+        tmp.file("a/point_cloud/iteration_30000/point_cloud.ply"));
+  CHECK_FALSE(find_scene_ply(tmp.file("missing")).is_ok());
+
+  // A close-up registered in COLMAP: its pose comes from there and it is not a candidate.
+  SynthFolderOptions so;
+  so.register_closeups = true;
+  so.closeup_gt = false;
+  const auto scene = small_scene();
+  REQUIRE(write_closeup_scene_folder(scene, tmp.file("reg"), so).is_ok());
+  SceneInputOptions o;
+  o.scene_dir = tmp.file("reg");
+  o.closeup = "closeup.png";
+  // Images of the close-ups are absent, so only the training cameras are candidates anyway; the
+  // registered close-up is skipped first, by name.
+  auto in = load_scene_inputs(o);
+  REQUIRE(in.is_ok());
+  CHECK(in->closeup_pose_source == "colmap");
+  for (const auto& c : in->candidates) CHECK(c.name != "closeup.png");
+  bool noted = false;
+  for (const auto& n : in->notes) noted |= n.find("is the close-up frame") != std::string::npos;
+  CHECK(noted);
+  o.closeup = "";
+  CHECK_FALSE(load_scene_inputs(o).is_ok());
+}
