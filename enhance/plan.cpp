@@ -210,7 +210,7 @@ std::string plan_to_json(const MacroPlan& p) {
     for (size_t l = 0; l < p.masks.masks.size(); ++l) {
       const BlockSparseMask& m = p.masks.masks[l];
       j["masks"].push_back({{"grid", {p.masks.grids[l].h, p.masks.grids[l].w}},
-                            {"tokens", m.nq},
+                            {"sequence_tokens", m.nq},
                             {"allowed_pairs", m.allowed_pairs()},
                             {"computed_pairs", m.computed_pairs()},
                             {"dense_pairs", int64_t(m.nq) * m.nk}});
