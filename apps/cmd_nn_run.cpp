@@ -20,8 +20,11 @@ int run_nn_run(std::vector<std::string> argv) {
         "  vae folder (config.json AutoencoderKL, Difix): input.image [N,3,H,W] in [-1,1] ->\n"
         "      output.moments, output.z, output.skip0.., output.decoded_view0\n"
         "  pipeline folder (model_index.json, unet/, vae/): input.images [V,3,H,W] in [-1,1],\n"
-        "      input.ctx, [input.timestep], [mask.levelL] -> output.z, output.eps, output.z0,\n"
-        "      output.image\n");
+        "      [input.ctx], [input.timestep], [mask.levelL] -> output.z, output.eps, output.z0,\n"
+        "      output.image (no input.ctx: the cached embedding of \"remove degradation\" from\n"
+        "      text_encoder/ + tokenizer/)\n"
+        "  clip text folder (config.json CLIPTextModel): input.ids [B,L] I64|I32 ->\n"
+        "      output.hidden [B,L,D]\n");
     return 0;
   }
   if (Status s = apply_common_flags(args); !s) return fail("nn-run", s);
