@@ -44,7 +44,7 @@ TEST_CASE("k-means: an empty bin drops that plane", "[macro][planes]") {
   for (int32_t l : r->labels) CHECK((l == 0 || l == 1));
 }
 
-TEST_CASE("k-means: no valid pixel is an error; auto picks the fewest planes", "[macro][planes]") {
+TEST_CASE("k-means: no valid pixel is an error, auto picks the fewest planes", "[macro][planes]") {
   std::vector<float> none(64, 0.f);
   auto bad = compute_depth_planes(none, 8, 8);
   REQUIRE_FALSE(bad.is_ok());

@@ -37,7 +37,7 @@ std::string without_timings(const std::string& json_text) {
 
 }  // namespace
 
-TEST_CASE("synthetic scene folder loads as DL3DV-Closeup; plan is thread-count invariant",
+TEST_CASE("synthetic scene folder loads as DL3DV-Closeup, plan is thread-count invariant",
           "[macro][plan]") {
   test::TempDir tmp("macro-plan");
   const auto scene = small_scene();
