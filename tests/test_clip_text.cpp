@@ -2,6 +2,7 @@
 // (3 layers, 64 wide, 4 heads, exact GELU; OpenCLIP reference), its loader's reports, the prompt
 // cache (attention/nets/prompt_cache.h) and `macro nn-run` on a CLIPTextModel folder.
 #include <catch2/catch.hpp>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -326,4 +327,126 @@ TEST_CASE("nn-run on a CLIPTextModel folder reproduces the golden (I64 and I32 i
   auto log = read_text_file(dir.file("log.txt"));
   REQUIRE(log.is_ok());
   CHECK_THAT(*log, Catch::Contains("input.ids") && Catch::Contains("F32"));
+}
+
+namespace {
+
+// Lists the (name, shape) pairs of a module walk.
+struct ShapeLister : ParamVisitor {
+  std::vector<std::pair<std::string, std::vector<int64_t>>> items;
+  void param(const std::string& name, Param&, const std::vector<int64_t>& shape) override {
+    items.emplace_back(name, shape);
+  }
+};
+
+// A random CLIP text encoder of the given width in <dir>/text_encoder (config.json +
+// model.safetensors), small values so that activations stay bounded.
+void write_random_text_encoder(const std::string& dir, int width) {
+  ClipTextConfig cfg;
+  cfg.hidden_size = width;
+  cfg.intermediate_size = 4 * width;
+  cfg.num_attention_heads = 3;
+  cfg.num_hidden_layers = 2;
+  auto m = ClipTextModel::build(cfg);
+  REQUIRE(m.is_ok());
+  ShapeLister lister;
+  (*m)->visit(lister);
+  std::vector<std::vector<float>> data;
+  std::vector<TensorToWrite> ts;
+  uint32_t state = 12345;
+  auto rnd = [&] {
+    state = state * 1664525u + 1013904223u;
+    return float(state >> 8) / float(1 << 24) * 2.0f - 1.0f;
+  };
+  data.reserve(lister.items.size());
+  for (const auto& [name, shape] : lister.items) {
+    int64_t n = 1;
+    for (int64_t d : shape) n *= d;
+    const bool norm_w =
+        name.find("layer_norm") != std::string::npos && name.find(".weight") != std::string::npos;
+    const float s = norm_w ? 0.05f : 0.1f;
+    std::vector<float> v(static_cast<size_t>(n));
+    for (float& x : v) x = (norm_w ? 1.0f : 0.0f) + s * rnd();
+    data.push_back(std::move(v));
+    ts.push_back({name, DType::kF32, shape, data.back().data()});
+  }
+  fs::create_directories(dir + "/text_encoder");
+  REQUIRE(write_safetensors(dir + "/text_encoder/model.safetensors", ts).is_ok());
+  const std::string config =
+      R"({"architectures": ["CLIPTextModel"], "hidden_size": )" + std::to_string(width) +
+      R"(, "intermediate_size": )" + std::to_string(4 * width) +
+      R"(, "num_attention_heads": 3, "num_hidden_layers": 2, "max_position_embeddings": 77,
+          "vocab_size": 49408, "hidden_act": "quick_gelu", "layer_norm_eps": 1e-05})";
+  REQUIRE(write_file_atomic(dir + "/text_encoder/config.json", config).is_ok());
+}
+
+}  // namespace
+
+TEST_CASE("difix pipeline without input.ctx uses the folder's cached prompt embedding",
+          "[nets][clip][nn-run]") {
+  // Tiny U-Net (cross dim 48) + tiny VAE + a random 48-wide text encoder + the real tokenizer.
+  test::TempDir dir("clip-pipe-ctx");
+  const std::string root = dir.path + "/pipe";
+  fs::create_directories(root);
+  fs::create_directory_symlink(test::golden_dir() + "/clip/tokenizer", root + "/tokenizer");
+  fs::create_directory_symlink(test::golden_dir() + "/unet-tiny", root + "/unet");
+  fs::create_directory_symlink(test::golden_dir() + "/vae-tiny", root + "/vae");
+  REQUIRE(write_file_atomic(root + "/model_index.json",
+                            std::string(R"({"_class_name": "DifixPipeline"})"))
+              .is_ok());
+  write_random_text_encoder(root, 48);
+  auto pipe = DifixPipeline::load(root, Precision::kF32);
+  REQUIRE(pipe.is_ok());
+  PromptCacheInfo info;
+  auto ctx = (*pipe)->prompt_context(kDifixPrompt, nullptr, &info);
+  INFO((ctx.is_ok() ? "" : ctx.status().message()));
+  REQUIRE(ctx.is_ok());
+  REQUIRE(ctx->shape() == Shape{1, 77, 48});
+  CHECK_FALSE(info.hit);
+  // The pad rows attend causally to the prompt: they differ from each other and are not zero.
+  double row76 = 0, diff = 0;
+  for (int c = 0; c < 48; ++c) {
+    row76 += std::abs(ctx->f32()[76 * 48 + c]);
+    diff += std::abs(ctx->f32()[76 * 48 + c] - ctx->f32()[2 * 48 + c]);
+  }
+  CHECK(row76 > 0);
+  CHECK(diff > 0);
+
+  auto g = SafeTensors::open(test::golden_dir() + "/difix-tiny/case-ref2.safetensors");
+  REQUIRE(g.is_ok());
+  const TensorEntry* ie = g->find("input.images");
+  REQUIRE(ie != nullptr);
+  auto iv = g->read_f32("input.images");
+  REQUIRE(iv.is_ok());
+  Tensor images = Tensor::from_f32(ie->shape, *iv);
+  auto want = (*pipe)->step(images, *ctx, UNetMasks{}, nullptr);
+  REQUIRE(want.is_ok());
+  auto got = (*pipe)->step_with_prompt(images, UNetMasks{}, nullptr);
+  REQUIRE(got.is_ok());
+  const test::Diff d0 =
+      test::compare(got->image.f32(), want->image.f32(), size_t(want->image.numel()));
+  CHECK(d0.max_abs == 0.0);
+
+  // nn-run on the folder without input.ctx: same image as the explicit context.
+  const std::string in = dir.file("in.safetensors"), out = dir.file("out.safetensors");
+  REQUIRE(write_safetensors(in, {{"input.images", ie->dtype, ie->shape, ie->data}}).is_ok());
+  const std::string cmd = test::macro_exe() + " nn-run --model " + root + " --inputs " + in +
+                          " --out " + out + " --threads 2 > " + dir.file("log.txt") + " 2>&1";
+  const int rc = test::run_command(cmd);
+  auto log = read_text_file(dir.file("log.txt"));
+  INFO((log.is_ok() ? *log : std::string("no log")));
+  REQUIRE(rc == 0);
+  auto o = SafeTensors::open(out);
+  REQUIRE(o.is_ok());
+  const std::vector<float> img = read_f32(*o, "output.image");
+  const test::Diff d = test::compare(img.data(), want->image.f32(), img.size());
+  std::printf("  nn-run without input.ctx vs explicit ctx: rel L2 %.3e max abs %.3e\n", d.rel_l2,
+              d.max_abs);
+  CHECK(d.rel_l2 <= 1e-6);
+  // A different prompt changes the result (the context is really used).
+  auto other = (*pipe)->step_with_prompt(images, UNetMasks{}, nullptr, 199, "a cat");
+  REQUIRE(other.is_ok());
+  const test::Diff d2 =
+      test::compare(other->image.f32(), want->image.f32(), size_t(want->image.numel()));
+  CHECK(d2.rel_l2 > 1e-6);
 }
