@@ -1,0 +1,88 @@
+// macro enhance: MACRO (or a baseline) for one close-up of a scene folder -> enhanced PNG
+// (enhance/enhance.h).
+#include <cstdio>
+#include <cstdlib>
+
+#include "apps/args.h"
+#include "attention/runtime/progress.h"
+#include "enhance/enhance.h"
+
+namespace macro::cli {
+namespace {
+
+constexpr const char* kUsage =
+    "usage: macro enhance --scene-dir DIR --closeup FRAME --out OUT.png\n"
+    "         [--method 3dgs|difix|macro|macro-unmasked|warp] [--weights DIFIX_DIR]\n"
+    "         [--precision fp32|bf16] [--ctx CTX.safetensors] [--refs K] [--planes P|auto]\n"
+    "         [--max-planes P] [--mask released|paper|none] [--threads N] [--quiet]\n"
+    "  DIR is a DL3DV-Closeup scene folder (see macro plan --help). DIFIX_DIR is the Difix-ref\n"
+    "  pipeline in diffusers layout (Hugging Face nvidia/difix_ref: unet/, vae/, text_encoder/,\n"
+    "  tokenizer/, scheduler/, model_index.json); every method but 3dgs needs it. Without\n"
+    "  text_encoder/ + tokenizer/, --ctx gives the prompt embedding (tensor 'ctx' [1, 77, D]).\n"
+    "  Methods: 3dgs = the raw render; difix = one reference, whole image, no mask; macro = the\n"
+    "  full method (K=3, P=3, masks 'released'); macro-unmasked = mask 'none'; warp = the\n"
+    "  backward-warp ablation (not implemented yet). The output has the close-up render's size.\n";
+
+int run_enhance(std::vector<std::string> argv) {
+  Args args(std::move(argv));
+  if (args.flag("--help")) {
+    std::printf("%s", kUsage);
+    return 0;
+  }
+  if (Status s = apply_common_flags(args); !s) return fail("enhance", s);
+  enhance::SceneInputOptions in;
+  in.scene_dir = args.required("--scene-dir");
+  in.closeup = args.required("--closeup");
+  const std::string out = args.required("--out");
+  const std::string method = args.value_or("--method", "macro");
+  enhance::EnhanceOptions o;
+  o.weights = args.value_or("--weights", "");
+  o.ctx_path = args.value_or("--ctx", "");
+  const std::string precision = args.value_or("--precision", "fp32");
+  o.plan.refs = args.int_or("--refs", 3, 1, 64);
+  const std::string planes = args.value_or("--planes", "3");
+  const int max_planes = args.int_or("--max-planes", 5, 1, 64);
+  const std::string mask = args.value_or("--mask", "released");
+  if (Status s = args.finish(); !s)
+    return fail("enhance", Status::error(s.message() + " (macro enhance --help for usage)"));
+  auto m = enhance::parse_method(method);
+  if (!m) return fail("enhance", m.status());
+  o.method = *m;
+  auto p = nets::parse_precision(precision);
+  if (!p) return fail("enhance", p.status().with_context("--precision"));
+  o.precision = *p;
+  if (planes == "auto") {
+    o.plan.planes.automatic = true;
+    o.plan.planes.planes = max_planes;
+  } else {
+    char* end = nullptr;
+    const long n = std::strtol(planes.c_str(), &end, 10);
+    if (!end || *end || n < 1 || n > 64)
+      return fail("enhance",
+                  Status::error("--planes: expected 1..64 or auto, found '" + planes + "'"));
+    o.plan.planes.planes = int(n);
+  }
+  auto mm = enhance::parse_mask_mode(mask);
+  if (!mm) return fail("enhance", mm.status());
+  o.plan.mask = *mm;
+  // Missing weights fail before the scene is even loaded.
+  if (o.method != enhance::EnhanceMethod::k3dgs && o.method != enhance::EnhanceMethod::kWarp)
+    if (Status s = enhance::check_difix_weights(o.weights); !s) return fail("enhance", s);
+
+  auto inputs = enhance::load_scene_inputs(in);
+  if (!inputs) return fail("enhance", inputs.status());
+  for (const std::string& n : inputs->notes) log_info("enhance", n);
+  auto r = enhance::enhance_to_file(*inputs, o, out);
+  if (!r) return fail("enhance", r.status());
+  if (!quiet())
+    std::printf("enhance: %s, method %s, %d views, model %dx%d, %.0f ms -> %s (%dx%d)\n",
+                in.closeup.c_str(), enhance::method_name(o.method), r->views, r->model.w,
+                r->model.h, r->timings.ms_total, out.c_str(), r->image.width, r->image.height);
+  return 0;
+}
+
+const bool registered = register_command(
+    {"enhance", "MACRO enhancement of one close-up (or a baseline) -> PNG", run_enhance});
+
+}  // namespace
+}  // namespace macro::cli

@@ -1,0 +1,278 @@
+// MACRO enhancement of one close-up (see enhance.h).
+#include "enhance/enhance.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "attention/nets/difix.h"
+#include "attention/nets/scheduler.h"
+#include "attention/runtime/progress.h"
+#include "attention/runtime/safetensors.h"
+#include "gs/rasterizer.h"
+
+namespace macro::enhance {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+constexpr const char* kStage = "enhance";
+constexpr const char* kDownloadHint =
+    "download the Difix-ref pipeline (Hugging Face 'nvidia/difix_ref', diffusers layout: unet/, "
+    "vae/, text_encoder/, tokenizer/, scheduler/, model_index.json) and pass its folder with "
+    "--weights DIR";
+
+void note(const char* what, double ms, const std::string& extra = "") {
+  char buf[160];
+  std::snprintf(buf, sizeof buf, "%-7s %8.1f ms", what, ms);
+  log_info(kStage, std::string(buf) + (extra.empty() ? "" : "  " + extra));
+}
+
+// `ctx` F32 [1, Lc, Dc] from a safetensors file; errors name the file and the tensor.
+Result<Tensor> read_ctx_file(const std::string& path) {
+  MACRO_ASSIGN_OR_RETURN(SafeTensors st, SafeTensors::open(path));
+  const TensorEntry* e = st.find("ctx");
+  if (!e)
+    return Status::error(path + ": tensor 'ctx' (the text embedding [1, 77, D]) not found");
+  if (e->shape.size() != 3 || e->shape[0] != 1 || e->shape[1] < 1 || e->shape[2] < 1)
+    return Status::error(path + ": tensor 'ctx': expected shape [1, L, D], found rank " +
+                         std::to_string(e->shape.size()));
+  MACRO_ASSIGN_OR_RETURN(std::vector<float> v, st.read_f32("ctx"));
+  for (float x : v)
+    if (!std::isfinite(x)) return Status::error(path + ": tensor 'ctx' has non-finite values");
+  Tensor t = Tensor::f32({1, e->shape[1], e->shape[2]});
+  std::copy(v.begin(), v.end(), t.f32());
+  return t;
+}
+
+gs::Image render_image(const std::vector<float>& color, int w, int h) {
+  gs::Image img(w, h, 3);
+  img.data = color;
+  return img;
+}
+
+// Views [V] of [Hm, Wm, 3] in [0, 1] -> [V, 3, Hm, Wm] in [-1, 1].
+Result<Tensor> to_network_batch(const std::vector<gs::Image>& views, Size2 model) {
+  const int64_t V = int64_t(views.size()), hw = int64_t(model.w) * model.h;
+  Tensor t = Tensor::f32({V, 3, model.h, model.w});
+  float* dst = t.f32();
+  for (int64_t v = 0; v < V; ++v) {
+    const gs::Image& im = views[size_t(v)];
+    if (im.width != model.w || im.height != model.h || im.channels != 3)
+      return Status::error("view " + std::to_string(v) + ": expected " + std::to_string(model.w) +
+                           "x" + std::to_string(model.h) + "x3, found " +
+                           std::to_string(im.width) + "x" + std::to_string(im.height) + "x" +
+                           std::to_string(im.channels));
+    for (int64_t p = 0; p < hw; ++p)
+      for (int c = 0; c < 3; ++c) dst[(v * 3 + c) * hw + p] = 2.f * im.data[size_t(p) * 3 + c] - 1.f;
+  }
+  return t;
+}
+
+}  // namespace
+
+const char* method_name(EnhanceMethod m) {
+  switch (m) {
+    case EnhanceMethod::k3dgs: return "3dgs";
+    case EnhanceMethod::kDifix: return "difix";
+    case EnhanceMethod::kMacro: return "macro";
+    case EnhanceMethod::kMacroUnmasked: return "macro-unmasked";
+    case EnhanceMethod::kWarp: return "warp";
+  }
+  return "?";
+}
+
+Result<EnhanceMethod> parse_method(const std::string& text) {
+  for (EnhanceMethod m : {EnhanceMethod::k3dgs, EnhanceMethod::kDifix, EnhanceMethod::kMacro,
+                          EnhanceMethod::kMacroUnmasked, EnhanceMethod::kWarp})
+    if (text == method_name(m)) return m;
+  return Status::error("--method: expected 3dgs, difix, macro, macro-unmasked or warp, found '" +
+                       text + "'");
+}
+
+Status check_difix_weights(const std::string& folder) {
+  namespace fs = std::filesystem;
+  if (folder.empty()) return Status::error(std::string("no Difix weights given: ") + kDownloadHint);
+  std::error_code ec;
+  if (!fs::is_directory(folder, ec))
+    return Status::error("Difix weights folder '" + folder + "' does not exist: " + kDownloadHint);
+  std::string missing;
+  for (const char* part : {"model_index.json", "unet/config.json", "vae/config.json"}) {
+    if (!fs::exists(fs::path(folder) / part, ec)) missing += std::string(missing.empty() ? "" : ", ") + part;
+  }
+  if (!missing.empty())
+    return Status::error("Difix weights folder '" + folder + "' lacks " + missing + ": " +
+                         kDownloadHint);
+  return Status::ok();
+}
+
+Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOptions& o) {
+  ThreadPool* pool = o.pool ? o.pool : &ThreadPool::global();
+  const auto t_all = Clock::now();
+  EnhanceResult res;
+  const int W = in.closeup.width, H = in.closeup.height;
+
+  if (o.method == EnhanceMethod::k3dgs) {
+    auto t0 = Clock::now();
+    gs::Rasterizer raster;
+    gs::RenderResult r;
+    MACRO_TRY(raster.render_into(in.cloud, in.closeup, o.plan.render, &r, *pool)
+                  .with_context("close-up '" + in.closeup.name + "'"));
+    res.render = render_image(r.color, W, H);
+    res.image = res.render;
+    res.timings.ms_render = ms_since(t0);
+    note("render", res.timings.ms_render, std::to_string(W) + "x" + std::to_string(H));
+    res.timings.ms_total = ms_since(t_all);
+    return res;
+  }
+  if (o.method == EnhanceMethod::kWarp)
+    return Status::error(
+        "--method warp (the backward-warp ablation, macro-method.md §6) is not implemented yet");
+
+  // Everything the network needs is checked before any work.
+  MACRO_TRY(check_difix_weights(o.weights));
+  const bool text_encoder = nets::has_text_encoder(o.weights);
+  Tensor ctx;
+  if (!o.ctx_path.empty()) {
+    MACRO_ASSIGN_OR_RETURN(ctx, read_ctx_file(o.ctx_path));
+    res.ctx_source = o.ctx_path;
+  } else if (!text_encoder) {
+    return Status::error("Difix weights folder '" + o.weights +
+                         "' has no text_encoder/ + tokenizer/ to embed the prompt \"" +
+                         nets::kDifixPrompt +
+                         "\", and no --ctx FILE.safetensors (tensor 'ctx' [1, 77, D]) was given: " +
+                         kDownloadHint);
+  }
+
+  // 1. Plan (its first stage is the close-up render).
+  PlanOptions po = o.plan;
+  po.pool = pool;
+  if (o.method == EnhanceMethod::kDifix) {
+    po.refs = 1;
+    po.mask = MaskMode::kNone;
+  } else if (o.method == EnhanceMethod::kMacroUnmasked) {
+    po.mask = MaskMode::kNone;
+  }
+  auto t0 = Clock::now();
+  MACRO_ASSIGN_OR_RETURN(MacroPlan plan, build_plan(in, po));
+  res.timings.ms_render = plan.timings.ms_closeup;
+  res.timings.ms_plan = plan.timings.ms_total - plan.timings.ms_closeup;
+  res.render = render_image(plan.closeup_color, W, H);
+  res.model = plan.model;
+  note("render", res.timings.ms_render, std::to_string(W) + "x" + std::to_string(H));
+  {
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "%zu refs, %zu planes, %zu crops, model %dx%d",
+                  plan.ref_candidates.size(), plan.planes.planes.size(), plan.crops.size(),
+                  plan.model.w, plan.model.h);
+    note("plan", res.timings.ms_plan, buf);
+  }
+
+  // 2. Views [V] at the model size and the masks.
+  t0 = Clock::now();
+  std::vector<gs::Image> views;
+  nets::UNetMasks masks;
+  LanczosUpsampler lanczos;
+  if (o.method == EnhanceMethod::kDifix) {
+    views.push_back(resize_lanczos(res.render, plan.model.w, plan.model.h, *pool));
+    if (plan.ref_candidates.empty()) return Status::error("no reference was selected");
+    MACRO_ASSIGN_OR_RETURN(gs::Image ref, load_candidate_image(in, plan.ref_candidates[0]));
+    views.push_back(resize_lanczos(ref, plan.model.w, plan.model.h, *pool));
+  } else {
+    MACRO_ASSIGN_OR_RETURN(PlanViews pv, build_views(plan, in, lanczos));
+    views = std::move(pv.images);
+    if (!plan.masks_built)
+      return Status::error("the plan's views differ in size, so it has no attention masks");
+    for (const BlockSparseMask& m : plan.masks.masks) masks.level.push_back(&m);
+  }
+  MACRO_ASSIGN_OR_RETURN(Tensor batch, to_network_batch(views, plan.model));
+  res.views = int(views.size());
+  res.timings.ms_views = ms_since(t0);
+  note("views", res.timings.ms_views,
+       std::to_string(res.views) + " views" +
+           (masks.level.empty() ? ", no mask"
+                                : std::string(", mask '") + mask_mode_name(plan.masks.mode) + "'"));
+
+  // 3. The pipeline and the text context.
+  t0 = Clock::now();
+  MACRO_ASSIGN_OR_RETURN(auto pipe, nets::DifixPipeline::load(o.weights, o.precision));
+  res.timings.ms_load = ms_since(t0);
+  note("load", res.timings.ms_load, std::string(nets::precision_name(o.precision)));
+  if (masks.level.size() > size_t(pipe->unet().levels()))
+    masks.level.resize(size_t(pipe->unet().levels()));
+  res.masked_levels = int(masks.level.size());
+  if (ctx.numel() == 0) {
+    t0 = Clock::now();
+    nets::PromptCacheInfo info;
+    MACRO_ASSIGN_OR_RETURN(ctx, pipe->prompt_context(nets::kDifixPrompt, pool, &info));
+    res.ctx_source = std::string("text_encoder (") + (info.hit ? "cache hit" : "computed") + ")";
+    res.timings.ms_ctx = ms_since(t0);
+    note("prompt", res.timings.ms_ctx, res.ctx_source);
+  }
+  const int64_t dc = pipe->unet().config().cross_attention_dim;
+  if (ctx.dim(2) != dc)
+    return Status::error((res.ctx_source.empty() ? std::string("ctx") : res.ctx_source) +
+                         ": tensor 'ctx': expected width " + std::to_string(dc) +
+                         " (the unet's cross_attention_dim), found " + std::to_string(ctx.dim(2)));
+
+  // 4. One Difix step, stage by stage (the same sequence as DifixPipeline::step).
+  t0 = Clock::now();
+  MACRO_ASSIGN_OR_RETURN(nets::VaeEncoding enc, pipe->vae().encode(batch, /*keep_skips=*/1, pool));
+  res.timings.ms_encode = ms_since(t0);
+  note("encode", res.timings.ms_encode);
+  t0 = Clock::now();
+  MACRO_ASSIGN_OR_RETURN(Tensor eps,
+                         pipe->unet().forward(enc.z, float(o.timestep), ctx, masks, pool));
+  Tensor z0 = Tensor::f32(enc.z.shape());
+  MACRO_TRY(nets::ddpm_x0(pipe->schedule(), o.timestep, enc.z.f32(), eps.f32(), z0.f32(),
+                          size_t(enc.z.numel())));
+  res.timings.ms_unet = ms_since(t0);
+  note("U-Net", res.timings.ms_unet,
+       std::to_string(res.masked_levels) + " masked levels, t=" + std::to_string(o.timestep));
+  t0 = Clock::now();
+  std::vector<TensorView> skips;
+  for (const Tensor& s : enc.skips) skips.push_back(s.view());
+  MACRO_ASSIGN_OR_RETURN(Tensor image, pipe->vae().decode(z0.view().slice(0, 0, 1), skips, pool));
+  res.timings.ms_decode = ms_since(t0);
+  note("decode", res.timings.ms_decode);
+
+  // 5. [1,3,Hm,Wm] in [-1,1] -> 8-bit (x/2 + 1/2 clamped, x255 rounded, as the pipeline's PIL
+  // output) -> Pillow 8-bit Lanczos to the render size.
+  t0 = Clock::now();
+  const int hm = plan.model.h, wm = plan.model.w;
+  if (image.dim(2) != hm || image.dim(3) != wm)
+    return Status::error("decoded image: expected " + std::to_string(wm) + "x" +
+                         std::to_string(hm) + ", found " + std::to_string(image.dim(3)) + "x" +
+                         std::to_string(image.dim(2)));
+  const size_t mhw = size_t(hm) * size_t(wm);
+  std::vector<uint8_t> u8(mhw * 3);
+  const float* src = image.f32();
+  for (size_t p = 0; p < mhw; ++p)
+    for (int c = 0; c < 3; ++c) {
+      float v = src[size_t(c) * mhw + p];
+      v = std::isfinite(v) ? std::clamp(0.5f * v + 0.5f, 0.f, 1.f) : 0.f;
+      u8[p * 3 + size_t(c)] = uint8_t(std::lround(v * 255.f));
+    }
+  std::vector<uint8_t> out =
+      (W == wm && H == hm) ? u8 : resize_lanczos_u8(u8.data(), wm, hm, 3, W, H, *pool);
+  res.image = gs::Image(W, H, 3);
+  for (size_t i = 0; i < out.size(); ++i) res.image.data[i] = float(out[i]) / 255.f;
+  res.timings.ms_resize = ms_since(t0);
+  res.timings.ms_total = ms_since(t_all);
+  note("resize", res.timings.ms_resize, std::to_string(W) + "x" + std::to_string(H));
+  return res;
+}
+
+Result<EnhanceResult> enhance_to_file(const SceneInputs& in, const EnhanceOptions& o,
+                                      const std::string& out_png) {
+  MACRO_ASSIGN_OR_RETURN(EnhanceResult r, enhance_closeup(in, o));
+  MACRO_TRY(gs::write_png(out_png, r.image));
+  return r;
+}
+
+}  // namespace macro::enhance
