@@ -1,0 +1,124 @@
+// macro bench run|merge|report: the evaluation harness (enhance/bench_harness.h) and its tables and
+// charts (enhance/bench_report.h). docs/benchmark.md describes the protocol and the files.
+#include <cstdio>
+#include <sstream>
+
+#include "apps/args.h"
+#include "attention/runtime/file_io.h"
+#include "enhance/bench_harness.h"
+#include "enhance/bench_report.h"
+
+namespace macro::cli {
+namespace {
+
+constexpr const char* kUsage =
+    "usage: macro bench run --root DIR --results FILE.jsonl [--methods 3dgs,...]\n"
+    "                       [--K 1,3] [--P 4] [--mask on,off] [--precision bf16,f32]\n"
+    "                       [--shard i/N] [--limit N] [--lpips-backbone F] [--lpips-heads F]\n"
+    "                       [--dinov2 F] [--dreamsim F] [--quiet] [--threads N]\n"
+    "       macro bench merge FILE.jsonl... --out FILE.jsonl\n"
+    "       macro bench report --results FILE.jsonl --out REPORT_DIR\n"
+    "  run     scores every (close-up pair, method, option set) of the scene folders under DIR\n"
+    "          against closeup_gt/<frame>, appending one JSON line per record; a rerun resumes.\n"
+    "          Option lists form a grid; each method records only the options it uses.\n"
+    "  merge   joins shard results (deduplicated, work-list order), written atomically.\n"
+    "  report  table.md, table.csv and SVG + PNG charts (mean over scenes of scene means).\n";
+
+std::vector<std::string> split_list(const std::string& text) {
+  std::vector<std::string> out;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ','))
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+int run_run(Args& args) {
+  enhance::BenchRunOptions o;
+  o.root = args.required("--root");
+  o.results = args.required("--results");
+  o.methods = split_list(args.value_or("--methods", "3dgs"));
+  std::map<std::string, std::vector<std::string>> grid;
+  for (const char* key : {"K", "P", "mask", "precision"})
+    if (auto v = args.value(std::string("--") + key)) grid[key] = split_list(*v);
+  o.option_sets = enhance::expand_option_grid(grid);
+  const std::string shard = args.value_or("--shard", "0/1");
+  o.limit = args.int_or("--limit", 0, 0, 1 << 30);
+  o.metrics.lpips_backbone = args.value_or("--lpips-backbone", "");
+  o.metrics.lpips_heads = args.value_or("--lpips-heads", "");
+  o.metrics.dinov2_weights = args.value_or("--dinov2", "");
+  o.metrics.dreamsim_weights = args.value_or("--dreamsim", "");
+  if (Status s = args.finish(); !s) return fail("bench run", s);
+  auto sh = enhance::parse_shard(shard);
+  if (!sh) return fail("bench run", sh.status());
+  o.shard = *sh;
+  const enhance::MethodRegistry registry = enhance::default_method_registry();
+  auto summary = enhance::run_benchmark(o, registry);
+  if (!summary) return fail("bench run", summary.status());
+  std::printf("bench run: %zu items in shard %d/%d, %zu already done, %zu run (%zu ok, %zu "
+              "skipped) -> %s\n",
+              summary->work_items, o.shard.index, o.shard.count, summary->already_done,
+              summary->ran, summary->ok, summary->skipped, o.results.c_str());
+  return 0;
+}
+
+int run_merge(Args& args) {
+  const std::string out = args.required("--out");
+  const std::vector<std::string> inputs = args.positionals();
+  if (Status s = args.finish(); !s) return fail("bench merge", s);
+  if (inputs.empty()) return fail("bench merge", Status::error("no input results file given"));
+  std::vector<std::vector<enhance::BenchRecord>> lists;
+  for (const std::string& path : inputs) {
+    if (!file_exists(path)) return fail("bench merge", Status::error(path + ": not found"));
+    auto records = enhance::read_records(path);
+    if (!records) return fail("bench merge", records.status());
+    lists.push_back(std::move(*records));
+  }
+  const auto merged = enhance::merge_records(lists);
+  if (Status s = enhance::write_records_atomic(out, merged); !s) return fail("bench merge", s);
+  std::printf("bench merge: %zu records from %zu files -> %s\n", merged.size(), inputs.size(),
+              out.c_str());
+  return 0;
+}
+
+int run_report(Args& args) {
+  const std::string results = args.required("--results");
+  const std::string out = args.required("--out");
+  if (Status s = args.finish(); !s) return fail("bench report", s);
+  if (!file_exists(results)) return fail("bench report", Status::error(results + ": not found"));
+  auto records = enhance::read_records(results);
+  if (!records) return fail("bench report", records.status());
+  std::vector<std::string> written;
+  if (Status s = enhance::write_report(*records, out, &written); !s) return fail("bench report", s);
+  const auto configs = enhance::aggregate_records(*records);
+  const std::string table = enhance::table_markdown(configs);
+  std::fwrite(table.data(), 1, table.size(), stdout);
+  std::printf("bench report: %zu files -> %s\n", written.size(), out.c_str());
+  return 0;
+}
+
+int run_bench(std::vector<std::string> argv) {
+  if (argv.empty() || argv[0] == "--help" || argv[0] == "help") {
+    std::printf("%s", kUsage);
+    return argv.empty() ? 1 : 0;
+  }
+  const std::string sub = argv[0];
+  Args args(std::vector<std::string>(argv.begin() + 1, argv.end()));
+  if (args.flag("--help")) {
+    std::printf("%s", kUsage);
+    return 0;
+  }
+  if (Status s = apply_common_flags(args); !s) return fail("bench " + sub, s);
+  if (sub == "run") return run_run(args);
+  if (sub == "merge") return run_merge(args);
+  if (sub == "report") return run_report(args);
+  std::fprintf(stderr, "%s", kUsage);
+  return fail("bench", Status::error("unknown subcommand '" + sub + "' (run, merge, report)"));
+}
+
+const bool registered =
+    register_command({"bench", "evaluation harness: run methods on close-up pairs, merge, report",
+                      run_bench});
+
+}  // namespace
+}  // namespace macro::cli
