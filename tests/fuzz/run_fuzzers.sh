@@ -8,7 +8,7 @@
 #   tests/fuzz/run_fuzzers.sh build-fuzz 600 scene_ply exr   # two targets, 10 min each
 #
 # Environment: SHARED (default /work/shared), JOBS (build parallelism, default 2), NO_BUILD=1 to skip
-# the build. Fuzzers run under `nice -n 19`, one at a time (the machine is shared).
+# the build, PARALLEL=n fuzzers at a time (default 1). Fuzzers run under `nice -n 19`.
 set -uo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 src="$(cd "$here/../.." && pwd)"
@@ -26,7 +26,10 @@ fi
 
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-  for f in "$build"/fuzz/fuzz_*; do targets+=("$(basename "$f" | sed 's/^fuzz_//')"); done
+  for f in "$build"/fuzz/fuzz_*; do
+    t="$(basename "$f" | sed 's/^fuzz_//')"
+    [ "$t" = regressions ] || targets+=("$t")  # the Catch2 replay, not a fuzzer
+  done
 fi
 
 seeds="$build/fuzz-seeds"
@@ -135,10 +138,11 @@ make_seeds() {
 make_seeds
 
 summary="$build/fuzz-summary.txt"
-: >"$summary"
-for t in "${targets[@]}"; do
-  exe="$build/fuzz/fuzz_$t"
-  [ -x "$exe" ] || { echo "missing target $exe" >&2; continue; }
+echo "# $(date -u +%FT%TZ) ${seconds}s per target" >>"$summary"
+run_one() {
+  local t="$1"
+  local exe="$build/fuzz/fuzz_$t"
+  [ -x "$exe" ] || { echo "missing target $exe" >&2; return; }
   corpus="$build/fuzz-corpus/$t"
   artifacts="$build/fuzz-artifacts/$t"
   mkdir -p "$corpus" "$artifacts" "$seeds/$t"
@@ -158,5 +162,12 @@ for t in "${targets[@]}"; do
   found=$(find "$artifacts" -type f | wc -l)
   printf '%-22s %6ss  rc=%-3s execs=%-10s cov=%-6s artifacts=%s\n' \
     "$t" "$seconds" "$rc" "${execs:-?}" "${cov:-?}" "$found" | tee -a "$summary"
+}
+# PARALLEL=n runs n fuzzers at a time (each still under nice -n 19); default one at a time.
+parallel="${PARALLEL:-1}"
+for t in "${targets[@]}"; do
+  while [ "$(jobs -rp | wc -l)" -ge "$parallel" ]; do sleep 1; done
+  run_one "$t" &
 done
+wait
 echo "summary: $summary; logs: $build/fuzz-logs; artifacts: $build/fuzz-artifacts" >&2
