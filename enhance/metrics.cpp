@@ -59,6 +59,47 @@ inline double ssim_at(double mu_a, double mu_b, double saa, double sbb, double s
          ((mu_a * mu_a + mu_b * mu_b + c1) * (saa + sbb + c2));
 }
 
+// out[x] = sum_t g[t] * in[x + t], x in [0, n): one horizontal 1-D filter (restrict: vectorises).
+void filter_row(const float* __restrict in, const float* __restrict g, int taps, int n,
+                float* __restrict out) {
+  for (int x = 0; x < n; ++x) out[x] = 0.f;
+  for (int t = 0; t < taps; ++t) {
+    const float w = g[t];
+    const float* __restrict src = in + t;
+    for (int x = 0; x < n; ++x) out[x] += w * src[x];
+  }
+}
+
+// dst[x] = a[x] * b[x].
+void multiply_row(const float* __restrict a, const float* __restrict b, int n,
+                  float* __restrict dst) {
+  for (int x = 0; x < n; ++x) dst[x] = a[x] * b[x];
+}
+
+// out[x] += w * in[x].
+void axpy_row(float w, const float* __restrict in, int n, float* __restrict out) {
+  for (int x = 0; x < n; ++x) out[x] += w * in[x];
+}
+
+// One row of the SSIM map from the five filtered rows m [5, n] (a, b, aa, bb, ab of the shifted
+// planes; `shift` added back to the means), in float so it vectorises.
+void ssim_row(const float* __restrict m, int n, float shift, float c1, float c2,
+              float* __restrict out) {
+  const float* __restrict ma = m;
+  const float* __restrict mb = m + n;
+  const float* __restrict maa = m + 2 * n;
+  const float* __restrict mbb = m + 3 * n;
+  const float* __restrict mab = m + 4 * n;
+  for (int x = 0; x < n; ++x) {
+    const float saa = maa[x] - ma[x] * ma[x];
+    const float sbb = mbb[x] - mb[x] * mb[x];
+    const float sab = mab[x] - ma[x] * mb[x];
+    const float ua = ma[x] + shift, ub = mb[x] + shift;
+    out[x] = ((2.f * ua * ub + c1) * (2.f * sab + c2)) /
+             ((ua * ua + ub * ub + c1) * (saa + sbb + c2));
+  }
+}
+
 bool all_u8_levels(const gs::Image& im) {
   for (float v : im.data) {
     const float s = v * 255.0f;
@@ -145,30 +186,19 @@ Result<double> ssim(const gs::Image& pred, const gs::Image& gt, const SsimParams
     pool.parallel_for(
         size_t(H),
         [&](size_t r0, size_t r1, int) {
+          std::vector<float> prod(static_cast<size_t>(W));
           for (size_t r = r0; r < r1; ++r) {
             const float* ar = a.data() + r * size_t(W);
             const float* br = b.data() + r * size_t(W);
-            float* o0 = hf.data() + 0 * hplane + r * size_t(Wv);
-            float* o1 = hf.data() + 1 * hplane + r * size_t(Wv);
-            float* o2 = hf.data() + 2 * hplane + r * size_t(Wv);
-            float* o3 = hf.data() + 3 * hplane + r * size_t(Wv);
-            float* o4 = hf.data() + 4 * hplane + r * size_t(Wv);
-            std::fill(o0, o0 + Wv, 0.f), std::fill(o1, o1 + Wv, 0.f);
-            std::fill(o2, o2 + Wv, 0.f), std::fill(o3, o3 + Wv, 0.f);
-            std::fill(o4, o4 + Wv, 0.f);
-            for (int t = 0; t < n; ++t) {
-              const float w = g[size_t(t)];
-              const float* at = ar + t;
-              const float* bt = br + t;
-              for (int x = 0; x < Wv; ++x) {
-                const float va = at[x], vb = bt[x];
-                o0[x] += w * va;
-                o1[x] += w * vb;
-                o2[x] += w * (va * va);
-                o3[x] += w * (vb * vb);
-                o4[x] += w * (va * vb);
-              }
-            }
+            float* o = hf.data() + r * size_t(Wv);
+            filter_row(ar, g.data(), n, Wv, o + 0 * hplane);
+            filter_row(br, g.data(), n, Wv, o + 1 * hplane);
+            multiply_row(ar, ar, W, prod.data());
+            filter_row(prod.data(), g.data(), n, Wv, o + 2 * hplane);
+            multiply_row(br, br, W, prod.data());
+            filter_row(prod.data(), g.data(), n, Wv, o + 3 * hplane);
+            multiply_row(ar, br, W, prod.data());
+            filter_row(prod.data(), g.data(), n, Wv, o + 4 * hplane);
           }
         },
         8);
@@ -176,25 +206,17 @@ Result<double> ssim(const gs::Image& pred, const gs::Image& gt, const SsimParams
     pool.parallel_for(
         size_t(Hv),
         [&](size_t r0, size_t r1, int) {
-          std::vector<float> m(5 * size_t(Wv));
+          std::vector<float> m(6 * size_t(Wv));  // five means, then the SSIM row
           for (size_t r = r0; r < r1; ++r) {
             std::fill(m.begin(), m.end(), 0.f);
-            for (int t = 0; t < n; ++t) {
-              const float w = g[size_t(t)];
-              for (int k = 0; k < 5; ++k) {
-                const float* src = hf.data() + size_t(k) * hplane + (r + size_t(t)) * size_t(Wv);
-                float* dst = m.data() + size_t(k) * size_t(Wv);
-                for (int x = 0; x < Wv; ++x) dst[x] += w * src[x];
-              }
-            }
+            for (int k = 0; k < 5; ++k)
+              for (int t = 0; t < n; ++t)
+                axpy_row(g[size_t(t)], hf.data() + size_t(k) * hplane + (r + size_t(t)) * size_t(Wv),
+                         Wv, m.data() + size_t(k) * size_t(Wv));
+            float* map = m.data() + 5 * size_t(Wv);
+            ssim_row(m.data(), Wv, shift, float(c1), float(c2), map);
             double sum = 0;
-            for (int x = 0; x < Wv; ++x) {
-              const double ma = m[size_t(x)], mb = m[size_t(Wv + x)];
-              const double saa = double(m[size_t(2 * Wv + x)]) - ma * ma;
-              const double sbb = double(m[size_t(3 * Wv + x)]) - mb * mb;
-              const double sab = double(m[size_t(4 * Wv + x)]) - ma * mb;
-              sum += ssim_at(ma + shift, mb + shift, saa, sbb, sab, c1, c2);
-            }
+            for (int x = 0; x < Wv; ++x) sum += map[x];
             row_sum[size_t(c) * size_t(Hv) + r] = sum;
           }
         },
