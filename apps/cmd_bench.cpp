@@ -14,10 +14,12 @@ namespace {
 constexpr const char* kUsage =
     "usage: macro bench run --root DIR --results FILE.jsonl [--methods 3dgs,...]\n"
     "                       [--K 1,3] [--P 4] [--mask on,off] [--precision bf16,f32]\n"
-    "                       [--shard i/N] [--limit N] [--lpips-backbone F] [--lpips-heads F]\n"
+    "                       [--shard i/N] [--limit N] [--weights DIFIX_DIR] [--ctx CTX.safetensors]\n"
+    "                       [--lpips-backbone F] [--lpips-heads F]\n"
     "                       [--dinov2 F] [--dreamsim F] [--quiet] [--threads N]\n"
     "       macro bench merge FILE.jsonl... --out FILE.jsonl\n"
     "       macro bench report --results FILE.jsonl --out REPORT_DIR\n"
+    "  methods: 3dgs, difix, macro, macro-unmasked (the network methods need --weights).\n"
     "  run     scores every (close-up pair, method, option set) of the scene folders under DIR\n"
     "          against closeup_gt/<frame>, appending one JSON line per record; a rerun resumes.\n"
     "          Option lists form a grid; each method records only the options it uses.\n"
@@ -48,11 +50,14 @@ int run_run(Args& args) {
   o.metrics.lpips_heads = args.value_or("--lpips-heads", "");
   o.metrics.dinov2_weights = args.value_or("--dinov2", "");
   o.metrics.dreamsim_weights = args.value_or("--dreamsim", "");
+  enhance::BenchMethodSettings settings;
+  settings.difix_weights = args.value_or("--weights", "");
+  settings.ctx_path = args.value_or("--ctx", "");
   if (Status s = args.finish(); !s) return fail("bench run", s);
   auto sh = enhance::parse_shard(shard);
   if (!sh) return fail("bench run", sh.status());
   o.shard = *sh;
-  const enhance::MethodRegistry registry = enhance::default_method_registry();
+  const enhance::MethodRegistry registry = enhance::default_method_registry(settings);
   auto summary = enhance::run_benchmark(o, registry);
   if (!summary) return fail("bench run", summary.status());
   std::printf("bench run: %zu items in shard %d/%d, %zu already done, %zu run (%zu ok, %zu "

@@ -8,6 +8,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <limits>
@@ -15,6 +16,8 @@
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/progress.h"
+#include "enhance/enhance.h"
+#include "enhance/plane_masks.h"
 #include "gs/rasterizer.h"
 
 namespace macro::enhance {
@@ -77,17 +80,82 @@ Result<MethodOutput> run_3dgs_method(const MethodContext& context) {
   return out;
 }
 
-Status register_enhance_bench_methods(MethodRegistry& registry) {
-  // The enhancers (enhance/enhance.h: difix, macro, ...) are added here, one registry.add each,
-  // with option_keys {"K", "P", "mask", "precision"} as they use them.
-  (void)registry;
+namespace {
+
+// BenchOptions -> EnhanceOptions; errors name the option and the value.
+Result<EnhanceOptions> enhance_options(EnhanceMethod method, const BenchOptions& o,
+                                       const BenchMethodSettings& settings) {
+  EnhanceOptions e;
+  e.method = method;
+  e.weights = settings.difix_weights;
+  e.ctx_path = settings.ctx_path;
+  if (auto it = o.find("K"); it != o.end()) {
+    char* end = nullptr;
+    const long k = std::strtol(it->second.c_str(), &end, 10);
+    if (it->second.empty() || *end || k < 1 || k > 64)
+      return Status::error("option K: expected an integer in [1, 64], found '" + it->second + "'");
+    e.plan.refs = int(k);
+  }
+  if (auto it = o.find("P"); it != o.end()) {
+    if (it->second == "auto") {
+      e.plan.planes.automatic = true;
+      e.plan.planes.planes = 5;
+    } else {
+      char* end = nullptr;
+      const long p = std::strtol(it->second.c_str(), &end, 10);
+      if (it->second.empty() || *end || p < 1 || p > 64)
+        return Status::error("option P: expected an integer in [1, 64] or auto, found '" +
+                             it->second + "'");
+      e.plan.planes.planes = int(p);
+    }
+  }
+  if (auto it = o.find("mask"); it != o.end()) {
+    const std::string m = it->second == "on" ? "released" : it->second == "off" ? "none"
+                                                                                : it->second;
+    MACRO_ASSIGN_OR_RETURN(e.plan.mask, parse_mask_mode(m));
+  }
+  if (auto it = o.find("precision"); it != o.end()) {
+    MACRO_ASSIGN_OR_RETURN(e.precision, nets::parse_precision(it->second));
+  }
+  return e;
+}
+
+MethodFn enhance_method_fn(EnhanceMethod method, BenchMethodSettings settings) {
+  return [method, settings](const MethodContext& c) -> Result<MethodOutput> {
+    MACRO_ASSIGN_OR_RETURN(EnhanceOptions e, enhance_options(method, c.options, settings));
+    MACRO_ASSIGN_OR_RETURN(EnhanceResult r, enhance_closeup(c.inputs, e));
+    MethodOutput out;
+    out.image = std::move(r.image);
+    const EnhanceTimings& t = r.timings;
+    const std::pair<const char*, double> stages[] = {
+        {"render", t.ms_render}, {"plan", t.ms_plan},     {"views", t.ms_views},
+        {"ctx", t.ms_ctx},       {"encode", t.ms_encode}, {"unet", t.ms_unet},
+        {"decode", t.ms_decode}, {"resize", t.ms_resize}};
+    for (const auto& [name, ms] : stages) out.stages.push_back({name, ms / 1000.0, true});
+    out.stages.push_back({"weights_load", t.ms_load / 1000.0, false});
+    return out;
+  };
+}
+
+}  // namespace
+
+Status register_enhance_bench_methods(MethodRegistry& registry,
+                                      const BenchMethodSettings& settings) {
+  MACRO_TRY(registry.add({"difix", "Difix-ref, K = 1 whole reference, no planes, no mask",
+                          {"precision"}, enhance_method_fn(EnhanceMethod::kDifix, settings)}));
+  MACRO_TRY(registry.add({"macro", "MACRO: scale-matched crops, depth-masked attention",
+                          {"K", "P", "mask", "precision"},
+                          enhance_method_fn(EnhanceMethod::kMacro, settings)}));
+  MACRO_TRY(registry.add({"macro-unmasked", "MACRO without the plane mask",
+                          {"K", "P", "precision"},
+                          enhance_method_fn(EnhanceMethod::kMacroUnmasked, settings)}));
   return Status::ok();
 }
 
-MethodRegistry default_method_registry() {
+MethodRegistry default_method_registry(const BenchMethodSettings& settings) {
   MethodRegistry r;
   MACRO_CHECK(r.add({"3dgs", "the raw 3DGS close-up render", {}, run_3dgs_method}).is_ok());
-  const Status s = register_enhance_bench_methods(r);
+  const Status s = register_enhance_bench_methods(r, settings);
   MACRO_CHECK(s.is_ok());
   return r;
 }
@@ -479,7 +547,7 @@ BenchRecord run_work_item(const BenchWorkItem& item, const MethodRegistry& regis
   if (out->image.data.empty()) return skip("no output: the method produced an empty image");
   for (const MethodStage& s : out->stages) {
     r.seconds.push_back(s);
-    r.seconds_per_closeup += s.seconds;
+    if (s.per_closeup) r.seconds_per_closeup += s.seconds;
   }
 
   t0 = std::chrono::steady_clock::now();

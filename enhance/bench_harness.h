@@ -60,6 +60,7 @@ struct BenchPair {
 struct MethodStage {
   std::string name;  // "render", "enhance", ...
   double seconds = 0;
+  bool per_closeup = true;  // counts towards seconds_per_closeup (false: e.g. loading weights)
 };
 
 struct MethodOutput {
@@ -93,14 +94,22 @@ class MethodRegistry {
   std::map<std::string, BenchMethod> methods_;
 };
 
+// Run-wide inputs of the network methods (not part of a record's key).
+struct BenchMethodSettings {
+  std::string difix_weights;  // Difix pipeline folder (enhance.h EnhanceOptions::weights)
+  std::string ctx_path;       // optional text context safetensors
+};
+
 // The registry with every method this build has: "3dgs" (the raw close-up render, classic
 // rasteriser, black background), then register_enhance_bench_methods.
-MethodRegistry default_method_registry();
+MethodRegistry default_method_registry(const BenchMethodSettings& settings = {});
 
-// HOOK for the enhancers (difix, macro, ...): add each `macro enhance` method here, mapping the
-// BenchOptions keys (K, P, mask, precision) to its options and reporting its stages. Defined in
-// bench_harness.cpp; today it adds nothing.
-Status register_enhance_bench_methods(MethodRegistry& registry);
+// HOOK for the enhancers: adds the `macro enhance` methods (enhance/enhance.h) "difix" (options
+// precision), "macro" (K, P, mask, precision) and "macro-unmasked" (K, P, precision). Option
+// values: K an integer; P an integer or "auto" (up to 5 planes); mask released|paper|none (also
+// on = released, off = none); precision fp32|bf16. A new method is one more registry.add here.
+Status register_enhance_bench_methods(MethodRegistry& registry,
+                                      const BenchMethodSettings& settings);
 
 // The 3dgs method on its own (tests and other methods reuse the render).
 Result<MethodOutput> run_3dgs_method(const MethodContext& context);
