@@ -14,7 +14,8 @@ constexpr const char* kUsage =
     "usage: macro metrics --pred A.png --gt B.png [--lpips-backbone alexnet.safetensors]\n"
     "                     [--lpips-heads lpips_v0.1_alex.safetensors] [--dinov2 W.safetensors]\n"
     "                     [--dreamsim W.safetensors] [--no-resize] [--json] [--threads N]\n"
-    "  The prediction is Lanczos-resized (Pillow-exact) to the ground-truth size unless --no-resize.\n"
+    "  The prediction is Lanczos-resized (Pillow-exact) to the ground-truth size unless "
+    "--no-resize.\n"
     "  LPIPS needs the AlexNet backbone (torchvision weights as safetensors, names\n"
     "  features.{0,3,6,8,10}.{weight,bias}); default data/weights/lpips/alexnet.safetensors.\n";
 
@@ -48,9 +49,8 @@ int run_metrics(std::vector<std::string> argv) {
   return 0;
 }
 
-const bool registered =
-    register_command({"metrics", "PSNR / SSIM / LPIPS of a prediction against its ground truth",
-                      run_metrics});
+const bool registered = register_command(
+    {"metrics", "PSNR / SSIM / LPIPS of a prediction against its ground truth", run_metrics});
 
 }  // namespace
 }  // namespace macro::cli

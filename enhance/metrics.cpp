@@ -95,8 +95,8 @@ void ssim_row(const float* __restrict m, int n, float shift, float c1, float c2,
     const float sbb = mbb[x] - mb[x] * mb[x];
     const float sab = mab[x] - ma[x] * mb[x];
     const float ua = ma[x] + shift, ub = mb[x] + shift;
-    out[x] = ((2.f * ua * ub + c1) * (2.f * sab + c2)) /
-             ((ua * ua + ub * ub + c1) * (saa + sbb + c2));
+    out[x] =
+        ((2.f * ua * ub + c1) * (2.f * sab + c2)) / ((ua * ua + ub * ub + c1) * (saa + sbb + c2));
   }
 }
 
@@ -211,8 +211,9 @@ Result<double> ssim(const gs::Image& pred, const gs::Image& gt, const SsimParams
             std::fill(m.begin(), m.end(), 0.f);
             for (int k = 0; k < 5; ++k)
               for (int t = 0; t < n; ++t)
-                axpy_row(g[size_t(t)], hf.data() + size_t(k) * hplane + (r + size_t(t)) * size_t(Wv),
-                         Wv, m.data() + size_t(k) * size_t(Wv));
+                axpy_row(g[size_t(t)],
+                         hf.data() + size_t(k) * hplane + (r + size_t(t)) * size_t(Wv), Wv,
+                         m.data() + size_t(k) * size_t(Wv));
             float* map = m.data() + 5 * size_t(Wv);
             ssim_row(m.data(), Wv, shift, float(c1), float(c2), map);
             double sum = 0;

@@ -25,7 +25,9 @@ using namespace macro::enhance;
 
 namespace {
 
-std::string metrics_golden() { return test::golden_dir() + "/metrics"; }
+std::string metrics_golden() {
+  return test::golden_dir() + "/metrics";
+}
 std::string heads_path() {
   return test::source_dir() + "/data/weights/lpips/lpips_v0.1_alex.safetensors";
 }
@@ -135,8 +137,8 @@ TEST_CASE("conv2d covers AlexNet's 11x11 stride-4 and 5x5 convs", "[metrics]") {
   for (Isa isa : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512, Isa::kAvx512Bf16}) {
     if (!isa_supported(isa)) continue;
     REQUIRE(set_isa(isa).is_ok());
-    for (auto [k, stride, pad, cin, cout, h, w] :
-         {std::array<int, 7>{11, 4, 2, 3, 64, 67, 45}, std::array<int, 7>{5, 1, 2, 64, 37, 9, 13}}) {
+    for (auto [k, stride, pad, cin, cout, h, w] : {std::array<int, 7>{11, 4, 2, 3, 64, 67, 45},
+                                                   std::array<int, 7>{5, 1, 2, 64, 37, 9, 13}}) {
       INFO(isa_name(isa) << " k " << k << " stride " << stride);
       const Conv2dShape s = Conv2dShape::make(2, cin, h, w, cout, k, stride, pad);
       std::vector<float> x(size_t(2 * cin * h * w)), wt(size_t(cout * cin * k * k)),
@@ -207,8 +209,8 @@ TEST_CASE("LPIPS loader: missing and mis-shaped backbones are clear errors", "[m
   test::TempDir dir("metrics-lpips");
   auto missing = LpipsAlex::load(dir.file("alexnet.safetensors"), heads_path());
   REQUIRE_FALSE(missing.is_ok());
-  CHECK_THAT(missing.status().message(), Catch::Contains("not supplied") &&
-                                             Catch::Contains(dir.file("alexnet.safetensors")));
+  CHECK_THAT(missing.status().message(),
+             Catch::Contains("not supplied") && Catch::Contains(dir.file("alexnet.safetensors")));
   // A backbone whose conv2 has the wrong shape and lacks conv5.
   std::vector<float> zeros(64 * 3 * 11 * 11, 0.f);
   std::vector<TensorToWrite> t = {
@@ -222,8 +224,8 @@ TEST_CASE("LPIPS loader: missing and mis-shaped backbones are clear errors", "[m
   auto r = LpipsAlex::load(bad, heads_path());
   REQUIRE_FALSE(r.is_ok());
   INFO(r.status().message());
-  CHECK_THAT(r.status().message(), Catch::Contains("features.3.weight") &&
-                                       Catch::Contains("features.10.weight"));
+  CHECK_THAT(r.status().message(),
+             Catch::Contains("features.3.weight") && Catch::Contains("features.10.weight"));
 }
 
 TEST_CASE("Metrics reject bad input with clear errors", "[metrics]") {

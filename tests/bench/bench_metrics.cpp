@@ -25,10 +25,14 @@ int run(int argc, char** argv) {
   backbone = backbone.substr(0, backbone.rfind('/')) +
              "/../../../shared/golden/metrics/lpips-alex-random-backbone.safetensors";
   for (int i = 1; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--reps")) reps = std::atoi(argv[i + 1]);
-    else if (!std::strcmp(argv[i], "--backbone")) backbone = argv[i + 1];
-    else if (!std::strcmp(argv[i], "--width")) width = std::atoi(argv[i + 1]);
-    else if (!std::strcmp(argv[i], "--height")) height = std::atoi(argv[i + 1]);
+    if (!std::strcmp(argv[i], "--reps"))
+      reps = std::atoi(argv[i + 1]);
+    else if (!std::strcmp(argv[i], "--backbone"))
+      backbone = argv[i + 1];
+    else if (!std::strcmp(argv[i], "--width"))
+      width = std::atoi(argv[i + 1]);
+    else if (!std::strcmp(argv[i], "--height"))
+      height = std::atoi(argv[i + 1]);
   }
   // A smooth pattern plus deterministic noise, and a perturbed copy.
   gs::Image a(width, height, 3), b(width, height, 3);
@@ -46,7 +50,8 @@ int run(int argc, char** argv) {
   double v = 0;
   const double t_psnr = median_seconds(reps, [&] { v = *enhance::psnr(a, b); });
   std::printf("psnr                 %8.2f ms  (%.4f dB)\n", 1e3 * t_psnr, v);
-  const double t_ref = median_seconds(1, [&] { v = *enhance::ssim_reference(a, b); }, false);
+  const double t_ref = median_seconds(
+      1, [&] { v = *enhance::ssim_reference(a, b); }, false);
   std::printf("ssim reference (2-D, double, 1 thread)  %8.1f ms  (%.6f)  baseline\n", 1e3 * t_ref,
               v);
   for (ThreadPool* pool : {&one, &two}) {
@@ -59,13 +64,14 @@ int run(int argc, char** argv) {
     std::printf("lpips: skipped: %s\n", net.status().message().c_str());
     return 0;
   }
-  const double t_lref = median_seconds(1, [&] { v = net->distance_reference(a, b)->value; }, false);
-  std::printf("lpips reference (double convs, 1 thread) %8.1f ms  (%.6f)  baseline\n",
-              1e3 * t_lref, v);
+  const double t_lref = median_seconds(
+      1, [&] { v = net->distance_reference(a, b)->value; }, false);
+  std::printf("lpips reference (double convs, 1 thread) %8.1f ms  (%.6f)  baseline\n", 1e3 * t_lref,
+              v);
   for (ThreadPool* pool : {&one, &two}) {
     const double t = median_seconds(reps, [&] { v = net->distance(a, b, *pool)->value; });
-    std::printf("lpips conv2d, %d thread(s)               %8.1f ms  (%.6f)  %.1fx\n",
-                pool->size(), 1e3 * t, v, t_lref / t);
+    std::printf("lpips conv2d, %d thread(s)               %8.1f ms  (%.6f)  %.1fx\n", pool->size(),
+                1e3 * t, v, t_lref / t);
   }
   return 0;
 }
