@@ -120,17 +120,28 @@ std::string table_markdown(const std::vector<ConfigResult>& configs) {
   std::string s = "| Method |";
   std::string rule = "|---|";
   for (const MetricColumn& m : cols) {
-    s += std::string(" ") + m.title + (m.higher_better ? " ↑" : " ↓") + " |";
+    s += ' ';
+    s += m.title;
+    s += m.higher_better ? " ↑ |" : " ↓ |";
     rule += "---:|";
   }
   s += " s / close-up | scenes | pairs ok | skipped |\n";
   rule += "---:|---:|---:|---:|\n";
   s += rule;
   for (const ConfigResult& c : configs) {
-    s += "| " + c.label + " |";
-    for (const MetricColumn& m : cols) s += " " + format_metric(m.name, metric_of(c, m.name)) + " |";
-    s += " " + format_metric(kSeconds, c.seconds_per_closeup) + " | " + std::to_string(c.scenes) +
-         " | " + std::to_string(c.pairs_ok) + " | " + std::to_string(c.pairs_skipped) + " |\n";
+    const auto cell = [&s](const std::string& text) {
+      s += ' ';
+      s += text;
+      s += " |";
+    };
+    s += "|";
+    cell(c.label);
+    for (const MetricColumn& m : cols) cell(format_metric(m.name, metric_of(c, m.name)));
+    cell(format_metric(kSeconds, c.seconds_per_closeup));
+    cell(std::to_string(c.scenes));
+    cell(std::to_string(c.pairs_ok));
+    cell(std::to_string(c.pairs_skipped));
+    s += '\n';
   }
   s += "\nMean over scenes of the per-scene mean over pairs; n/c = not computed.\n";
   return s;
@@ -139,7 +150,10 @@ std::string table_markdown(const std::vector<ConfigResult>& configs) {
 std::string table_csv(const std::vector<ConfigResult>& configs) {
   const auto cols = shown_columns(configs);
   std::string s = "method,options";
-  for (const MetricColumn& m : cols) s += std::string(",") + m.name;
+  for (const MetricColumn& m : cols) {
+    s += ',';
+    s += m.name;
+  }
   s += ",seconds_per_closeup,scenes,pairs_ok,pairs_skipped\n";
   for (const ConfigResult& c : configs) {
     s += csv_field(c.method) + "," + csv_field(c.options_text);
@@ -147,7 +161,8 @@ std::string table_csv(const std::vector<ConfigResult>& configs) {
       auto v = metric_of(c, m.name);
       char buf[64];
       if (v && std::isfinite(*v)) std::snprintf(buf, sizeof buf, "%.9g", *v);
-      s += "," + (v ? (std::isfinite(*v) ? std::string(buf) : format_metric(m.name, v)) : "n/c");
+      s += ',';
+      s += v ? (std::isfinite(*v) ? std::string(buf) : format_metric(m.name, v)) : "n/c";
     }
     char buf[64] = "n/c";
     if (c.seconds_per_closeup) std::snprintf(buf, sizeof buf, "%.6g", *c.seconds_per_closeup);
@@ -204,9 +219,9 @@ void axes(Chart& c, const Frame& f, const std::string& title, const std::string&
   }
   c.lines.push_back({f.left, f.h - f.bottom, f.w - f.right, f.h - f.bottom, kInk, 1.5});
   c.lines.push_back({f.left, double(f.top), f.left, f.h - f.bottom, kInk, 1.5});
-  c.texts.push_back({f.w / 2.0, 22, title, kInk, 0});
+  c.texts.push_back({f.w / 2.0, 15, title, kInk, 0});
   c.texts.push_back({(f.left + f.w - f.right) / 2, f.h - 12.0, xlabel, kInk, 0});
-  c.texts.push_back({8, f.top - 10, ylabel, kInk, -1});
+  c.texts.push_back({8, f.top - 8, ylabel, kInk, -1});
 }
 
 std::string metric_axis_label(const MetricColumn& m) {
@@ -225,10 +240,9 @@ Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const Metri
     ylo = std::min(ylo, *v), yhi = std::max(yhi, *v);
   }
   if (xlo > xhi) xlo = 0, xhi = 1, ylo = 0, yhi = 1;
-  xlo = std::min(xlo, 0.0);
   pad_range(xlo, xhi);
   pad_range(ylo, yhi);
-  f.x0 = xlo, f.x1 = xhi, f.y0 = ylo, f.y1 = yhi;
+  f.x0 = 0, f.x1 = xhi, f.y0 = ylo, f.y1 = yhi;
   Chart c;
   axes(c, f, std::string("Seconds per close-up vs ") + metric.title, "seconds per close-up",
        metric_axis_label(metric), true);
@@ -237,14 +251,25 @@ Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const Metri
     if (!v || !configs[i].seconds_per_closeup || !std::isfinite(*v)) continue;
     const double x = f.px(*configs[i].seconds_per_closeup), y = f.py(*v);
     c.circles.push_back({x, y, 5, palette(i)});
-    c.texts.push_back({x + 8, y - 6, configs[i].label, palette(i), -1});
+    // Labels right of the point in the left half, left of it in the right half.
+    const bool right_half = x > f.w / 2.0;
+    c.texts.push_back({right_half ? x - 8 : x + 8, y - 6, configs[i].label, palette(i),
+                       right_half ? 1 : -1});
   }
   return c;
 }
 
+// Right margin that fits the legend labels (8 px per character in both renderers' fonts).
+static double legend_margin(const std::vector<ConfigResult>& configs) {
+  size_t longest = 0;
+  for (const ConfigResult& c : configs) longest = std::max(longest, c.label.size());
+  return std::max(150.0, 40.0 + 8.0 * double(longest));
+}
+
 Chart chart_metric_vs_zoom(const std::vector<ConfigResult>& configs, const MetricColumn& metric) {
   Frame f;
-  f.right = 150;
+  f.right = legend_margin(configs);
+  f.w = int(640 + f.right - 150);
   double xlo = 1e300, xhi = -1e300, ylo = 1e300, yhi = -1e300;
   for (const ConfigResult& c : configs)
     for (const auto& [zoom, values] : c.pairs) {
@@ -300,7 +325,7 @@ Chart chart_scene_bars(const std::vector<ConfigResult>& configs, const MetricCol
     }
   const std::vector<std::string> scenes(scene_set.begin(), scene_set.end());
   Frame f;
-  f.right = 150;
+  f.right = legend_margin(configs);
   f.bottom = 70;
   f.w = std::max(640, int(f.left + f.right) + int(scenes.size() * configs.size()) * 14 +
                           int(scenes.size()) * 20);
@@ -410,13 +435,13 @@ const char* glyph(char ch) {
     case 'E': return "####..####..###";
     case 'F': return "####..####..#..";
     case 'G': return "####..#.##.####";
-    case 'H': return "#.##.####.##.##";
+    case 'H': return "#.##.#####.##.#";
     case 'I': return "###.#..#..#.###";
     case 'J': return "..#..#..##.####";
     case 'K': return "#.##.###.#.##.#";
     case 'L': return "#..#..#..#..###";
     case 'M': return "#.#####.##.##.#";
-    case 'N': return "###.##.##.##.##";
+    case 'N': return "##.#.##.##.##.#";
     case 'O': return "####.##.##.####";
     case 'P': return "####.#####..#..";
     case 'Q': return "####.##.####..#";
