@@ -42,8 +42,10 @@ size_t replay(const std::string& target) {
   fs::path dir = fs::path(kRegressions) / target;
   REQUIRE(fs::is_directory(dir));
   std::vector<fs::path> files;
+  // "open-*": findings not fixed yet, each with its own [!mayfail] test below; rename when fixed.
   for (const auto& f : fs::directory_iterator(dir))
-    if (f.is_regular_file()) files.push_back(f.path());
+    if (f.is_regular_file() && f.path().filename().string().rfind("open-", 0) != 0)
+      files.push_back(f.path());
   std::sort(files.begin(), files.end());
   for (const auto& f : files) {
     INFO("input: " << f.string());
@@ -127,4 +129,19 @@ TEST_CASE("fuzz entry points: empty, garbage and saved regression inputs are cle
     REQUIRE(entry(target) != nullptr);
     CHECK(replay(target) > 0);
   }
+}
+
+// Found by fuzz_image (libFuzzer timeout: 14 s wall on the loaded machine, 0.5 s CPU): a 2,309-byte
+// uncompressed grayscale TGA whose header claims 193 x 12550 pixels at 15 bits. stb_image's TGA
+// loader (stbi__tga_load) reads past the end as zeros, so gs::decode_image allocates and fills
+// 2.4 M pixels and returns success for a file that holds 0.1 % of its data. The fix belongs in
+// gs/image_io.cpp: for uncompressed TGA (types 1, 2, 3), refuse width * height * bytes-per-pixel
+// larger than the bytes after the header (RLE types: a ratio bound, as for PNG).
+TEST_CASE("fuzz regression image: a TGA shorter than its header's size is an error",
+          "[fuzz][!mayfail]") {
+  std::vector<uint8_t> bytes = read_bytes(fs::path(kRegressions) / "image/open-tga-short-data");
+  REQUIRE(bytes.size() == 2309);
+  Status st = fuzz::image(bytes.data(), bytes.size());
+  CHECK_FALSE(st.is_ok());
+  CHECK_FALSE(st.message().empty());
 }

@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <string>
 #include <utility>
@@ -32,12 +33,17 @@
 
 namespace macro::fuzz {
 
-// Scratch folder for this process, created on first use.
+// Scratch folder for this process, created on first use and removed at normal exit.
 inline const std::string& scratch_dir() {
-  static const std::string dir = [] {
-    std::string d = "/tmp/macro-fuzz-" + std::to_string(::getpid());
+  // Never destroyed: the exit handler below runs after static destructors registered later.
+  static const std::string& dir = *[] {
+    auto* d = new std::string("/tmp/macro-fuzz-" + std::to_string(::getpid()));
     std::error_code ec;
-    std::filesystem::create_directories(d, ec);
+    std::filesystem::create_directories(*d, ec);
+    std::atexit([] {
+      std::error_code ignored;
+      std::filesystem::remove_all(scratch_dir(), ignored);
+    });
     return d;
   }();
   return dir;
@@ -165,10 +171,10 @@ inline Status clip_tokenizer(const uint8_t* data, size_t size) {
   return Status::ok();
 }
 
-// A fixed tokenizer would be needed to fuzz the text side; the text is the input here and the
-// tokenizer is the tiny one written from the first part (so both sides are covered in one target).
+// The text side: a tiny fixed tokenizer encodes the input. The input keeps the split_two layout
+// (first part ignored) so seeds and findings look like those of clip_tokenizer.
 inline Status clip_tokenizer_text(const uint8_t* data, size_t size) {
-  auto [vocab_merges, text] = split_two(data, size);
+  auto [ignored, text] = split_two(data, size);
   static const char kVocab[] =
       R"({"a": 0, "b": 1, "c": 2, "a</w>": 3, "b</w>": 4, "c</w>": 5, "ab": 6, "ab</w>": 7,)"
       R"( "!": 8, "<|startoftext|>": 9, "<|endoftext|>": 10})";
@@ -177,7 +183,7 @@ inline Status clip_tokenizer_text(const uint8_t* data, size_t size) {
   write_scratch("tokenizer_text/merges.txt", std::string(kMerges));
   static auto t = nets::ClipTokenizer::load(scratch_dir() + "/tokenizer_text");
   if (!t.is_ok()) return t.status();
-  (void)vocab_merges;
+  (void)ignored;
   auto ids = t->encode(text);
   if (ids.size() != size_t(nets::ClipTokenizer::kContextLength))
     return Status::error("encode returned " + std::to_string(ids.size()) + " ids");

@@ -8,7 +8,8 @@
 #   tests/fuzz/run_fuzzers.sh build-fuzz 600 scene_ply exr   # two targets, 10 min each
 #
 # Environment: SHARED (default /work/shared), JOBS (build parallelism, default 2), NO_BUILD=1 to skip
-# the build, PARALLEL=n fuzzers at a time (default 1). Fuzzers run under `nice -n 19`.
+# the build, PARALLEL=n fuzzers at a time (default 1), RSS_LIMIT_MB (default 2048; a larger value
+# lets a target run past a known allocation finding). Fuzzers run under `nice -n 19`.
 set -uo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 src="$(cd "$here/../.." && pwd)"
@@ -146,14 +147,18 @@ run_one() {
   corpus="$build/fuzz-corpus/$t"
   artifacts="$build/fuzz-artifacts/$t"
   mkdir -p "$corpus" "$artifacts" "$seeds/$t"
-  cp "$src/tests/fuzz/regressions/$t/"* "$seeds/$t/" 2>/dev/null  # known findings stay covered
+  # Known findings are not seeded: libFuzzer stops at a crashing seed. They are replayed by
+  # tests/test_fuzz_regressions.cpp; add them with SEED_REGRESSIONS=1 once fixed.
+  if [ "${SEED_REGRESSIONS:-0}" = 1 ]; then
+    cp "$src/tests/fuzz/regressions/$t/"* "$seeds/$t/" 2>/dev/null
+  fi
   log="$build/fuzz-logs/$t.log"
   mkdir -p "$(dirname "$log")"
   echo "== fuzz_$t: ${seconds}s" >&2
   # -rss_limit_mb: a lying size that allocates gigabytes is a finding (OOM artifact).
   ASAN_OPTIONS="detect_leaks=1:allocator_may_return_null=0" \
   UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1" \
-    nice -n 19 "$exe" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 \
+    nice -n 19 "$exe" -max_total_time="$seconds" -timeout=10 -rss_limit_mb="${RSS_LIMIT_MB:-2048}" \
     -max_len=65536 -print_final_stats=1 -artifact_prefix="$artifacts/" \
     "$corpus" "$seeds/$t" >"$log" 2>&1
   rc=$?
