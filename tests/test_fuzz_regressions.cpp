@@ -76,7 +76,8 @@ int run_with_address_limit(fuzz::EntryFn fn, const std::vector<uint8_t>& bytes, 
     Status st = fn(bytes.data(), bytes.size());
     if (st.is_ok()) ::_exit(2);
     const std::string& m = st.message();
-    bool oom = m.find("outofmem") != std::string::npos || m.find("ut of memory") != std::string::npos;
+    bool oom =
+        m.find("outofmem") != std::string::npos || m.find("ut of memory") != std::string::npos;
     ::_exit(oom ? 1 : 0);
   }
   int status = 0;

@@ -1,5 +1,5 @@
-// libFuzzer target: macro::fuzz::colmap_text (tests/fuzz/fuzz_targets.h). Errors are expected; crashes,
-// hangs, sanitizer reports and escaping exceptions are findings (docs/reliability.md).
+// libFuzzer target: macro::fuzz::colmap_text (tests/fuzz/fuzz_targets.h). Errors are expected;
+// crashes, hangs, sanitizer reports and escaping exceptions are findings (docs/reliability.md).
 #include "tests/fuzz/fuzz_targets.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

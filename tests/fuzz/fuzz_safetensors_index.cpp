@@ -1,5 +1,6 @@
-// libFuzzer target: macro::fuzz::safetensors_index (tests/fuzz/fuzz_targets.h). Errors are expected; crashes,
-// hangs, sanitizer reports and escaping exceptions are findings (docs/reliability.md).
+// libFuzzer target: macro::fuzz::safetensors_index (tests/fuzz/fuzz_targets.h). Errors are
+// expected; crashes, hangs, sanitizer reports and escaping exceptions are findings
+// (docs/reliability.md).
 #include "tests/fuzz/fuzz_targets.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -1,7 +1,7 @@
 // Fuzz entry points: one function per untrusted-input parser, each feeding raw bytes to the real
-// library entry point and returning its Status. Used by the libFuzzer targets (tests/fuzz/fuzz_*.cpp,
-// built with -DMACRO_FUZZ=ON) and by tests/test_fuzz_regressions.cpp, which replays every input in
-// tests/fuzz/regressions/<target>/ through the normal build.
+// library entry point and returning its Status. Used by the libFuzzer targets
+// (tests/fuzz/fuzz_*.cpp, built with -DMACRO_FUZZ=ON) and by tests/test_fuzz_regressions.cpp, which
+// replays every input in tests/fuzz/regressions/<target>/ through the normal build.
 //
 // APIs that take a path get the bytes written to a per-process scratch folder under /tmp
 // (/tmp/macro-fuzz-<pid>/). Inputs that need two files (COLMAP cameras + images, tokenizer vocab +
@@ -93,9 +93,15 @@ inline Status scene(const uint8_t* data, size_t size, const char* name) {
   return r.is_ok() ? Status::ok() : r.status();
 }
 // Content detection decides .ply / compressed .ply / .spz; the name decides .splat.
-inline Status scene_ply(const uint8_t* d, size_t n) { return scene(d, n, "fuzz.ply"); }
-inline Status scene_splat(const uint8_t* d, size_t n) { return scene(d, n, "fuzz.splat"); }
-inline Status scene_spz(const uint8_t* d, size_t n) { return scene(d, n, "fuzz.spz"); }
+inline Status scene_ply(const uint8_t* d, size_t n) {
+  return scene(d, n, "fuzz.ply");
+}
+inline Status scene_splat(const uint8_t* d, size_t n) {
+  return scene(d, n, "fuzz.splat");
+}
+inline Status scene_spz(const uint8_t* d, size_t n) {
+  return scene(d, n, "fuzz.spz");
+}
 
 // One .safetensors file; every tensor is then read out as float32.
 inline Status safetensors(const uint8_t* data, size_t size) {
