@@ -14,7 +14,8 @@ namespace {
 constexpr const char* kUsage =
     "usage: macro bench run --root DIR --results FILE.jsonl [--methods 3dgs,...]\n"
     "                       [--K 1,3] [--P 4] [--mask on,off] [--precision bf16,f32]\n"
-    "                       [--shard i/N] [--limit N] [--weights DIFIX_DIR] [--ctx CTX.safetensors]\n"
+    "                       [--shard i/N] [--limit N] [--weights DIFIX_DIR] [--ctx "
+    "CTX.safetensors]\n"
     "                       [--lpips-backbone F] [--lpips-heads F]\n"
     "                       [--dinov2 F] [--dreamsim F] [--quiet] [--threads N]\n"
     "       macro bench merge FILE.jsonl... --out FILE.jsonl\n"
@@ -60,10 +61,11 @@ int run_run(Args& args) {
   const enhance::MethodRegistry registry = enhance::default_method_registry(settings);
   auto summary = enhance::run_benchmark(o, registry);
   if (!summary) return fail("bench run", summary.status());
-  std::printf("bench run: %zu items in shard %d/%d, %zu already done, %zu run (%zu ok, %zu "
-              "skipped) -> %s\n",
-              summary->work_items, o.shard.index, o.shard.count, summary->already_done,
-              summary->ran, summary->ok, summary->skipped, o.results.c_str());
+  std::printf(
+      "bench run: %zu items in shard %d/%d, %zu already done, %zu run (%zu ok, %zu "
+      "skipped) -> %s\n",
+      summary->work_items, o.shard.index, o.shard.count, summary->already_done, summary->ran,
+      summary->ok, summary->skipped, o.results.c_str());
   return 0;
 }
 
@@ -121,9 +123,8 @@ int run_bench(std::vector<std::string> argv) {
   return fail("bench", Status::error("unknown subcommand '" + sub + "' (run, merge, report)"));
 }
 
-const bool registered =
-    register_command({"bench", "evaluation harness: run methods on close-up pairs, merge, report",
-                      run_bench});
+const bool registered = register_command(
+    {"bench", "evaluation harness: run methods on close-up pairs, merge, report", run_bench});
 
 }  // namespace
 }  // namespace macro::cli

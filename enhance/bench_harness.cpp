@@ -66,8 +66,8 @@ std::vector<std::string> MethodRegistry::names() const {
 Result<MethodOutput> run_3dgs_method(const MethodContext& context) {
   const auto t0 = std::chrono::steady_clock::now();
   gs::RenderOptions ro;  // classic, black background, SH degree 3 (gsplat's render defaults)
-  MACRO_ASSIGN_OR_RETURN(gs::RenderResult r, gs::render(context.inputs.cloud,
-                                                        context.inputs.closeup, ro));
+  MACRO_ASSIGN_OR_RETURN(gs::RenderResult r,
+                         gs::render(context.inputs.cloud, context.inputs.closeup, ro));
   MethodOutput out;
   out.image = gs::Image(r.width, r.height, 3);
   out.image.data = std::move(r.color);
@@ -110,8 +110,9 @@ Result<EnhanceOptions> enhance_options(EnhanceMethod method, const BenchOptions&
     }
   }
   if (auto it = o.find("mask"); it != o.end()) {
-    const std::string m = it->second == "on" ? "released" : it->second == "off" ? "none"
-                                                                                : it->second;
+    const std::string m = it->second == "on"    ? "released"
+                          : it->second == "off" ? "none"
+                                                : it->second;
     MACRO_ASSIGN_OR_RETURN(e.plan.mask, parse_mask_mode(m));
   }
   if (auto it = o.find("precision"); it != o.end()) {
@@ -141,12 +142,16 @@ MethodFn enhance_method_fn(EnhanceMethod method, BenchMethodSettings settings) {
 
 Status register_enhance_bench_methods(MethodRegistry& registry,
                                       const BenchMethodSettings& settings) {
-  MACRO_TRY(registry.add({"difix", "Difix-ref, K = 1 whole reference, no planes, no mask",
-                          {"precision"}, enhance_method_fn(EnhanceMethod::kDifix, settings)}));
-  MACRO_TRY(registry.add({"macro", "MACRO: scale-matched crops, depth-masked attention",
+  MACRO_TRY(registry.add({"difix",
+                          "Difix-ref, K = 1 whole reference, no planes, no mask",
+                          {"precision"},
+                          enhance_method_fn(EnhanceMethod::kDifix, settings)}));
+  MACRO_TRY(registry.add({"macro",
+                          "MACRO: scale-matched crops, depth-masked attention",
                           {"K", "P", "mask", "precision"},
                           enhance_method_fn(EnhanceMethod::kMacro, settings)}));
-  MACRO_TRY(registry.add({"macro-unmasked", "MACRO without the plane mask",
+  MACRO_TRY(registry.add({"macro-unmasked",
+                          "MACRO without the plane mask",
                           {"K", "P", "precision"},
                           enhance_method_fn(EnhanceMethod::kMacroUnmasked, settings)}));
   return Status::ok();
@@ -200,8 +205,9 @@ Result<std::vector<std::string>> list_scene_dirs(const std::string& root) {
   }
   if (ec) return Status::error(root + ": cannot list: " + ec.message());
   if (dirs.empty())
-    return Status::error(root + ": no scene folder (expected split.json in it or in its "
-                                "sub-folders)");
+    return Status::error(root +
+                         ": no scene folder (expected split.json in it or in its "
+                         "sub-folders)");
   std::sort(dirs.begin(), dirs.end());
   return dirs;
 }
@@ -343,8 +349,7 @@ std::string record_to_json_line(const BenchRecord& r) {
 
 Result<BenchRecord> record_from_json(const std::string& line, const std::string& where) {
   Json j = Json::parse(line, nullptr, /*allow_exceptions=*/false);
-  if (j.is_discarded() || !j.is_object())
-    return Status::error(where + ": not a JSON object");
+  if (j.is_discarded() || !j.is_object()) return Status::error(where + ": not a JSON object");
   BenchRecord r;
   const auto str = [&](const char* k, std::string& out) -> Status {
     if (!j.contains(k) || !j[k].is_string())
@@ -460,11 +465,11 @@ Status RecordAppender::open(const std::string& path) {
       if (!found) keep -= chunk;
     }
     if (keep != size) {
-      log_info("bench", path + ": dropping a torn last line (" + std::to_string(size - keep) +
-                            " bytes)");
+      log_info("bench",
+               path + ": dropping a torn last line (" + std::to_string(size - keep) + " bytes)");
       if (::ftruncate(fd_, keep) != 0)
-        return Status::error(path + ": cannot truncate the torn last line: " +
-                             std::strerror(errno));
+        return Status::error(path +
+                             ": cannot truncate the torn last line: " + std::strerror(errno));
     }
   }
   return Status::ok();
@@ -475,8 +480,8 @@ Status RecordAppender::append(const BenchRecord& record) {
   const std::string line = record_to_json_line(record);
   const ssize_t n = ::write(fd_, line.data(), line.size());
   if (n != ssize_t(line.size()))
-    return Status::error(path_ + ": write failed: " +
-                         (n < 0 ? std::string(std::strerror(errno)) : "short write"));
+    return Status::error(
+        path_ + ": write failed: " + (n < 0 ? std::string(std::strerror(errno)) : "short write"));
   if (::fsync(fd_) != 0) return Status::error(path_ + ": fsync failed: " + std::strerror(errno));
   return Status::ok();
 }
@@ -562,9 +567,9 @@ BenchRecord run_work_item(const BenchWorkItem& item, const MethodRegistry& regis
 Result<BenchRunSummary> run_benchmark(const BenchRunOptions& options,
                                       const MethodRegistry& registry) {
   if (options.results.empty()) return Status::error("--results: a results file is required");
-  MACRO_ASSIGN_OR_RETURN(std::vector<BenchWorkItem> all,
-                         build_work_list(options.root, options.methods, options.option_sets,
-                                         registry));
+  MACRO_ASSIGN_OR_RETURN(
+      std::vector<BenchWorkItem> all,
+      build_work_list(options.root, options.methods, options.option_sets, registry));
   const std::vector<BenchWorkItem> items = take_shard(all, options.shard);
   BenchRunSummary summary;
   summary.work_items = items.size();
@@ -594,8 +599,8 @@ Result<BenchRunSummary> run_benchmark(const BenchRunOptions& options,
       ++summary.ok;
     } else {
       ++summary.skipped;
-      log_info("bench", r.scene + " " + r.closeup_frame + " " + r.method + ": skipped: " +
-                            r.reason);
+      log_info("bench",
+               r.scene + " " + r.closeup_frame + " " + r.method + ": skipped: " + r.reason);
     }
     progress.advance();
   }

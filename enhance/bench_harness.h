@@ -19,11 +19,10 @@
 //   {"scene", "pair_index", "training_frame", "closeup_frame", "depth_ratio", "method",
 //    "options": {"K": "3", ...} (only the keys the method uses), "options_hash": 16 hex digits
 //    (FNV-1a 64 of the canonical options text), "status": "ok" | "skipped", "reason",
-//    "metrics": {"psnr": 26.2, "ssim": ..., "lpips_alex": ...}  (computed ones only; +inf as "inf"),
-//    "not_computed": {"dinov2": "<reason>", ...},
-//    "seconds": {"load": ..., "render": ..., <method stages>..., "metrics": ...},
-//    "seconds_per_closeup": the method's stages only (render + enhance), not load or metrics,
-//    "width", "height": the GT size}
+//    "metrics": {"psnr": 26.2, "ssim": ..., "lpips_alex": ...}  (computed ones only; +inf as
+//    "inf"), "not_computed": {"dinov2": "<reason>", ...}, "seconds": {"load": ..., "render": ...,
+//    <method stages>..., "metrics": ...}, "seconds_per_closeup": the method's stages only (render +
+//    enhance), not load or metrics, "width", "height": the GT size}
 // Key of a record: scene, closeup_frame, method, options_hash.
 //
 // Appending: each record is one write(2) of the whole line (newline included) on a descriptor
@@ -48,7 +47,8 @@
 namespace macro::enhance {
 
 // ---- Methods -----------------------------------------------------------------------------------
-// An option set: name -> value text ("K" -> "3", "P" -> "4", "mask" -> "on", "precision" -> "bf16").
+// An option set: name -> value text ("K" -> "3", "P" -> "4", "mask" -> "on", "precision" ->
+// "bf16").
 using BenchOptions = std::map<std::string, std::string>;
 
 struct BenchPair {
@@ -70,7 +70,7 @@ struct MethodOutput {
 
 struct MethodContext {
   const BenchPair& pair;
-  const SceneInputs& inputs;  // cloud, close-up camera (at the GT size), reference candidates
+  const SceneInputs& inputs;    // cloud, close-up camera (at the GT size), reference candidates
   const BenchOptions& options;  // restricted to the method's option_keys
 };
 
@@ -133,7 +133,8 @@ std::string record_key(const std::string& scene, const std::string& closeup_fram
 Result<std::vector<std::string>> list_scene_dirs(const std::string& root);
 
 // Cross product of the option values: {"K": {"1","3"}, "P": {"4"}} -> {K=1,P=4}, {K=3,P=4}.
-std::vector<BenchOptions> expand_option_grid(const std::map<std::string, std::vector<std::string>>& grid);
+std::vector<BenchOptions> expand_option_grid(
+    const std::map<std::string, std::vector<std::string>>& grid);
 
 // The sorted work list. Unknown methods are an error listing the known ones. Each method's option
 // sets are the grid restricted to its option_keys, duplicates dropped.
@@ -158,7 +159,7 @@ struct BenchRecord {
   BenchOptions options;
   std::string options_hash;
   bool ok = false;
-  std::string reason;  // why skipped
+  std::string reason;                // why skipped
   std::vector<MetricValue> metrics;  // computed and not-computed entries
   std::vector<MethodStage> seconds;  // load, method stages, metrics
   double seconds_per_closeup = 0;

@@ -177,7 +177,9 @@ namespace {
 
 constexpr uint32_t kPalette[] = {0x1f77b4, 0xd62728, 0x2ca02c, 0xff7f0e, 0x9467bd,
                                  0x8c564b, 0xe377c2, 0x17becf, 0xbcbd22, 0x7f7f7f};
-uint32_t palette(size_t i) { return kPalette[i % (sizeof kPalette / sizeof kPalette[0])]; }
+uint32_t palette(size_t i) {
+  return kPalette[i % (sizeof kPalette / sizeof kPalette[0])];
+}
 constexpr uint32_t kInk = 0x222222, kGrid = 0xdddddd;
 
 struct Frame {  // plot area and data ranges
@@ -198,7 +200,11 @@ void pad_range(double& lo, double& hi) {
 std::string tick_text(double v) {
   char buf[32];
   const double a = std::fabs(v);
-  std::snprintf(buf, sizeof buf, a >= 100 ? "%.0f" : a >= 10 ? "%.1f" : a >= 1 ? "%.2f" : "%.3f",
+  std::snprintf(buf, sizeof buf,
+                a >= 100  ? "%.0f"
+                : a >= 10 ? "%.1f"
+                : a >= 1  ? "%.2f"
+                          : "%.3f",
                 v);
   return buf;
 }
@@ -253,8 +259,8 @@ Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const Metri
     c.circles.push_back({x, y, 5, palette(i)});
     // Labels right of the point in the left half, left of it in the right half.
     const bool right_half = x > f.w / 2.0;
-    c.texts.push_back({right_half ? x - 8 : x + 8, y - 6, configs[i].label, palette(i),
-                       right_half ? 1 : -1});
+    c.texts.push_back(
+        {right_half ? x - 8 : x + 8, y - 6, configs[i].label, palette(i), right_half ? 1 : -1});
   }
   return c;
 }
@@ -347,8 +353,8 @@ Chart chart_scene_bars(const std::vector<ConfigResult>& configs, const MetricCol
       if (it == sc->second.end() || !std::isfinite(it->second)) continue;
       const double x = f.px(double(s)) + slot * 0.1 + bar * double(i);
       const double y_top = f.py(it->second), y_base = f.py(std::max(0.0, f.y0));
-      c.rects.push_back({x, std::min(y_top, y_base), bar * 0.9, std::fabs(y_base - y_top),
-                         palette(i)});
+      c.rects.push_back(
+          {x, std::min(y_top, y_base), bar * 0.9, std::fabs(y_base - y_top), palette(i)});
     }
   }
   for (size_t i = 0; i < configs.size(); ++i) {
@@ -375,11 +381,20 @@ std::string xml_escape(const std::string& s) {
   std::string o;
   for (char ch : s) {
     switch (ch) {
-      case '&': o += "&amp;"; break;
-      case '<': o += "&lt;"; break;
-      case '>': o += "&gt;"; break;
-      case '"': o += "&quot;"; break;
-      default: o += ch;
+      case '&':
+        o += "&amp;";
+        break;
+      case '<':
+        o += "&lt;";
+        break;
+      case '>':
+        o += "&gt;";
+        break;
+      case '"':
+        o += "&quot;";
+        break;
+      default:
+        o += ch;
     }
   }
   return o;
@@ -395,12 +410,11 @@ std::string chart_to_svg(const Chart& c) {
     s += "<rect x=\"" + num(r.x) + "\" y=\"" + num(r.y) + "\" width=\"" + num(r.w) +
          "\" height=\"" + num(r.h) + "\" fill=\"" + hex(r.rgb) + "\"/>\n";
   for (const auto& l : c.lines)
-    s += "<line x1=\"" + num(l.x0) + "\" y1=\"" + num(l.y0) + "\" x2=\"" + num(l.x1) +
-         "\" y2=\"" + num(l.y1) + "\" stroke=\"" + hex(l.rgb) + "\" stroke-width=\"" +
-         num(l.width) + "\"/>\n";
+    s += "<line x1=\"" + num(l.x0) + "\" y1=\"" + num(l.y0) + "\" x2=\"" + num(l.x1) + "\" y2=\"" +
+         num(l.y1) + "\" stroke=\"" + hex(l.rgb) + "\" stroke-width=\"" + num(l.width) + "\"/>\n";
   for (const auto& p : c.circles)
-    s += "<circle cx=\"" + num(p.x) + "\" cy=\"" + num(p.y) + "\" r=\"" + num(p.r) +
-         "\" fill=\"" + hex(p.rgb) + "\"/>\n";
+    s += "<circle cx=\"" + num(p.x) + "\" cy=\"" + num(p.y) + "\" r=\"" + num(p.r) + "\" fill=\"" +
+         hex(p.rgb) + "\"/>\n";
   for (const auto& t : c.texts) {
     const char* anchor = t.anchor < 0 ? "start" : t.anchor > 0 ? "end" : "middle";
     s += "<text x=\"" + num(t.x) + "\" y=\"" + num(t.y) + "\" fill=\"" + hex(t.rgb) +
@@ -418,53 +432,100 @@ namespace {
 const char* glyph(char ch) {
   if (ch >= 'a' && ch <= 'z') ch = char(ch - 'a' + 'A');
   switch (ch) {
-    case '0': return "####.##.##.####";
-    case '1': return ".#.##..#..#.###";
-    case '2': return "###..#####..###";
-    case '3': return "###..####..####";
-    case '4': return "#.##.####..#..#";
-    case '5': return "####..###..####";
-    case '6': return "####..####.####";
-    case '7': return "###..#..#..#..#";
-    case '8': return "####.#####.####";
-    case '9': return "####.####..####";
-    case 'A': return ".#.#.#####.##.#";
-    case 'B': return "##.#.###.#.###.";
-    case 'C': return "####..#..#..###";
-    case 'D': return "##.#.##.##.###.";
-    case 'E': return "####..####..###";
-    case 'F': return "####..####..#..";
-    case 'G': return "####..#.##.####";
-    case 'H': return "#.##.#####.##.#";
-    case 'I': return "###.#..#..#.###";
-    case 'J': return "..#..#..##.####";
-    case 'K': return "#.##.###.#.##.#";
-    case 'L': return "#..#..#..#..###";
-    case 'M': return "#.#####.##.##.#";
-    case 'N': return "##.#.##.##.##.#";
-    case 'O': return "####.##.##.####";
-    case 'P': return "####.#####..#..";
-    case 'Q': return "####.##.####..#";
-    case 'R': return "####.###.#.##.#";
-    case 'S': return "####..###..####";
-    case 'T': return "###.#..#..#..#.";
-    case 'U': return "#.##.##.##.####";
-    case 'V': return "#.##.##.##.#.#.";
-    case 'W': return "#.##.##.#####.#";
-    case 'X': return "#.##.#.#.#.##.#";
-    case 'Y': return "#.##.#.#..#..#.";
-    case 'Z': return "###..#.#.#..###";
-    case '.': return "............#..";
-    case ',': return "..........#.#..";
-    case '-': return "......###......";
-    case '+': return "....#.###.#....";
-    case '=': return "...###...###...";
-    case '/': return "..#..#.#.#..#..";
-    case ':': return "....#.....#....";
-    case '_': return "............###";
-    case '(': return ".#.#..#..#...#.";
-    case ')': return ".#...#..#..#.#.";
-    default: return "...............";
+    case '0':
+      return "####.##.##.####";
+    case '1':
+      return ".#.##..#..#.###";
+    case '2':
+      return "###..#####..###";
+    case '3':
+      return "###..####..####";
+    case '4':
+      return "#.##.####..#..#";
+    case '5':
+      return "####..###..####";
+    case '6':
+      return "####..####.####";
+    case '7':
+      return "###..#..#..#..#";
+    case '8':
+      return "####.#####.####";
+    case '9':
+      return "####.####..####";
+    case 'A':
+      return ".#.#.#####.##.#";
+    case 'B':
+      return "##.#.###.#.###.";
+    case 'C':
+      return "####..#..#..###";
+    case 'D':
+      return "##.#.##.##.###.";
+    case 'E':
+      return "####..####..###";
+    case 'F':
+      return "####..####..#..";
+    case 'G':
+      return "####..#.##.####";
+    case 'H':
+      return "#.##.#####.##.#";
+    case 'I':
+      return "###.#..#..#.###";
+    case 'J':
+      return "..#..#..##.####";
+    case 'K':
+      return "#.##.###.#.##.#";
+    case 'L':
+      return "#..#..#..#..###";
+    case 'M':
+      return "#.#####.##.##.#";
+    case 'N':
+      return "##.#.##.##.##.#";
+    case 'O':
+      return "####.##.##.####";
+    case 'P':
+      return "####.#####..#..";
+    case 'Q':
+      return "####.##.####..#";
+    case 'R':
+      return "####.###.#.##.#";
+    case 'S':
+      return "####..###..####";
+    case 'T':
+      return "###.#..#..#..#.";
+    case 'U':
+      return "#.##.##.##.####";
+    case 'V':
+      return "#.##.##.##.#.#.";
+    case 'W':
+      return "#.##.##.#####.#";
+    case 'X':
+      return "#.##.#.#.#.##.#";
+    case 'Y':
+      return "#.##.#.#..#..#.";
+    case 'Z':
+      return "###..#.#.#..###";
+    case '.':
+      return "............#..";
+    case ',':
+      return "..........#.#..";
+    case '-':
+      return "......###......";
+    case '+':
+      return "....#.###.#....";
+    case '=':
+      return "...###...###...";
+    case '/':
+      return "..#..#.#.#..#..";
+    case ':':
+      return "....#.....#....";
+    case '_':
+      return "............###";
+    case '(':
+      return ".#.#..#..#...#.";
+    case ')':
+      return ".#...#..#..#.#.";
+    default:
+      return "...............";
   }
 }
 

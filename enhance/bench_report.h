@@ -67,10 +67,25 @@ std::string table_csv(const std::vector<ConfigResult>& configs);
 // A drawing as a list of primitives in pixel coordinates (origin top left), rendered to SVG text
 // or rasterised to an RGB image.
 struct Chart {
-  struct Line { double x0, y0, x1, y1; uint32_t rgb; double width; };
-  struct Circle { double x, y, r; uint32_t rgb; };
-  struct Rect { double x, y, w, h; uint32_t rgb; };
-  struct Text { double x, y; std::string text; uint32_t rgb; int anchor; };  // -1 left 0 mid 1 right
+  struct Line {
+    double x0, y0, x1, y1;
+    uint32_t rgb;
+    double width;
+  };
+  struct Circle {
+    double x, y, r;
+    uint32_t rgb;
+  };
+  struct Rect {
+    double x, y, w, h;
+    uint32_t rgb;
+  };
+  struct Text {
+    double x, y;
+    std::string text;
+    uint32_t rgb;
+    int anchor;
+  };  // -1 left 0 mid 1 right
   int width = 640, height = 420;
   std::vector<Line> lines;
   std::vector<Circle> circles;

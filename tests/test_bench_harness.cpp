@@ -21,9 +21,9 @@ namespace {
 namespace fs = std::filesystem;
 using namespace enhance;
 
-// Two tiny scenes: "scene_a" (GT = the render: PSNR very high) and "scene_b" (GT brightened by 0.02,
-// so 3dgs scores a finite PSNR), each with 3 close-up pairs. If drop_gt, scene_b loses the GT of
-// its second close-up (a skip).
+// Two tiny scenes: "scene_a" (GT = the render: PSNR very high) and "scene_b" (GT brightened by
+// 0.02, so 3dgs scores a finite PSNR), each with 3 close-up pairs. If drop_gt, scene_b loses the GT
+// of its second close-up (a skip).
 void make_root(const std::string& root, bool drop_gt = false) {
   for (int s = 0; s < 2; ++s) {
     gs::SynthParams p;
@@ -70,11 +70,13 @@ const MetricValue* find_metric(const BenchRecord& r, const std::string& name) {
 // A cheap method for shard/merge tests: a flat grey image; uses option K.
 MethodRegistry test_registry() {
   MethodRegistry r = default_method_registry();
-  REQUIRE(r.add({"grey", "flat grey", {"K"},
+  REQUIRE(r.add({"grey",
+                 "flat grey",
+                 {"K"},
                  [](const MethodContext& c) -> Result<MethodOutput> {
                    MethodOutput o;
-                   const float level = c.options.count("K") ? 0.1f * std::stof(c.options.at("K"))
-                                                            : 0.5f;
+                   const float level =
+                       c.options.count("K") ? 0.1f * std::stof(c.options.at("K")) : 0.5f;
                    o.image = gs::Image(c.inputs.closeup.width, c.inputs.closeup.height, 3);
                    std::fill(o.image.data.begin(), o.image.data.end(), level);
                    o.stages.push_back({"enhance", 0.001});
@@ -115,7 +117,8 @@ TEST_CASE("bench harness: records append, resume, torn last line, skip rules", "
     REQUIRE(psnr);
     REQUIRE(psnr->computed);
     if (r.scene == "scene_a") {
-      CHECK(psnr->value > 45.0);  // GT is the render itself (+inf unless the pose round trip moves a bit)
+      CHECK(psnr->value >
+            45.0);  // GT is the render itself (+inf unless the pose round trip moves a bit)
     } else {
       // GT = render + 0.02 (clamped, 8-bit): PSNR near 20 log10(1 / 0.02) = 34 dB.
       CHECK(psnr->value > 30.0);
@@ -331,8 +334,8 @@ void check_svg(const std::string& path) {
   for (size_t i = 2; i + 1 < lines.size(); ++i) {
     const std::string& l = lines[i];
     const bool self_closing = l[0] == '<' && l.size() > 3 && l.substr(l.size() - 2) == "/>";
-    const bool text = l.rfind("<text ", 0) == 0 && l.size() > 13 &&
-                      l.substr(l.size() - 7) == "</text>";
+    const bool text =
+        l.rfind("<text ", 0) == 0 && l.size() > 13 && l.substr(l.size() - 7) == "</text>";
     CHECK((self_closing || text));
     if (text) {
       const std::string body = l.substr(l.find('>') + 1, l.size() - 7 - l.find('>') - 1);
@@ -351,9 +354,9 @@ TEST_CASE("bench report files: table, SVG well formed, PNG matches the SVG size"
   };
   std::vector<std::string> written;
   REQUIRE(write_report(recs, tmp.file("rep"), &written).is_ok());
-  for (const char* f : {"table.md", "table.csv", "time_vs_psnr.svg", "time_vs_psnr.png",
-                        "zoom_ssim.svg", "zoom_ssim.png", "scenes_lpips_alex.svg",
-                        "scenes_psnr.png"})
+  for (const char* f :
+       {"table.md", "table.csv", "time_vs_psnr.svg", "time_vs_psnr.png", "zoom_ssim.svg",
+        "zoom_ssim.png", "scenes_lpips_alex.svg", "scenes_psnr.png"})
     CHECK(file_exists(tmp.file(std::string("rep/") + f)));
   CHECK_FALSE(file_exists(tmp.file("rep/time_vs_dinov2.svg")));
   for (const std::string& p : written) {
@@ -378,13 +381,12 @@ TEST_CASE("macro bench run, merge and report end to end on synthetic scene folde
   make_root(tmp.file("root"));
   const std::string exe = test::macro_exe();
   const auto sh = [&](const std::string& args) {
-    return std::system((exe + " bench " + args + " --quiet > " + tmp.file("out.txt") + " 2>&1")
-                           .c_str());
+    return std::system(
+        (exe + " bench " + args + " --quiet > " + tmp.file("out.txt") + " 2>&1").c_str());
   };
   for (int i = 0; i < 2; ++i)
-    REQUIRE(sh("run --root " + tmp.file("root") + " --methods 3dgs --shard " +
-               std::to_string(i) + "/2 --results " + tmp.file("s" + std::to_string(i) + ".jsonl")) ==
-            0);
+    REQUIRE(sh("run --root " + tmp.file("root") + " --methods 3dgs --shard " + std::to_string(i) +
+               "/2 --results " + tmp.file("s" + std::to_string(i) + ".jsonl")) == 0);
   REQUIRE(std::system((exe + " bench merge " + tmp.file("s0.jsonl") + " " + tmp.file("s1.jsonl") +
                        " --out " + tmp.file("all.jsonl") + " > /dev/null")
                           .c_str()) == 0);
@@ -398,8 +400,7 @@ TEST_CASE("macro bench run, merge and report end to end on synthetic scene folde
   CHECK(gs::read_image(tmp.file("report/scenes_ssim.png")).is_ok());
   // Bad input: clear errors, exit code 1.
   CHECK(sh("run --root " + tmp.file("nowhere") + " --results " + tmp.file("x.jsonl")) != 0);
-  CHECK(read_text_file(tmp.file("out.txt"))->find("benchmark root not found") !=
-        std::string::npos);
+  CHECK(read_text_file(tmp.file("out.txt"))->find("benchmark root not found") != std::string::npos);
   CHECK(sh("run --root " + tmp.file("root") + " --methods nope --results " + tmp.file("x.jsonl")) !=
         0);
   CHECK(read_text_file(tmp.file("out.txt"))->find("unknown method 'nope'") != std::string::npos);
