@@ -71,10 +71,11 @@ Result<MethodOutput> run_3dgs_method(const MethodContext& context) {
   MethodOutput out;
   out.image = gs::Image(r.width, r.height, 3);
   out.image.data = std::move(r.color);
-  // The released pipeline saves the render as an 8-bit PNG and scores the file: quantise likewise.
+  // The released pipeline saves the render as an 8-bit PNG and scores the file: quantise exactly
+  // as gs::write_png + gs::read_image would (round half up, then level * (1 / 255)).
   for (float& v : out.image.data) {
-    const float c = std::isfinite(v) ? std::clamp(v, 0.f, 1.f) : 0.f;
-    v = std::floor(c * 255.f + 0.5f) / 255.f;
+    const int level = !(v > 0.f) ? 0 : v >= 1.f ? 255 : int(v * 255.f + 0.5f);
+    v = float(level) * (1.f / 255.f);
   }
   out.stages.push_back({"render", seconds_since(t0)});
   return out;
@@ -590,6 +591,7 @@ Result<BenchRunSummary> run_benchmark(const BenchRunOptions& options,
   }
   if (options.limit > 0 && todo.size() > size_t(options.limit)) todo.resize(size_t(options.limit));
 
+  if (todo.empty()) return summary;
   Progress progress("bench", todo.size());
   for (const BenchWorkItem* it : todo) {
     BenchRecord r = run_work_item(*it, registry, options.metrics);
