@@ -35,6 +35,7 @@
 
 #include <functional>
 #include <map>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -216,8 +217,15 @@ struct BenchRunSummary {
 Result<BenchRunSummary> run_benchmark(const BenchRunOptions& options,
                                       const MethodRegistry& registry);
 
-// One item, scored (never an error for a skip: the record says why).
+// The scene inputs of the last pair run, reused by the next item of the same pair (items of one
+// pair are consecutive in the work list, so methods and option sets share one load).
+struct PairInputsCache {
+  std::string key;  // scene_dir \t closeup_frame
+  std::optional<SceneInputs> inputs;
+};
+
+// One item, scored (never an error for a skip: the record says why). `cache` may be null.
 BenchRecord run_work_item(const BenchWorkItem& item, const MethodRegistry& registry,
-                          const MetricOptions& metric_options);
+                          const MetricOptions& metric_options, PairInputsCache* cache = nullptr);
 
 }  // namespace macro::enhance
