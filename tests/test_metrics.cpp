@@ -212,7 +212,7 @@ TEST_CASE("LPIPS loader: missing and mis-shaped backbones are clear errors", "[m
   CHECK_THAT(missing.status().message(),
              Catch::Contains("not supplied") && Catch::Contains(dir.file("alexnet.safetensors")));
   // A backbone whose conv2 has the wrong shape and lacks conv5.
-  std::vector<float> zeros(64 * 3 * 11 * 11, 0.f);
+  std::vector<float> zeros(192 * 64 * 3 * 3, 0.f);  // large enough for every tensor below
   std::vector<TensorToWrite> t = {
       {"features.0.weight", DType::kF32, {64, 3, 11, 11}, zeros.data()},
       {"features.0.bias", DType::kF32, {64}, zeros.data()},
@@ -220,7 +220,9 @@ TEST_CASE("LPIPS loader: missing and mis-shaped backbones are clear errors", "[m
       {"features.3.bias", DType::kF32, {192}, zeros.data()},
   };
   const std::string bad = dir.file("bad.safetensors");
-  REQUIRE(write_safetensors(bad, t).is_ok());
+  Status written = write_safetensors(bad, t);
+  INFO(written.message());
+  REQUIRE(written.is_ok());
   auto r = LpipsAlex::load(bad, heads_path());
   REQUIRE_FALSE(r.is_ok());
   INFO(r.status().message());
