@@ -84,6 +84,48 @@ Status check_size(const std::string& name, int64_t w, int64_t h, const ImageLimi
   return Status::ok();
 }
 
+// Every PNG chunk must fit in the file: stb grows its IDAT buffer to a chunk's declared length
+// before reading it, so a lying length would allocate gigabytes.
+Status check_png_chunks(const uint8_t* bytes, size_t size, const std::string& name) {
+  size_t at = 8;
+  while (at + 8 <= size) {
+    const uint32_t length = (uint32_t(bytes[at]) << 24) | (uint32_t(bytes[at + 1]) << 16) |
+                            (uint32_t(bytes[at + 2]) << 8) | uint32_t(bytes[at + 3]);
+    const std::string type(reinterpret_cast<const char*>(bytes + at + 4), 4);
+    if (uint64_t(length) + 12 > uint64_t(size - at)) {
+      return Status::error(name + ": PNG chunk '" + type + "' at byte " + std::to_string(at) +
+                           " claims " + std::to_string(length) + " bytes but only " +
+                           std::to_string(size - at) + " remain: truncated or corrupt");
+    }
+    at += size_t(length) + 12;
+    if (type == "IEND") return Status::ok();
+  }
+  return Status::ok();  // a missing IEND is stb's to report
+}
+
+// TGA: the decoder fills missing pixel data with zeros instead of failing, so the data a header
+// promises must fit in the file: exactly for uncompressed images, by RLE's 128:1 bound otherwise.
+Status check_tga_size(const uint8_t* bytes, size_t size, const std::string& name, int w, int h) {
+  if (size < 18) return Status::ok();  // stb refuses it
+  const uint32_t id_length = bytes[0], colormap_type = bytes[1], image_type = bytes[2];
+  const uint32_t cmap_length = uint32_t(bytes[5]) | (uint32_t(bytes[6]) << 8);
+  const uint32_t cmap_bits = bytes[7], pixel_bits = bytes[16];
+  const uint64_t pixel_bytes = std::max<uint64_t>(1, (pixel_bits + 7) / 8);
+  const uint64_t header = 18 + id_length + (colormap_type ? cmap_length * ((cmap_bits + 7) / 8) : 0);
+  const uint64_t data = uint64_t(w) * uint64_t(h) * pixel_bytes;
+  const bool rle = image_type >= 9;
+  const uint64_t available = size > header ? size - header : 0;
+  if ((!rle && data > available) || (rle && data > 128 * available + 4096)) {
+    return Status::error(name + ": TGA header says " + dims(w, h) + " with " +
+                         std::to_string(pixel_bits) + "-bit pixels but the file has only " +
+                         std::to_string(size) + " bytes: truncated or corrupt");
+  }
+  return Status::ok();
+}
+
+bool is_jpeg(const uint8_t* b, size_t n) { return n >= 3 && b[0] == 0xFF && b[1] == 0xD8 && b[2] == 0xFF; }
+bool is_bmp(const uint8_t* b, size_t n) { return n >= 2 && b[0] == 'B' && b[1] == 'M'; }
+
 }  // namespace
 
 // ---- PNG / JPEG read -----------------------------------------------------------------------------
@@ -116,6 +158,7 @@ Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string&
       return Status::error(name + ": header says " + dims(pw, ph) + " but the file has only " +
                            std::to_string(size) + " bytes: truncated or corrupt");
     }
+    MACRO_TRY(check_png_chunks(bytes, size, name));
     is_png = true;
   }
   int w = 0, h = 0, comp = 0;
@@ -134,6 +177,9 @@ Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string&
   }
   if (comp < 1 || comp > 4) {
     return Status::error(name + ": expected 1 to 4 channels, found " + std::to_string(comp));
+  }
+  if (!is_png && !is_jpeg(bytes, size) && !is_bmp(bytes, size)) {
+    MACRO_TRY(check_tga_size(bytes, size, name, w, h));  // the only other format compiled in
   }
   Image out(w, h, 3);
   const size_t n = out.pixels();

@@ -42,7 +42,7 @@ size_t replay(const std::string& target) {
   fs::path dir = fs::path(kRegressions) / target;
   REQUIRE(fs::is_directory(dir));
   std::vector<fs::path> files;
-  // "open-*": findings not fixed yet, each with its own [!mayfail] test below; rename when fixed.
+  // "open-*": findings not fixed yet (none at present), skipped here; rename when fixed.
   for (const auto& f : fs::directory_iterator(dir))
     if (f.is_regular_file() && f.path().filename().string().rfind("open-", 0) != 0)
       files.push_back(f.path());
@@ -90,10 +90,10 @@ int run_with_address_limit(fuzz::EntryFn fn, const std::vector<uint8_t>& bytes, 
 // Found by fuzz_image (libFuzzer: out-of-memory, malloc(2147483648)): a 9 KB PNG whose second IDAT
 // chunk claims 1,191,446,707 bytes with 1,215 left. stb_image grows its IDAT buffer to the claimed
 // length (doubling to 2 GiB) before reading it (stb_image.h stbi__parse_png_file, IDAT case), via
-// gs::decode_image -> stbi_load_from_memory. The fix belongs in gs/image_io.cpp: walk the PNG
-// chunks and refuse a chunk longer than the bytes left before calling stb.
+// gs::decode_image -> stbi_load_from_memory. Fixed in gs/image_io.cpp (check_png_chunks): the
+// PNG chunks are walked and a chunk longer than the bytes left is refused before stb runs.
 TEST_CASE("fuzz regression image: a PNG chunk longer than the file is refused before allocating",
-          "[fuzz][!mayfail]") {
+          "[fuzz]") {
   std::vector<uint8_t> bytes = read_bytes(fs::path(kRegressions) / "image/png-idat-length-oom");
   REQUIRE(bytes.size() == 9464);
   int code = run_with_address_limit(fuzz::image, bytes, rlim_t(1) << 30);  // 1 GiB
@@ -135,12 +135,11 @@ TEST_CASE("fuzz entry points: empty, garbage and saved regression inputs are cle
 // Found by fuzz_image (libFuzzer timeout: 14 s wall on the loaded machine, 0.5 s CPU): a 2,309-byte
 // uncompressed grayscale TGA whose header claims 193 x 12550 pixels at 15 bits. stb_image's TGA
 // loader (stbi__tga_load) reads past the end as zeros, so gs::decode_image allocates and fills
-// 2.4 M pixels and returns success for a file that holds 0.1 % of its data. The fix belongs in
-// gs/image_io.cpp: for uncompressed TGA (types 1, 2, 3), refuse width * height * bytes-per-pixel
-// larger than the bytes after the header (RLE types: a ratio bound, as for PNG).
-TEST_CASE("fuzz regression image: a TGA shorter than its header's size is an error",
-          "[fuzz][!mayfail]") {
-  std::vector<uint8_t> bytes = read_bytes(fs::path(kRegressions) / "image/open-tga-short-data");
+// 2.4 M pixels and returns success for a file that holds 0.1 % of its data. Fixed in
+// gs/image_io.cpp (check_tga_size): uncompressed TGA (types 1, 2, 3) must hold width * height *
+// bytes-per-pixel after its header; RLE types get RLE's 128:1 bound.
+TEST_CASE("fuzz regression image: a TGA shorter than its header's size is an error", "[fuzz]") {
+  std::vector<uint8_t> bytes = read_bytes(fs::path(kRegressions) / "image/tga-short-data");
   REQUIRE(bytes.size() == 2309);
   Status st = fuzz::image(bytes.data(), bytes.size());
   CHECK_FALSE(st.is_ok());
