@@ -34,28 +34,6 @@ using attention_detail::AttentionKernels;
 
 // The machine is shared, so every timing is taken both on the wall clock and as process CPU time
 // (all threads); rates per CPU-second show the kernel's efficiency on the cores it actually got.
-struct Timing {
-  double wall = 0, cpu = 0;
-};
-double cpu_seconds() {
-  timespec ts;
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
-Timing median_timing(int reps, const std::function<void()>& fn) {
-  fn();  // warm-up
-  std::vector<double> w, c;
-  for (int i = 0; i < reps; ++i) {
-    const double w0 = now_seconds(), c0 = cpu_seconds();
-    fn();
-    c.push_back(cpu_seconds() - c0);
-    w.push_back(now_seconds() - w0);
-  }
-  std::sort(w.begin(), w.end());
-  std::sort(c.begin(), c.end());
-  return {w[w.size() / 2], c[c.size() / 2]};
-}
-
 // GFLOP/s of the FMA loop: {per wall second with all threads, per CPU-second (one core)}.
 Timing fma_peak_gflops(const AttentionKernels& k, ThreadPool& pool) {
   const int64_t iters = 20'000'000;

@@ -46,31 +46,10 @@ namespace {
 namespace fs = std::filesystem;
 using nets::Precision;
 
-double cpu_seconds() {
-  timespec ts;
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
 double peak_rss_gb() {
   rusage u{};
   getrusage(RUSAGE_SELF, &u);
   return double(u.ru_maxrss) / (1024.0 * 1024.0);  // ru_maxrss is in KiB on Linux
-}
-
-struct Timing {
-  double wall = 0, cpu = 0;
-};
-Timing measure(int reps, const std::function<void()>& fn) {
-  std::vector<double> w, c;
-  for (int i = 0; i < reps; ++i) {
-    const double w0 = now_seconds(), c0 = cpu_seconds();
-    fn();
-    c.push_back(cpu_seconds() - c0);
-    w.push_back(now_seconds() - w0);
-  }
-  std::sort(w.begin(), w.end());
-  std::sort(c.begin(), c.end());
-  return {w[w.size() / 2], c[c.size() / 2]};
 }
 
 // fp32 FMA peak of `threads` threads at once: GFLOP per wall-second, and per CPU-second.
@@ -78,7 +57,7 @@ Timing fma_peak(int threads, bool bf16 = false) {
   const auto probe = bf16 ? kernels().probe_bf16 : kernels().probe_fma;
   const int64_t iters = 2000000;
   ThreadPool* pool = threads > 1 ? &ThreadPool::global() : nullptr;
-  const Timing t = measure(3, [&] {
+  const Timing t = median_timing(3, [&] {
     if (!pool) {
       probe(iters);
       return;
@@ -413,7 +392,7 @@ int run(int argc, char** argv) {
         };
         Timing te{}, tu{}, td{};
         if (all || o.stage == "encode") {
-          te = measure(o.reps, do_encode);
+          te = median_timing(o.reps, do_encode);
         } else {
           do_encode();
         }
@@ -423,7 +402,7 @@ int run(int argc, char** argv) {
         }
         if (all || o.stage == "encode") row("encode", enc_flop, te, pk0);
         if (all || o.stage == "unet") {
-          tu = measure(o.reps, do_unet);
+          tu = median_timing(o.reps, do_unet);
           if (!err) {
             std::fprintf(stderr, "bench difix: %s\n", err.message().c_str());
             return 1;
@@ -431,7 +410,7 @@ int run(int argc, char** argv) {
           row("unet", unet_flop, tu, pk0);
         }
         if (all || o.stage == "decode") {
-          td = measure(o.reps, do_decode);
+          td = median_timing(o.reps, do_decode);
           if (!err) {
             std::fprintf(stderr, "bench difix: %s\n", err.message().c_str());
             return 1;

@@ -22,11 +22,6 @@ namespace {
 
 // Process CPU seconds: on a shared, oversubscribed machine the wall clock mostly measures waiting;
 // the loaders are single-threaded, so CPU time is their work.
-double cpu_seconds() {
-  timespec ts;
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
 double median_cpu_seconds(int reps, const std::function<void()>& fn) {  // after a warm-up
   fn();
   std::vector<double> t;

@@ -34,28 +34,6 @@ std::vector<float> random_vec(size_t n, uint32_t seed) {
 // The machine is shared with builds, so every measurement records both the wall time and the
 // process CPU time (all threads); rates per CPU-second show the kernels' efficiency on the cores
 // they actually got, rates per wall-second what a user would see. Both are medians.
-struct Timing {
-  double wall = 0, cpu = 0;
-};
-double cpu_seconds() {
-  timespec ts;
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
-Timing measure(int reps, const std::function<void()>& fn) {
-  fn();  // warm-up
-  std::vector<double> w, c;
-  for (int i = 0; i < reps; ++i) {
-    const double w0 = now_seconds(), c0 = cpu_seconds();
-    fn();
-    c.push_back(cpu_seconds() - c0);
-    w.push_back(now_seconds() - w0);
-  }
-  std::sort(w.begin(), w.end());
-  std::sort(c.begin(), c.end());
-  return {w[w.size() / 2], c[c.size() / 2]};
-}
-
 // GFLOP/s of a probe loop run on every thread of `pool` at once (nullptr: the calling thread).
 struct Rate {
   double wall = 0, cpu = 0;  // GFLOP per wall-second, and per CPU-second of one thread
@@ -63,7 +41,7 @@ struct Rate {
 Rate probe_peak(double (*probe)(int64_t), ThreadPool* pool, int reps) {
   const int64_t iters = 2000000;
   const int threads = pool ? pool->size() : 1;
-  const Timing t = measure(reps, [&] {
+  const Timing t = median_timing(reps, [&] {
     if (!pool) {
       probe(iters);
       return;
@@ -93,7 +71,7 @@ Timing row(const char* what, const std::string& shape, double flop, int reps,
            const std::function<void()>& fn, double (*probe)(int64_t), ThreadPool* pool) {
   if (!g_only.empty() && std::string(what).find(g_only) == std::string::npos) return {};
   const Rate p0 = probe_peak(probe, pool, 3);
-  const Timing t = measure(reps, fn);
+  const Timing t = median_timing(reps, fn);
   const Rate p1 = probe_peak(probe, pool, 3);
   const Rate peak{0.5 * (p0.wall + p1.wall), 0.5 * (p0.cpu + p1.cpu)};
   const int threads = pool ? pool->size() : 1;

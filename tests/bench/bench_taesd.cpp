@@ -22,30 +22,6 @@
 namespace macro::bench {
 namespace {
 
-double cpu_seconds() {
-  timespec ts;
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
-
-struct Timing {
-  double wall = 0, cpu = 0;
-};
-
-Timing measure(int reps, const std::function<void()>& fn) {
-  fn();  // warm-up
-  std::vector<double> w, c;
-  for (int i = 0; i < reps; ++i) {
-    const double w0 = now_seconds(), c0 = cpu_seconds();
-    fn();
-    c.push_back(cpu_seconds() - c0);
-    w.push_back(now_seconds() - w0);
-  }
-  std::sort(w.begin(), w.end());
-  std::sort(c.begin(), c.end());
-  return {w[w.size() / 2], c[c.size() / 2]};
-}
-
 // Conv MACs of one net on an input [1, c, h, w].
 double conv_macs(const nets::TaesdNet& net, int64_t h, int64_t w) {
   double macs = 0;
@@ -118,7 +94,7 @@ int run(int argc, char** argv) {
     }
     for (int threads : {1, 2}) {
       ThreadPool pool(threads);
-      const Timing t = measure(reps, [&] {
+      const Timing t = median_timing(reps, [&] {
         auto z = taesd->encode(x, &pool);
         auto y = taesd->decode(z->view(), &pool);
         if (!y) std::abort();
