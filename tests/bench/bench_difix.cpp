@@ -68,7 +68,7 @@ Timing fma_peak(int threads, bool bf16 = false) {
           for (size_t i = b; i < e; ++i) probe(iters);
         },
         1);
-  });
+  }, /*warmup=*/false);
   const double flop = probe(1) * double(iters) * threads;
   return {flop / t.wall * 1e-9, flop / t.cpu * 1e-9};
 }
@@ -392,7 +392,7 @@ int run(int argc, char** argv) {
         };
         Timing te{}, tu{}, td{};
         if (all || o.stage == "encode") {
-          te = median_timing(o.reps, do_encode);
+          te = median_timing(o.reps, do_encode, /*warmup=*/false);
         } else {
           do_encode();
         }
@@ -402,7 +402,7 @@ int run(int argc, char** argv) {
         }
         if (all || o.stage == "encode") row("encode", enc_flop, te, pk0);
         if (all || o.stage == "unet") {
-          tu = median_timing(o.reps, do_unet);
+          tu = median_timing(o.reps, do_unet, /*warmup=*/false);
           if (!err) {
             std::fprintf(stderr, "bench difix: %s\n", err.message().c_str());
             return 1;
@@ -410,7 +410,7 @@ int run(int argc, char** argv) {
           row("unet", unet_flop, tu, pk0);
         }
         if (all || o.stage == "decode") {
-          td = median_timing(o.reps, do_decode);
+          td = median_timing(o.reps, do_decode, /*warmup=*/false);
           if (!err) {
             std::fprintf(stderr, "bench difix: %s\n", err.message().c_str());
             return 1;

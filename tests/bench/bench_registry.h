@@ -55,9 +55,10 @@ struct Timing {
   double wall = 0, cpu = 0;  // seconds
 };
 
-// Medians of wall and process CPU time over `reps` runs of fn() after one warm-up call.
-inline Timing median_timing(int reps, const std::function<void()>& fn) {
-  fn();  // warm-up
+// Medians of wall and process CPU time over `reps` runs of fn(), after one warm-up call unless
+// `warmup` is false (for runs that take minutes).
+inline Timing median_timing(int reps, const std::function<void()>& fn, bool warmup = true) {
+  if (warmup) fn();
   std::vector<double> w, c;
   for (int i = 0; i < reps; ++i) {
     const double w0 = now_seconds(), c0 = cpu_seconds();
