@@ -188,3 +188,22 @@ TEST_CASE("synthetic checkpoints are deterministic in the seed, independent of t
   REQUIRE_FALSE(s.is_ok());
   REQUIRE(s.message().find("bad.json") != std::string::npos);
 }
+
+TEST_CASE("macro synth-weights writes a loadable VAE folder and refuses bad flags", "[nets][weights][synthetic]") {
+  test::TempDir dir("synth-weights-cli");
+  const std::string manifest = test::golden_dir() + "/manifests/vae.json";
+  const std::string exe = test::macro_exe();
+  REQUIRE(test::run_command(exe + " synth-weights --quiet --manifest " + manifest +
+                            " --class AutoencoderKL --dtype bf16 --out " + dir.file("vae") +
+                            " > /dev/null") == 0);
+  auto cfg = load_vae_config(dir.file("vae/config.json"));
+  REQUIRE(cfg.is_ok());
+  auto store = WeightStore::open(dir.file("vae/diffusion_pytorch_model.safetensors"), {cfg->lora_scale, {}});
+  INFO((store ? std::string() : store.status().message()));
+  REQUIRE(store.is_ok());
+  REQUIRE(test::run_command(exe + " synth-weights --manifest " + manifest + " --class Foo --out " +
+                            dir.file("x") + " 2> /dev/null") == 1);
+  REQUIRE(test::run_command(exe + " synth-weights --manifest " + dir.file("missing.json") +
+                            " --class AutoencoderKL --out " + dir.file("y") + " 2> /dev/null") == 1);
+  REQUIRE_FALSE(file_exists(dir.file("y/diffusion_pytorch_model.safetensors")));
+}
