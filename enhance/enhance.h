@@ -23,7 +23,7 @@
 
 #include <string>
 
-#include "attention/nets/taesd.h"  // Precision
+#include "attention/nets/precision.h"
 #include "attention/runtime/status.h"
 #include "attention/runtime/thread_pool.h"
 #include "enhance/plan.h"

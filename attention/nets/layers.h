@@ -25,7 +25,7 @@
 #include <string>
 #include <vector>
 
-#include "attention/nets/taesd.h"  // Precision (shared enum; TODO move to its own header)
+#include "attention/nets/precision.h"
 #include "attention/nets/weights.h"
 #include "attention/runtime/attention.h"
 #include "attention/runtime/conv.h"

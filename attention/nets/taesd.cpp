@@ -68,16 +68,6 @@ std::string dir_name(const std::string& p) {
 
 }  // namespace
 
-Result<Precision> parse_precision(const std::string& name) {
-  if (name == "fp32") return Precision::kF32;
-  if (name == "bf16") return Precision::kBf16;
-  return Status::error("precision: expected fp32 or bf16, found '" + name + "'");
-}
-
-const char* precision_name(Precision p) {
-  return p == Precision::kF32 ? "fp32" : "bf16";
-}
-
 // ---- layout ------------------------------------------------------------------------------------
 
 TaesdNet TaesdNet::encoder_layout(int latent_channels) {

@@ -26,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include "attention/nets/precision.h"
 #include "attention/runtime/conv.h"
 #include "attention/runtime/safetensors.h"
 #include "attention/runtime/status.h"
@@ -33,10 +34,6 @@
 #include "attention/runtime/thread_pool.h"
 
 namespace macro::nets {
-
-enum class Precision { kF32, kBf16 };
-Result<Precision> parse_precision(const std::string& name);  // "fp32" | "bf16"
-const char* precision_name(Precision p);
 
 // A 3x3, pad-1 convolution as stored in the checkpoint.
 struct TaesdConv {
