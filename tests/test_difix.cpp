@@ -11,6 +11,7 @@
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/safetensors.h"
+#include "golden_tensors.h"
 #include "test_support.h"
 
 using namespace macro;
@@ -18,18 +19,9 @@ using namespace macro::nets;
 
 namespace {
 
-Tensor read_tensor(const SafeTensors& f, const std::string& name) {
-  const TensorEntry* e = f.find(name);
-  REQUIRE(e != nullptr);
-  auto v = f.read_f32(name);
-  REQUIRE(v.is_ok());
-  return Tensor::from_f32(e->shape, *v);
-}
-
-struct Bound {
-  double rel_l2, max_abs;
-};
-constexpr Bound kFp32{1e-4, 1e-3};
+using test::Bound;
+using test::kFp32;
+using test::read_tensor;
 // bf16 through encoder, U-Net and decoder of random-weight tiny nets; measured values printed.
 constexpr Bound kBf16{5e-2, 2e-1};
 

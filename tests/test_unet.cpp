@@ -16,6 +16,7 @@
 #include "attention/runtime/attention_mask.h"
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/safetensors.h"
+#include "golden_tensors.h"
 #include "test_support.h"
 
 using namespace macro;
@@ -27,18 +28,9 @@ std::string unet_dir() {
   return test::golden_dir() + "/unet-tiny";
 }
 
-Tensor read_tensor(const SafeTensors& f, const std::string& name) {
-  const TensorEntry* e = f.find(name);
-  REQUIRE(e != nullptr);
-  auto v = f.read_f32(name);
-  REQUIRE(v.is_ok());
-  return Tensor::from_f32(e->shape, *v);
-}
-
-struct Bound {
-  double rel_l2, max_abs;
-};
-constexpr Bound kFp32{1e-4, 1e-3};
+using test::Bound;
+using test::kFp32;
+using test::read_tensor;
 // bf16 weights and matmul inputs through ~20 random-weight layers: measured 1.1-1.2e-2 rel L2,
 // max abs <= 2.6e-2 on these cases (2026-11-22).
 constexpr Bound kBf16{3e-2, 1e-1};

@@ -9,6 +9,7 @@
 #include "attention/nets/synthetic_checkpoint.h"
 #include "attention/nets/vae.h"
 #include "attention/runtime/safetensors.h"
+#include "golden_tensors.h"
 #include "test_support.h"
 
 using namespace macro;
@@ -20,18 +21,9 @@ std::string vae_dir() {
   return test::golden_dir() + "/vae-tiny";
 }
 
-Tensor read_tensor(const SafeTensors& f, const std::string& name) {
-  const TensorEntry* e = f.find(name);
-  REQUIRE(e != nullptr);
-  auto v = f.read_f32(name);
-  REQUIRE(v.is_ok());
-  return Tensor::from_f32(e->shape, *v);
-}
-
-struct Bound {
-  double rel_l2, max_abs;
-};
-constexpr Bound kFp32{1e-4, 1e-3};
+using test::Bound;
+using test::kFp32;
+using test::read_tensor;
 // bf16 weights and conv/matmul inputs; measured values are printed by the test.
 constexpr Bound kBf16{3e-2, 1e-1};
 
