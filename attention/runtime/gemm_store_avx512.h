@@ -1,0 +1,57 @@
+// The AVX-512 micro-tile epilogue shared by the fp32 and bf16 micro-kernels (gemm_avx512.cpp,
+// gemm_avx512bf16.cpp). Include ONLY from files compiled with AVX-512 flags. Internal linkage
+// (anonymous namespace), so each ISA file keeps its own copy compiled with its own flags.
+#pragma once
+
+#include <immintrin.h>
+
+#include "attention/runtime/kernels.h"
+
+namespace macro {
+namespace {
+
+// C = alpha*acc + beta*C (if load_c) + bias_n + bias_m + res, masked to t.n columns, t.m rows.
+template <int MR>
+inline void store_tile(const MicroTile& t, const __m512* c0, const __m512* c1) {
+  const __mmask16 k0 = t.n >= 16 ? __mmask16(0xffff) : __mmask16((1u << t.n) - 1);
+  const __mmask16 k1 = t.n >= 32   ? __mmask16(0xffff)
+                       : t.n <= 16 ? __mmask16(0)
+                                   : __mmask16((1u << (t.n - 16)) - 1);
+  const __m512 alpha = _mm512_set1_ps(t.alpha), beta = _mm512_set1_ps(t.beta);
+  const bool scale = t.alpha != 1.0f;
+  __m512 bn0 = _mm512_setzero_ps(), bn1 = _mm512_setzero_ps();
+  if (t.bias_n) {
+    bn0 = _mm512_maskz_loadu_ps(k0, t.bias_n);
+    bn1 = _mm512_maskz_loadu_ps(k1, t.bias_n + 16);
+  }
+#pragma GCC unroll 16
+  for (int r = 0; r < MR; ++r) {
+    if (r >= t.m) break;
+    float* c = t.c + r * t.ldc;
+    __m512 v0 = scale ? _mm512_mul_ps(c0[r], alpha) : c0[r];
+    __m512 v1 = scale ? _mm512_mul_ps(c1[r], alpha) : c1[r];
+    if (t.load_c) {
+      v0 = _mm512_fmadd_ps(beta, _mm512_maskz_loadu_ps(k0, c), v0);
+      v1 = _mm512_fmadd_ps(beta, _mm512_maskz_loadu_ps(k1, c + 16), v1);
+    }
+    if (t.bias_n) {
+      v0 = _mm512_add_ps(v0, bn0);
+      v1 = _mm512_add_ps(v1, bn1);
+    }
+    if (t.bias_m) {
+      const __m512 bm = _mm512_set1_ps(t.bias_m[r]);
+      v0 = _mm512_add_ps(v0, bm);
+      v1 = _mm512_add_ps(v1, bm);
+    }
+    if (t.res) {
+      const float* rr = t.res + r * t.ldr;
+      v0 = _mm512_add_ps(v0, _mm512_maskz_loadu_ps(k0, rr));
+      v1 = _mm512_add_ps(v1, _mm512_maskz_loadu_ps(k1, rr + 16));
+    }
+    _mm512_mask_storeu_ps(c, k0, v0);
+    _mm512_mask_storeu_ps(c + 16, k1, v1);
+  }
+}
+
+}  // namespace
+}  // namespace macro
