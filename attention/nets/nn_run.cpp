@@ -56,9 +56,6 @@ Status check_finite(const float* x, size_t n, const std::string& file, const std
   return Status::ok();
 }
 
-namespace {
-
-// Read a float input tensor into an owning fp32 Tensor after checking its name, dtype and rank.
 Result<Tensor> read_input(const SafeTensors& f, const std::string& name, int rank) {
   const TensorEntry* e = f.find(name);
   if (!e) return Status::error(f.path() + ": missing input tensor '" + name + "'");
@@ -69,11 +66,18 @@ Result<Tensor> read_input(const SafeTensors& f, const std::string& name, int ran
   if (int(e->shape.size()) != rank)
     return Status::error(f.path() + ": tensor '" + name + "': expected rank " +
                          std::to_string(rank) + ", found shape " + shape_to_string(e->shape));
+  for (int64_t d : e->shape)
+    if (d < 1)
+      return Status::error(f.path() + ": tensor '" + name + "': expected non-empty dims, found " +
+                           shape_to_string(e->shape));
   Tensor t = Tensor::f32(e->shape);
   MACRO_TRY(convert_to_f32(*e, t.f32(), size_t(t.numel())).with_context(f.path()));
   MACRO_TRY(check_finite(t.f32(), size_t(t.numel()), f.path(), name));
   return t;
 }
+
+namespace {
+
 
 Status check_names(const SafeTensors& f, const std::set<std::string>& allowed, const char* kind) {
   for (const std::string& n : f.names())

@@ -18,7 +18,9 @@
 #include <string>
 
 #include "attention/nets/taesd.h"
+#include "attention/runtime/safetensors.h"
 #include "attention/runtime/status.h"
+#include "attention/runtime/tensor.h"
 #include "attention/runtime/thread_pool.h"
 
 namespace macro::nets {
@@ -40,5 +42,9 @@ Status nn_run(const NnRunOptions& opt);
 
 // Every element finite? Error "<file>: tensor '<name>': element <i> is nan" otherwise.
 Status check_finite(const float* x, size_t n, const std::string& file, const std::string& name);
+
+// A float input tensor (F32/F16/BF16/F64) as an owning fp32 Tensor, after checking that it exists,
+// has the given rank, no empty dimension, and only finite values; errors name file and tensor.
+Result<Tensor> read_input(const SafeTensors& f, const std::string& name, int rank);
 
 }  // namespace macro::nets

@@ -32,26 +32,6 @@ Status check_allowed(const SafeTensors& f, const std::set<std::string>& fixed, b
   return Status::ok();
 }
 
-Result<Tensor> read_float(const SafeTensors& f, const std::string& name, int rank) {
-  const TensorEntry* e = f.find(name);
-  if (!e) return Status::error(f.path() + ": missing input tensor '" + name + "'");
-  if (e->dtype != DType::kF32 && e->dtype != DType::kF16 && e->dtype != DType::kBF16 &&
-      e->dtype != DType::kF64)
-    return Status::error(f.path() + ": tensor '" + name + "': expected a float dtype, found " +
-                         dtype_name(e->dtype));
-  if (int(e->shape.size()) != rank)
-    return Status::error(f.path() + ": tensor '" + name + "': expected rank " +
-                         std::to_string(rank) + ", found shape " + shape_to_string(e->shape));
-  for (int64_t d : e->shape)
-    if (d < 1)
-      return Status::error(f.path() + ": tensor '" + name + "': expected non-empty dims, found " +
-                           shape_to_string(e->shape));
-  Tensor t = Tensor::f32(e->shape);
-  MACRO_TRY(convert_to_f32(*e, t.f32(), size_t(t.numel())).with_context(f.path()));
-  MACRO_TRY(check_finite(t.f32(), size_t(t.numel()), f.path(), name));
-  return t;
-}
-
 Result<int> read_timestep(const SafeTensors& f, int num_train) {
   const TensorEntry* e = f.find("input.timestep");
   if (!e) return DifixPipeline::kDefaultTimestep;
@@ -127,8 +107,8 @@ std::map<std::string, std::string> meta(const char* model, Precision p) {
 
 Status nn_run_unet(const NnRunOptions& opt, const SafeTensors& in) {
   MACRO_TRY(check_allowed(in, {"input.z", "input.ctx", "input.timestep"}, true, "unet"));
-  MACRO_ASSIGN_OR_RETURN(Tensor z, read_float(in, "input.z", 4));
-  MACRO_ASSIGN_OR_RETURN(Tensor ctx, read_float(in, "input.ctx", 3));
+  MACRO_ASSIGN_OR_RETURN(Tensor z, read_input(in, "input.z", 4));
+  MACRO_ASSIGN_OR_RETURN(Tensor ctx, read_input(in, "input.ctx", 3));
   MACRO_ASSIGN_OR_RETURN(UNetConfig cfg, load_unet_config(opt.model + "/config.json"));
   MACRO_TRY(expect_dims(in, "input.z", z, {-1, cfg.in_channels, -1, -1},
                         "[V," + std::to_string(cfg.in_channels) + ",h,w]"));
@@ -145,7 +125,7 @@ Status nn_run_unet(const NnRunOptions& opt, const SafeTensors& in) {
 
 Status nn_run_vae(const NnRunOptions& opt, const SafeTensors& in) {
   MACRO_TRY(check_allowed(in, {"input.image"}, false, "vae"));
-  MACRO_ASSIGN_OR_RETURN(Tensor image, read_float(in, "input.image", 4));
+  MACRO_ASSIGN_OR_RETURN(Tensor image, read_input(in, "input.image", 4));
   MACRO_ASSIGN_OR_RETURN(VaeConfig cfg, load_vae_config(opt.model + "/config.json"));
   const int64_t f = int64_t(1) << (cfg.block_out_channels.size() - 1);
   MACRO_TRY(expect_dims(in, "input.image", image, {-1, cfg.in_channels, -1, -1},
@@ -170,7 +150,7 @@ Status nn_run_vae(const NnRunOptions& opt, const SafeTensors& in) {
 
 Status nn_run_difix(const NnRunOptions& opt, const SafeTensors& in) {
   MACRO_TRY(check_allowed(in, {"input.images", "input.ctx", "input.timestep"}, true, "pipeline"));
-  MACRO_ASSIGN_OR_RETURN(Tensor images, read_float(in, "input.images", 4));
+  MACRO_ASSIGN_OR_RETURN(Tensor images, read_input(in, "input.images", 4));
   // Without input.ctx the folder's text encoder gives the "remove degradation" embedding (cached).
   const bool has_ctx = in.find("input.ctx") != nullptr;
   if (!has_ctx && !has_text_encoder(opt.model))
@@ -178,7 +158,7 @@ Status nn_run_difix(const NnRunOptions& opt, const SafeTensors& in) {
                          " has no text_encoder/ + tokenizer/ to compute it)");
   Tensor ctx;
   if (has_ctx) {
-    MACRO_ASSIGN_OR_RETURN(ctx, read_float(in, "input.ctx", 3));
+    MACRO_ASSIGN_OR_RETURN(ctx, read_input(in, "input.ctx", 3));
   }
   {
     MACRO_ASSIGN_OR_RETURN(UNetConfig ucfg, load_unet_config(opt.model + "/unet/config.json"));
