@@ -175,9 +175,9 @@ std::vector<uint32_t> clean(const std::string& text) {
 // Pre-tokenisation: special tokens, contractions, letter runs, single digits, other runs.
 std::vector<std::string> pre_tokenize(const std::vector<uint32_t>& cps) {
   std::vector<std::string> words;
-  static const char* kSpecial[] = {"<|startoftext|>", "<|endoftext|>", "<start_of_text>",
-                                   "<end_of_text>"};
-  static const char* kContractions[] = {"'s", "'t", "'re", "'ve", "'m", "'ll", "'d"};
+  // The regex's literal alternatives, in its order: special tokens, then contractions.
+  static const char* kLiterals[] = {"<|startoftext|>", "<|endoftext|>", "<start_of_text>",
+                                    "<end_of_text>", "'s", "'t", "'re", "'ve", "'m", "'ll", "'d"};
   auto matches = [&](size_t at, const char* lit) {
     size_t n = std::char_traits<char>::length(lit);
     if (at + n > cps.size()) return false;
@@ -192,16 +192,7 @@ std::vector<std::string> pre_tokenize(const std::vector<uint32_t>& cps) {
       continue;
     }
     bool matched = false;
-    for (const char* lit : kSpecial) {
-      if (matches(i, lit)) {
-        words.emplace_back(lit);
-        i += std::char_traits<char>::length(lit);
-        matched = true;
-        break;
-      }
-    }
-    if (matched) continue;
-    for (const char* lit : kContractions) {  // order as the regex alternation ('s before 'll etc.)
+    for (const char* lit : kLiterals) {
       if (matches(i, lit)) {
         words.emplace_back(lit);
         i += std::char_traits<char>::length(lit);
