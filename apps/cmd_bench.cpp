@@ -4,11 +4,23 @@
 #include <sstream>
 
 #include "apps/args.h"
+#include "apps/bench_commands.h"
 #include "attention/runtime/file_io.h"
 #include "enhance/bench_harness.h"
 #include "enhance/bench_report.h"
 
 namespace macro::cli {
+
+std::vector<BenchCommand>& bench_registry() {
+  static std::vector<BenchCommand> registry;
+  return registry;
+}
+bool register_bench_command(BenchCommand command) {
+  bench_registry().push_back(command);
+  return true;
+}
+const std::vector<BenchCommand>& bench_commands() { return bench_registry(); }
+
 namespace {
 
 constexpr const char* kUsage =
@@ -104,23 +116,33 @@ int run_report(Args& args) {
   return 0;
 }
 
+void print_usage(std::FILE* to) {
+  std::fprintf(to, "%s", kUsage);
+  for (const BenchCommand& c : bench_commands()) std::fprintf(to, "%s", c.usage);
+}
+
 int run_bench(std::vector<std::string> argv) {
   if (argv.empty() || argv[0] == "--help" || argv[0] == "help") {
-    std::printf("%s", kUsage);
+    print_usage(argv.empty() ? stderr : stdout);
     return argv.empty() ? 1 : 0;
   }
   const std::string sub = argv[0];
   Args args(std::vector<std::string>(argv.begin() + 1, argv.end()));
   if (args.flag("--help")) {
-    std::printf("%s", kUsage);
+    print_usage(stdout);
     return 0;
   }
   if (Status s = apply_common_flags(args); !s) return fail("bench " + sub, s);
   if (sub == "run") return run_run(args);
   if (sub == "merge") return run_merge(args);
   if (sub == "report") return run_report(args);
-  std::fprintf(stderr, "%s", kUsage);
-  return fail("bench", Status::error("unknown subcommand '" + sub + "' (run, merge, report)"));
+  std::string known = "run, merge, report";
+  for (const BenchCommand& c : bench_commands()) {
+    if (sub == c.name) return c.run(args);
+    known += std::string(", ") + c.name;
+  }
+  print_usage(stderr);
+  return fail("bench", Status::error("unknown subcommand '" + sub + "' (" + known + ")"));
 }
 
 const bool registered = register_command(
