@@ -1,6 +1,7 @@
 // Synthetic scene -> DL3DV-Closeup folder (see synth_scene_folder.h).
 #include "enhance/synth_scene_folder.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
@@ -15,12 +16,27 @@ using nlohmann::json;
 
 namespace {
 
-Status render_png(const gs::SynthScene& scene, const gs::Camera& cam, const std::string& path,
-                  gs::Rasterizer& raster) {
+Status render_png(const gs::GaussianCloud& cloud, const gs::Camera& cam, int supersample,
+                  const std::string& path, gs::Rasterizer& raster) {
+  const int s = std::max(1, supersample);
   gs::RenderResult r;
-  MACRO_TRY(raster.render_into(scene.cloud, cam, {}, &r));
-  gs::Image img(r.width, r.height, 3);
-  img.data = r.color;
+  MACRO_TRY(raster.render_into(cloud, s == 1 ? cam : cam.resized(cam.width * s, cam.height * s),
+                               {}, &r));
+  gs::Image img(cam.width, cam.height, 3);
+  if (s == 1) {
+    img.data = r.color;
+  } else {
+    const float norm = 1.f / float(s * s);
+    for (int i = 0; i < cam.height; ++i)
+      for (int j = 0; j < cam.width; ++j)
+        for (int c = 0; c < 3; ++c) {
+          float sum = 0.f;
+          for (int a = 0; a < s; ++a)
+            for (int b = 0; b < s; ++b)
+              sum += r.color[(size_t(i * s + a) * size_t(r.width) + size_t(j * s + b)) * 3 + c];
+          img.at(i, j, c) = sum * norm;
+        }
+  }
   return gs::write_png(path, img);
 }
 
@@ -44,10 +60,16 @@ Status write_closeup_scene_folder(const gs::SynthScene& scene, const std::string
     return Status::error("synthetic scene folder: the scene has no training camera");
   auto frame = [](const std::string& name) { return name + ".png"; };
   gs::Rasterizer raster;
+  const gs::GaussianCloud& photos = o.photo_cloud ? *o.photo_cloud : scene.cloud;
+  const auto photo = [&](const gs::Camera& c, const char* sub) -> Status {
+    MACRO_TRY(render_png(photos, c, o.supersample, (root / sub / frame(c.name)).string(), raster));
+    if (o.on_photo) o.on_photo();
+    return Status::ok();
+  };
   gs::CameraSet colmap;
   json training = json::array();
   for (const gs::Camera* c : train) {
-    MACRO_TRY(render_png(scene, *c, (root / "images" / frame(c->name)).string(), raster));
+    MACRO_TRY(photo(*c, "images"));
     gs::Camera named = *c;
     named.name = named.file_path = frame(c->name);
     colmap.cameras.push_back(named);
@@ -55,8 +77,7 @@ Status write_closeup_scene_folder(const gs::SynthScene& scene, const std::string
   }
   json poses = json::object(), pairs = json::array();
   for (const gs::Camera* c : close) {
-    if (o.closeup_gt)
-      MACRO_TRY(render_png(scene, *c, (root / "closeup_gt" / frame(c->name)).string(), raster));
+    if (o.closeup_gt) MACRO_TRY(photo(*c, "closeup_gt"));
     const Eigen::Matrix4d gl = gs::opengl_c2w_from_opencv_w2c(c->world_to_camera());
     json m = json::array();
     for (int r = 0; r < 4; ++r) m.push_back({gl(r, 0), gl(r, 1), gl(r, 2), gl(r, 3)});
@@ -76,7 +97,9 @@ Status write_closeup_scene_folder(const gs::SynthScene& scene, const std::string
                      {"pair_score", 0.0}});
   MACRO_TRY(gs::save_colmap_text(colmap, (root / "sparse" / "0").string()));
   const gs::Camera& k = *train.front();
-  json split = {{"scene", "synthetic-seed-" + std::to_string(scene.params.seed)},
+  const std::string scene_name =
+      o.scene_name.empty() ? "synthetic-seed-" + std::to_string(scene.params.seed) : o.scene_name;
+  json split = {{"scene", scene_name},
                 {"data_factor", 1},
                 {"intrinsics",
                  {{"w", k.width},
@@ -93,6 +116,8 @@ Status write_closeup_scene_folder(const gs::SynthScene& scene, const std::string
                 {"num_closeup_pairs", pairs.size()}};
   MACRO_TRY(write_file_atomic((root / "split.json").string(), split.dump(2) + "\n"));
   MACRO_TRY(gs::save_scene(scene.cloud, (root / o.ply_name).string()));
+  if (o.photo_cloud && !o.photo_ply_name.empty())
+    MACRO_TRY(gs::save_scene(*o.photo_cloud, (root / o.photo_ply_name).string()));
   return write_file_atomic((root / "geometry.json").string(), gs::geometry_to_json(scene));
 }
 

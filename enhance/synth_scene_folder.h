@@ -14,6 +14,7 @@
 // Frame names are the camera names plus ".png". Every file is written atomically.
 #pragma once
 
+#include <functional>
 #include <string>
 
 #include "attention/runtime/status.h"
@@ -25,6 +26,13 @@ struct SynthFolderOptions {
   bool closeup_gt = true;          // render closeup_gt/
   bool register_closeups = false;  // also put the close-ups into sparse/0 (tests the COLMAP path)
   std::string ply_name = "scene.ply";
+  // Photos (images/, closeup_gt/) from another cloud than the saved splat (SynthClose: the dense
+  // ground truth photographs, the merged reconstruction is ply_name); null = scene.cloud.
+  const gs::GaussianCloud* photo_cloud = nullptr;
+  std::string photo_ply_name;  // also save photo_cloud under this name ("" = not saved)
+  int supersample = 1;         // photos rendered at s x the size, each pixel the mean of s x s
+  std::string scene_name;      // split.json "scene" ("" = synthetic-seed-<seed>)
+  std::function<void()> on_photo;  // called after each photo is written (progress)
 };
 
 Status write_closeup_scene_folder(const gs::SynthScene& scene, const std::string& dir,

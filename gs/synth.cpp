@@ -70,14 +70,7 @@ double fbm(double x, double y, uint32_t seed) {
   return sum / norm;
 }
 
-struct Texture {
-  Vector3d color_a, color_b, accent;
-  double noise_freq = 3;     // cycles per metre of the colour noise
-  double checker = 0.25;     // checker cell (m)
-  double dot_cell = 0.12;    // cell of the dot pattern (m)
-  double line_period = 0.5;  // grid lines (m)
-  uint32_t seed = 0;
-};
+using Texture = SynthTexture;
 
 // Colour at plane-local coordinates (u, v) in metres. Detail from 1.5 cm (dot rims, line width)
 // to metres (noise), so close-ups at any zoom see structure.
@@ -212,6 +205,8 @@ std::string indexed(const char* prefix, int k) {
 
 }  // namespace
 
+Vector3d synth_texture_color(const SynthTexture& tex, double u, double v) { return texture(tex, u, v); }
+
 // ---- analytic ray casting ------------------------------------------------------------------------
 
 std::optional<SurfaceHit> cast_ray(const SynthGeometry& g, const Vector3d& o, const Vector3d& dir) {
@@ -302,6 +297,8 @@ Result<SynthScene> generate_synthetic_scene(const SynthParams& params) {
   const int palette0 = int(rng.next() % kPalettes);
   for (size_t k = 0; k < g.planes.size(); ++k) plane_tex.push_back(make_texture(rng, palette0 + int(k)));
   for (size_t k = 0; k < g.spheres.size(); ++k) sphere_tex.push_back(make_texture(rng, palette0 + 4 + int(k)));
+  for (size_t k = 0; k < g.planes.size(); ++k) g.planes[k].texture = plane_tex[k];
+  for (size_t k = 0; k < g.spheres.size(); ++k) g.spheres[k].texture = sphere_tex[k];
 
   // Planes and spheres use 7 different palettes of the 8.
   // Budget: rods need ~1 Gaussian per 0.7 radius of length; spheres 12%; planes the rest, the
@@ -425,8 +422,9 @@ Result<SynthScene> generate_synthetic_scene(const SynthParams& params) {
   static constexpr double kZooms[] = {3.0, 1.5, 4.5, 6.0, 2.0, 2.5, 3.5, 5.0};
   static constexpr int kPlaneOrder[] = {1, 0, 2, 1, 0, 2, 1, 2};
   for (int k = 0; k < params.closeup_views; ++k) {
-    const int plane = kPlaneOrder[k % 8];
-    const double zoom = kZooms[k % 8];
+    const int cycle = (params.closeup_cycle_start % 8 + 8 + k) % 8;
+    const int plane = kPlaneOrder[cycle];
+    const double zoom = kZooms[cycle];
     const SynthPlane& p = g.planes[size_t(plane)];
     bool placed = false;
     for (int attempt = 0; attempt < 200 && !placed; ++attempt) {

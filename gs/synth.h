@@ -39,7 +39,23 @@ struct SynthParams {
   int width = 480, height = 270;  // image size of every camera
   int training_views = 8;
   int closeup_views = 4;          // the first is named "closeup"
+  // Close-up k takes zoom and target plane from entry (closeup_cycle_start + k) mod 8 of the fixed
+  // cycles (zooms 3, 1.5, 4.5, 6, 2, 2.5, 3.5, 5; planes mid, near, far, ...).
+  int closeup_cycle_start = 0;
 };
+
+// A surface's procedural texture (colour at plane-local / surface arc-length coordinates, metres).
+struct SynthTexture {
+  Eigen::Vector3d color_a = Eigen::Vector3d::Zero(), color_b = Eigen::Vector3d::Zero(),
+                  accent = Eigen::Vector3d::Zero();
+  double noise_freq = 3;     // cycles per metre of the colour noise
+  double checker = 0.25;     // checker cell (m)
+  double dot_cell = 0.12;    // cell of the dot pattern (m)
+  double line_period = 0.5;  // grid lines (m)
+  uint32_t seed = 0;
+};
+// The texture's RGB in [0, 1] at (u, v) (detail from 1.5 cm dot rims and lines to metres of noise).
+Eigen::Vector3d synth_texture_color(const SynthTexture& texture, double u, double v);
 
 struct SynthPlane {
   std::string name;
@@ -48,6 +64,7 @@ struct SynthPlane {
   double spacing = 0;                              // grid spacing of the Gaussians
   bool background = false;
   size_t first = 0, count = 0;                     // Gaussians [first, first + count)
+  SynthTexture texture;                            // colours at (u, v)
   double offset() const { return normal.dot(center); }  // the plane is normal . x = offset
 };
 struct SynthSphere {
@@ -55,6 +72,7 @@ struct SynthSphere {
   Eigen::Vector3d center;
   double radius = 0;
   size_t first = 0, count = 0;
+  SynthTexture texture;  // at (longitude, latitude) arc lengths: atan2(z, x) r, asin(y) r
 };
 struct SynthRod {
   std::string name;
