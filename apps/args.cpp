@@ -5,6 +5,7 @@
 #include <cstdlib>
 
 #include "attention/runtime/cpu.h"
+#include "attention/runtime/limits.h"
 #include "attention/runtime/progress.h"
 #include "attention/runtime/thread_pool.h"
 
@@ -156,6 +157,29 @@ Status apply_common_flags(Args& args) {
     MACRO_ASSIGN_OR_RETURN(Isa parsed, parse_isa(*isa));
     MACRO_TRY(set_isa(parsed).with_context("--isa"));
   }
+  // Resource limits (attention/runtime/limits.h). --max-gaussians is also read by render and
+  // convert themselves; taken here first, it reaches them through the LoadLimits default.
+  ResourceLimits limits = resource_limits();
+  const struct {
+    const char* flag;
+    uint64_t* value;
+    uint64_t max;
+  } limit_flags[] = {{"--max-gaussians", &limits.max_gaussians, INT32_MAX},  // an int in render
+                     {"--max-image-pixels", &limits.max_image_pixels, 1ull << 30},
+                     {"--max-tile-pairs", &limits.max_tile_pairs, 0xffffffffull},
+                     {"--max-tensor-bytes", &limits.max_tensor_bytes, UINT64_MAX}};
+  for (const auto& f : limit_flags) {
+    auto v = args.value(f.flag);
+    if (!v) continue;
+    errno = 0;
+    char* end = nullptr;
+    const unsigned long long x = std::strtoull(v->c_str(), &end, 10);
+    if (v->empty() || (*v)[0] == '-' || *end != '\0' || errno != 0 || x == 0 || x > f.max)
+      return Status::error(std::string(f.flag) + ": expected an integer in [1, " +
+                           std::to_string(f.max) + "], found '" + *v + "'");
+    *f.value = x;
+  }
+  set_resource_limits(limits);
   return Status::ok();
 }
 

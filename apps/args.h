@@ -41,7 +41,8 @@ class Args {
   std::vector<std::string> errors_;
 };
 
-// Common flags every command accepts: --threads N, --quiet, --isa NAME. Applies them.
+// Common flags every command accepts: --threads N, --quiet, --isa NAME, and the resource limits
+// --max-gaussians, --max-image-pixels, --max-tile-pairs, --max-tensor-bytes (limits.h). Applies them.
 Status apply_common_flags(Args& args);
 
 using CommandFn = int (*)(std::vector<std::string> argv);

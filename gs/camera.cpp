@@ -7,6 +7,8 @@
 #include <cmath>
 #include <cstdio>
 
+#include "attention/runtime/limits.h"
+
 namespace macro::gs {
 namespace {
 
@@ -109,6 +111,13 @@ Status Camera::validate() const {
   if (width <= 0 || height <= 0) {
     return fail("size " + std::to_string(width) + "x" + std::to_string(height) +
                 ": expected width and height > 0");
+  }
+  // Checked here, where the camera is read, so the message can name the file; the renderer
+  // allocates its image buffers from this size.
+  if (uint64_t(width) * uint64_t(height) > resource_limits().max_image_pixels) {
+    return fail("image " + std::to_string(width) + "x" + std::to_string(height) +
+                " has more than the limit of " +
+                std::to_string(resource_limits().max_image_pixels) + " pixels (--max-image-pixels)");
   }
   if (!std::isfinite(fx) || !(fx > 0)) return fail("fx = " + num(fx) + ": expected finite and > 0");
   if (!std::isfinite(fy) || !(fy > 0)) return fail("fy = " + num(fy) + ": expected finite and > 0");

@@ -159,6 +159,11 @@ Result<CameraSet> load_colmap_binary(const std::string& cameras_bin,
                                      const std::string& images_bin) {
   MACRO_ASSIGN_OR_RETURN(auto cams, parse_cameras_bin(cameras_bin));
   MACRO_ASSIGN_OR_RETURN(auto images, parse_images_bin(images_bin));
+  // A model without images gives no cameras; every caller needs at least one, so an image count
+  // of 0 is refused here, naming the file, instead of failing later as "no camera named ...".
+  if (images.empty())
+    return Status::error(images_bin + ": image count 0: a COLMAP model needs at least one " +
+                         "registered image");
   const size_t slash = cameras_bin.find_last_of('/');
   const std::string folder =
       slash == std::string::npos ? cameras_bin : cameras_bin.substr(0, slash);

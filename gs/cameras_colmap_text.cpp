@@ -190,6 +190,12 @@ Result<std::vector<ColmapImageRecord>> parse_images_txt(const std::string& path)
 Result<CameraSet> load_colmap_text(const std::string& cameras_txt, const std::string& images_txt) {
   MACRO_ASSIGN_OR_RETURN(auto cams, parse_cameras_txt(cameras_txt));
   MACRO_ASSIGN_OR_RETURN(auto images, parse_images_txt(images_txt));
+  // A model without images gives no cameras; every caller needs at least one, so an empty file
+  // (or one holding only comments) is refused here, naming it, instead of failing later as "no
+  // camera named ...".
+  if (images.empty())
+    return Status::error(images_txt + ": no images: a COLMAP model needs at least one " +
+                         "registered image (line 'IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME')");
   const size_t slash = cameras_txt.find_last_of('/');
   const std::string folder =
       slash == std::string::npos ? cameras_txt : cameras_txt.substr(0, slash);

@@ -142,6 +142,18 @@ Result<GaussianCloud> decode_spz(const uint8_t* data, size_t size, const std::st
     return Status::error(file + ": .spz data: " + std::to_string(N) + " points need " +
                          std::to_string(body.size()) + " bytes after the header, the stream " +
                          "holds " + std::to_string(have) + " (truncated?)");
+  // The payload is complete; the gzip trailer (CRC-32 and length) must follow, so a file cut just
+  // before its end, or with a damaged data check, is refused rather than half trusted. Bytes past
+  // the payload are read into a scratch buffer and ignored (bounded by the deflate ratio).
+  uint8_t scratch[4096];
+  while (!ended && zerr.empty()) {
+    const size_t extra = inflate_into(zs, scratch, sizeof scratch, &ended, &zerr);
+    if (extra == 0 && !ended) break;
+  }
+  if (!zerr.empty()) return Status::error(file + ": corrupt gzip stream: " + zerr);
+  if (!ended)
+    return Status::error(file + ": gzip stream: ends before its trailer (CRC-32 and length), " +
+                         "after the .spz data (truncated?)");
 
   const int out_degree = std::min(degree, 3);
   if (degree > 3) {

@@ -79,7 +79,7 @@ Status check_size(const std::string& name, int64_t w, int64_t h, const ImageLimi
   }
   if (uint64_t(w) * uint64_t(h) > limits.max_pixels) {
     return Status::error(name + ": image " + dims(w, h) + " has more than the limit of " +
-                         std::to_string(limits.max_pixels) + " pixels");
+                         std::to_string(limits.max_pixels) + " pixels (--max-image-pixels)");
   }
   return Status::ok();
 }
@@ -125,6 +125,36 @@ Status check_tga_size(const uint8_t* bytes, size_t size, const std::string& name
 
 bool is_jpeg(const uint8_t* b, size_t n) { return n >= 3 && b[0] == 0xFF && b[1] == 0xD8 && b[2] == 0xFF; }
 bool is_bmp(const uint8_t* b, size_t n) { return n >= 2 && b[0] == 'B' && b[1] == 'M'; }
+
+// BMP: stb reads missing rows of an uncompressed bitmap as zeros, so the rows the header promises
+// (from bfOffBits, the stride of 4-byte-aligned rows and |height|) must fit in the file.
+// Compressed bitmaps (RLE4/RLE8) keep the loose ratio bound of decode_image.
+Status check_bmp_size(const uint8_t* b, size_t size, const std::string& name, int w, int h) {
+  if (size < 26) return Status::ok();  // stb refuses it
+  auto le16 = [&](size_t at) { return uint32_t(b[at]) | (uint32_t(b[at + 1]) << 8); };
+  auto le32 = [&](size_t at) { return le16(at) | (le16(at + 2) << 16); };
+  const uint32_t data_offset = le32(10), info_size = le32(14);
+  uint32_t bits = 0, compression = 0;
+  if (info_size == 12) {
+    bits = le16(24);
+  } else if (size >= 34) {
+    bits = le16(28);
+    compression = le32(30);
+  } else {
+    return Status::ok();
+  }
+  if (compression != 0 && compression != 3 && compression != 6) return Status::ok();
+  const uint64_t stride = (uint64_t(w) * bits + 31) / 32 * 4;
+  const uint64_t need = uint64_t(data_offset) + stride * uint64_t(h);
+  if (need > size) {
+    return Status::error(name + ": BMP header says " + dims(w, h) + " with " +
+                         std::to_string(bits) + "-bit pixels from byte " +
+                         std::to_string(data_offset) + ", " + std::to_string(need) +
+                         " bytes, but the file has only " + std::to_string(size) +
+                         ": truncated or corrupt");
+  }
+  return Status::ok();
+}
 
 }  // namespace
 
@@ -178,7 +208,9 @@ Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string&
   if (comp < 1 || comp > 4) {
     return Status::error(name + ": expected 1 to 4 channels, found " + std::to_string(comp));
   }
-  if (!is_png && !is_jpeg(bytes, size) && !is_bmp(bytes, size)) {
+  if (is_bmp(bytes, size)) {
+    MACRO_TRY(check_bmp_size(bytes, size, name, w, h));
+  } else if (!is_png && !is_jpeg(bytes, size)) {
     MACRO_TRY(check_tga_size(bytes, size, name, w, h));  // the only other format compiled in
   }
   Image out(w, h, 3);
@@ -203,7 +235,12 @@ Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string&
   } else {
     stbi_uc* px = stbi_load_from_memory(bytes, len, &dw, &dh, &dc, 0);
     if (!px) {
-      return Status::error(name + ": cannot decode the image (" +
+      // stb tries each decoder in turn and reports the last one's complaint ("bad png sig" for a
+      // broken JPEG), so the message names the format the header announced.
+      const char* kind = is_png ? "PNG" : is_jpeg(bytes, size) ? "JPEG"
+                                      : is_bmp(bytes, size)    ? "BMP"
+                                                               : "TGA";
+      return Status::error(name + ": cannot decode the " + dims(w, h) + " " + kind + " image (" +
                            std::string(stbi_failure_reason()) + "): truncated or corrupt");
     }
     if (dw != w || dh != h || dc != comp) {

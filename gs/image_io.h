@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "attention/runtime/limits.h"
 #include "attention/runtime/status.h"
 
 namespace macro::gs {
@@ -35,7 +36,8 @@ struct Image {
 };
 
 struct ImageLimits {
-  uint64_t max_pixels = 1ull << 27;      // 134 M pixels (a 16k x 8k panorama fits)
+  // 2^27 = 134 M pixels by default (a 16k x 8k panorama fits); --max-image-pixels.
+  uint64_t max_pixels = resource_limits().max_image_pixels;
   uint64_t max_file_bytes = 1ull << 32;  // 4 GiB
 };
 

@@ -31,7 +31,8 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
 
 Status check_inputs(const GaussianCloud& cloud, const Camera& camera, const RenderOptions& o) {
   MACRO_TRY(camera.validate().with_context("render: camera '" + camera.name + "'"));
-  // Tile ids and pair indices are 32-bit; 2^31 pixels is far beyond any real image.
+  // Camera::validate applies the image limit (--max-image-pixels). Tile ids and pair indices are
+  // 32-bit, so 2^30 pixels stays a hard cap above any limit.
   if (double(camera.width) * double(camera.height) > double(1u << 30))
     return Status::error("render: camera '" + camera.name + "': image " +
                          std::to_string(camera.width) + "x" + std::to_string(camera.height) +
@@ -114,7 +115,7 @@ Status Rasterizer::render_into(const GaussianCloud& cloud, const Camera& camera,
     return Status::error("render: the scene needs " + std::to_string(counts.pairs) +
                          " (Gaussian, tile) pairs for camera '" + camera.name +
                          "', more than the limit " + std::to_string(limit) +
-                         " (options.max_tile_pairs)");
+                         " (--max-tile-pairs, RenderOptions::max_tile_pairs)");
 
   // Bin.
   const auto t_bin = std::chrono::steady_clock::now();

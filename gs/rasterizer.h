@@ -12,6 +12,7 @@
 #include <memory>
 #include <vector>
 
+#include "attention/runtime/limits.h"
 #include "attention/runtime/status.h"
 #include "attention/runtime/thread_pool.h"
 #include "gs/camera.h"
@@ -31,7 +32,8 @@ struct RenderOptions {
   int sh_degree_cap = 3;  // evaluate at most this degree (<= the file's)
   float near_plane = 0.01f;
   float far_plane = 1e10f;
-  size_t max_tile_pairs = 1ull << 31;  // refuse (with an error) scenes needing more tile pairs
+  // Refuse (with an error) scenes needing more tile pairs; 2^31 by default, --max-tile-pairs.
+  size_t max_tile_pairs = size_t(resource_limits().max_tile_pairs);
   // Benchmark baseline / second reference: bounding-box tile lists and a plain scalar per-pixel
   // loop over each tile's whole list (no ellipse culling, no row lists, no SIMD). Same output
   // up to float rounding.

@@ -34,17 +34,26 @@ bool ends_with(const std::string& s, const std::string& tail) {
 }
 
 // Drops Gaussians with non-finite values, repairs quaternions and scales (policy in scene_io.h).
-void sanitize(GaussianCloud& c, LoadReport& report, const std::string& file) {
+// A file whose every Gaussian is dropped is an error (it names the first bad field), not an empty
+// scene: a file with zero Gaussians to begin with still loads.
+Status sanitize(GaussianCloud& c, LoadReport& report, const std::string& file) {
   const size_t N = c.size();
   const size_t K3 = static_cast<size_t>(c.sh_coeffs()) * 3;
   size_t kept = 0;
+  const char* first_bad = nullptr;  // field of the first dropped Gaussian, for the message
   for (size_t i = 0; i < N; ++i) {
-    bool finite = std::isfinite(c.opacity[i]);
-    for (size_t a = 0; a < 3; ++a)
-      finite &= std::isfinite(c.position[i * 3 + a]) && std::isfinite(c.scale[i * 3 + a]);
-    for (size_t a = 0; a < 4; ++a) finite &= std::isfinite(c.rotation[i * 4 + a]);
-    for (size_t j = 0; j < K3; ++j) finite &= std::isfinite(c.sh[i * K3 + j]);
-    if (!finite) {
+    const char* bad = nullptr;
+    for (size_t a = 0; a < 3 && !bad; ++a)
+      if (!std::isfinite(c.position[i * 3 + a])) bad = "position";
+    for (size_t a = 0; a < 3 && !bad; ++a)
+      if (!std::isfinite(c.scale[i * 3 + a])) bad = "scale";
+    for (size_t a = 0; a < 4 && !bad; ++a)
+      if (!std::isfinite(c.rotation[i * 4 + a])) bad = "rotation";
+    if (!bad && !std::isfinite(c.opacity[i])) bad = "opacity";
+    for (size_t j = 0; j < K3 && !bad; ++j)
+      if (!std::isfinite(c.sh[i * K3 + j])) bad = "colour (SH)";
+    if (bad) {
+      if (!first_bad) first_bad = bad;
       ++report.dropped_nonfinite;
       continue;
     }
@@ -90,6 +99,11 @@ void sanitize(GaussianCloud& c, LoadReport& report, const std::string& file) {
                  " zero quaternions to identity, clamped " + std::to_string(report.clamped_scales) +
                  " Gaussians' zero/negative scales (docs/formats.md)");
   }
+  if (N > 0 && kept == 0)
+    return Status::error(file + ": all " + std::to_string(N) +
+                         " Gaussians have NaN/Inf values (the first in field '" + first_bad +
+                         "'), nothing is left to render");
+  return Status::ok();
 }
 
 }  // namespace
@@ -148,7 +162,7 @@ Result<GaussianCloud> load_scene_from_memory(const uint8_t* data, size_t size,
       break;
   }
   if (!cloud) return cloud.status();
-  sanitize(*cloud, report, name);
+  MACRO_TRY(sanitize(*cloud, report, name));
   if (report_out) *report_out = report;
   return cloud;
 }

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "attention/runtime/limits.h"
 #include "attention/runtime/status.h"
 #include "gs/gaussians.h"
 
@@ -25,7 +26,8 @@ enum class SceneFormat { kPly, kCompressedPly, kSplat, kSpz };
 const char* scene_format_name(SceneFormat format);  // "ply", "compressed.ply", "splat", "spz"
 
 struct LoadLimits {
-  size_t max_gaussians = 50'000'000;     // checked before allocating (raise with --max-gaussians)
+  // Checked before allocating; default from resource_limits() (50 M, --max-gaussians).
+  size_t max_gaussians = size_t(resource_limits().max_gaussians);
   uint64_t max_file_bytes = 1ull << 36;  // 64 GiB: files larger than this are refused unread
 };
 

@@ -110,13 +110,10 @@ TEST_CASE("fuzz entry points: empty, garbage and saved regression inputs are cle
   for (const auto& e : fuzz::entries()) {
     if (std::string(e.name) == "clip_tokenizer_text") continue;  // any text is valid there
     INFO("target: " << e.name);
-    // Two empty COLMAP text files load as a model with no cameras (an empty set, not an error;
-    // an open question in docs/reliability.md), so only garbage must fail there.
-    if (std::string(e.name) != "colmap_text") {
-      Status a = e.fn(empty.data(), empty.size());
-      CHECK_FALSE(a.is_ok());
-      CHECK_FALSE(a.message().empty());
-    }
+    // Empty input is an error everywhere (two empty COLMAP text files: "images.txt: no images").
+    Status a = e.fn(empty.data(), empty.size());
+    CHECK_FALSE(a.is_ok());
+    CHECK_FALSE(a.message().empty());
     Status b = e.fn(garbage.data(), garbage.size());
     CHECK_FALSE(b.is_ok());
     CHECK_FALSE(b.message().empty());

@@ -226,7 +226,9 @@ Result<ClipTokenizer> ClipTokenizer::load(const std::string& dir) {
   MACRO_ASSIGN_OR_RETURN(std::string vocab_text, read_text_file(vocab_path, 64ull << 20));
   nlohmann::json vocab = nlohmann::json::parse(vocab_text, nullptr, false);
   if (vocab.is_discarded() || !vocab.is_object())
-    return Status::error(vocab_path + ": expected a JSON object of token -> id, found malformed JSON");
+    return Status::error(vocab_path + ": expected a JSON object of token -> id, found " +
+                         (vocab.is_discarded() ? std::string("malformed JSON")
+                                               : std::string("a JSON ") + vocab.type_name()));
   for (auto it = vocab.begin(); it != vocab.end(); ++it) {
     if (!it.value().is_number_integer() || it.value().get<int64_t>() < 0 ||
         it.value().get<int64_t>() > INT32_MAX)

@@ -14,6 +14,7 @@
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/half.h"
+#include "attention/runtime/limits.h"
 
 namespace macro {
 
@@ -293,6 +294,11 @@ Result<SafeTensors> SafeTensors::open(const std::string& path) {
       return Status::error(where + ": shape " + shape_text(e.shape) + " of " + dtype_name(e.dtype) +
                            " needs " + std::to_string(nbytes) + " bytes, data_offsets " +
                            off.dump() + " give " + std::to_string(en - b));
+    if (nbytes > resource_limits().max_tensor_bytes)
+      return Status::error(where + ": shape " + shape_text(e.shape) + " of " + dtype_name(e.dtype) +
+                           " is " + std::to_string(nbytes) + " bytes, more than the limit of " +
+                           std::to_string(resource_limits().max_tensor_bytes) +
+                           " (--max-tensor-bytes)");
     e.data = data + b;
     e.bytes = static_cast<size_t>(nbytes);
     auto ins = st_out.tensors_.emplace(name, std::move(e));
