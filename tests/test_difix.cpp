@@ -4,6 +4,7 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 
 #include "attention/nets/difix.h"
@@ -129,6 +130,49 @@ TEST_CASE("difix-tiny matches on every instruction-set path the machine supports
     }
   }
   REQUIRE(set_isa(saved).is_ok());
+}
+
+TEST_CASE("difix: consecutive steps on the reused arena are bit-identical",
+          "[nets][difix][arena]") {
+  test::TempDir dir("difix-arena");
+  const std::string root = make_pipeline(dir);
+  auto g = SafeTensors::open(test::golden_dir() + "/difix-tiny/case-ref2.safetensors");
+  REQUIRE(g.is_ok());
+  const Tensor images = read_tensor(*g, "input.images"), ctx = read_tensor(*g, "input.ctx");
+  auto same = [](const Tensor& a, const Tensor& b) {
+    return a.shape() == b.shape() &&
+           std::memcmp(a.f32(), b.f32(), size_t(a.numel()) * sizeof(float)) == 0;
+  };
+  for (Precision p : {Precision::kF32, Precision::kBf16}) {
+    auto pipe = DifixPipeline::load(root, p);
+    REQUIRE(pipe.is_ok());
+    const size_t ws =
+        (*pipe)->step_workspace_bytes(images.dim(0), images.dim(2), images.dim(3), ctx.dim(1));
+    auto first = (*pipe)->step(images, ctx, {}, &ThreadPool::global());
+    REQUIRE(first.is_ok());
+    const size_t capacity = (*pipe)->arena_capacity();
+    // Reserved once, to the largest stage: the arena is as big as that stage and no bigger.
+    CHECK(capacity >= ws);
+    CHECK(capacity < ws + 4096);
+    // Poison the arena's stale contents through a step of another shape (one view), then repeat.
+    auto other = (*pipe)->step(images.view().slice(0, 0, 1), ctx.view().slice(0, 0, 1), {},
+                               &ThreadPool::global());
+    REQUIRE(other.is_ok());
+    auto second = (*pipe)->step(images, ctx, {}, &ThreadPool::global());
+    REQUIRE(second.is_ok());
+    CHECK((*pipe)->arena_capacity() == capacity);  // no re-allocation for a shape seen before
+    INFO(precision_name(p));
+    CHECK(same(first->z, second->z));
+    CHECK(same(first->eps, second->eps));
+    CHECK(same(first->z0, second->z0));
+    CHECK(same(first->image, second->image));
+    // And the reused arena changes nothing against a fresh pipeline's first step.
+    auto fresh = DifixPipeline::load(root, p);
+    REQUIRE(fresh.is_ok());
+    auto third = (*fresh)->step(images, ctx, {}, &ThreadPool::global());
+    REQUIRE(third.is_ok());
+    CHECK(same(first->image, third->image));
+  }
 }
 
 TEST_CASE("difix: bad scheduler configs and inputs are refused by name", "[nets][difix]") {

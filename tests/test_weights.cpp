@@ -1,16 +1,20 @@
 // Checkpoint plumbing: diffusers configs, the weight store's name table and LoRA merge, the DDPM
 // constants, and synthetic checkpoints written from the real manifests.
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <nlohmann/json.hpp>
 
 #include "attention/nets/diffusers_config.h"
 #include "attention/nets/scheduler.h"
+#include "attention/nets/unet.h"
 #include "attention/nets/synthetic_checkpoint.h"
 #include "attention/nets/weights.h"
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/safetensors.h"
+#include "attention/runtime/tensor.h"
 #include "attention/runtime/thread_pool.h"
 #include "test_support.h"
 
@@ -206,4 +210,105 @@ TEST_CASE("macro synth-weights writes a loadable VAE folder and refuses bad flag
   REQUIRE(test::run_command(exe + " synth-weights --manifest " + dir.file("missing.json") +
                             " --class AutoencoderKL --out " + dir.file("y") + " 2> /dev/null") == 1);
   REQUIRE_FALSE(file_exists(dir.file("y/diffusion_pytorch_model.safetensors")));
+}
+
+namespace {
+
+// unet-tiny rewritten twice with the same values: every tensor rounded to bf16 and stored as BF16
+// (`<dir>/bf16`) and stored as F32 (`<dir>/f32`), each a loadable U-Net folder. Returns the largest
+// tensor's fp32 bytes.
+size_t write_bf16_unet_copies(const std::string& dir) {
+  namespace fs = std::filesystem;
+  const std::string src = test::golden_dir() + "/unet-tiny";
+  auto f = SafeTensors::open(src + "/diffusion_pytorch_model.safetensors");
+  REQUIRE(f.is_ok());
+  std::vector<std::vector<float>> f32s;
+  std::vector<std::vector<uint16_t>> bf16s;
+  std::vector<TensorToWrite> as_f32, as_bf16;
+  size_t largest = 0;
+  for (const std::string& name : f->names()) {
+    auto v = f->read_f32(name);
+    REQUIRE(v.is_ok());
+    largest = std::max(largest, v->size() * sizeof(float));
+    std::vector<uint16_t> b(v->size());
+    f32_to_bf16(v->data(), b.data(), int64_t(b.size()));
+    bf16_to_f32(b.data(), v->data(), int64_t(b.size()));
+    f32s.push_back(std::move(*v));
+    bf16s.push_back(std::move(b));
+    const auto& shape = f->find(name)->shape;
+    as_f32.push_back({name, DType::kF32, shape, f32s.back().data()});
+    as_bf16.push_back({name, DType::kBF16, shape, bf16s.back().data()});
+  }
+  for (const char* kind : {"f32", "bf16"}) {
+    const std::string folder = dir + "/" + kind;
+    fs::create_directories(folder);
+    fs::copy_file(src + "/config.json", folder + "/config.json");
+    REQUIRE(write_safetensors(folder + "/diffusion_pytorch_model.safetensors",
+                              std::string(kind) == "f32" ? as_f32 : as_bf16)
+                .is_ok());
+  }
+  return largest;
+}
+
+}  // namespace
+
+TEST_CASE("loading keeps no widened copies: packed straight from the file, bytes accounted",
+          "[nets][weights][memory]") {
+  test::TempDir dir("lazy-load");
+  const size_t largest = write_bf16_unet_copies(dir.path);
+  auto g = SafeTensors::open(test::golden_dir() + "/unet-tiny/case-ref2.safetensors");
+  REQUIRE(g.is_ok());
+  auto zv = g->read_f32("input.z");
+  auto cv = g->read_f32("input.ctx");
+  REQUIRE((zv.is_ok() && cv.is_ok()));
+  const Tensor z = Tensor::from_f32(g->find("input.z")->shape, *zv);
+  const Tensor ctx = Tensor::from_f32(g->find("input.ctx")->shape, *cv);
+  for (Precision p : {Precision::kF32, Precision::kBf16}) {
+    reset_widen_peak();
+    REQUIRE(widen_stats().live_bytes == 0);
+    auto from_bf16 = UNet2DConditionModel::load(dir.path + "/bf16", p);
+    INFO((from_bf16.is_ok() ? "" : from_bf16.status().message()));
+    REQUIRE(from_bf16.is_ok());
+    const WidenStats s = widen_stats();
+    auto from_f32 = UNet2DConditionModel::load(dir.path + "/f32", p);
+    REQUIRE(from_f32.is_ok());
+    const size_t wb = (*from_bf16)->weight_bytes();
+    std::printf(
+        "unet-tiny %s from a BF16 file: packed %zu bytes (from F32 %zu), transient "
+        "fp32 peak %zu bytes (largest tensor %zu)\n",
+        precision_name(p), wb, (*from_f32)->weight_bytes(), s.peak_bytes, largest);
+    // Nothing widened survives the load, and at most one fused q|k|v (three tensors) was ever
+    // widened at once; a bf16 run widens only conv weights (the bf16 conv packing takes fp32).
+    CHECK(widen_stats().live_bytes == 0);
+    CHECK(s.peak_bytes <= 3 * largest);
+    CHECK(s.peak_bytes > 0);
+    // The loaded model holds exactly its packed form, the same whatever the file's dtype.
+    CHECK(wb == (*from_f32)->weight_bytes());
+    // Packing from the BF16 bytes gives bit-identical results to packing the same values from F32.
+    auto a = (*from_bf16)->forward(z, 199, ctx, {}, &ThreadPool::global());
+    auto b = (*from_f32)->forward(z, 199, ctx, {}, &ThreadPool::global());
+    REQUIRE((a.is_ok() && b.is_ok()));
+    REQUIRE(a->numel() == b->numel());
+    CHECK(std::memcmp(a->f32(), b->f32(), size_t(a->numel()) * sizeof(float)) == 0);
+  }
+  // The packed size tracks the precision: bf16 GEMM/conv panels are half the fp32 ones (the fp32
+  // norm/bias vectors and panel padding keep it a little above half).
+  auto m32 = UNet2DConditionModel::load(dir.path + "/bf16", Precision::kF32);
+  auto m16 = UNet2DConditionModel::load(dir.path + "/bf16", Precision::kBf16);
+  REQUIRE((m32.is_ok() && m16.is_ok()));
+  CHECK(double((*m16)->weight_bytes()) < 0.6 * double((*m32)->weight_bytes()));
+  // An eager store (the default, for small loaders) owns converted copies; a lazy one owns none.
+  WeightStoreOptions lazy;
+  lazy.lazy = true;
+  auto eager_store = WeightStore::open(dir.path + "/bf16/diffusion_pytorch_model.safetensors");
+  auto lazy_store = WeightStore::open(dir.path + "/bf16/diffusion_pytorch_model.safetensors", lazy);
+  REQUIRE((eager_store.is_ok() && lazy_store.is_ok()));
+  auto u1 = UNet2DConditionModel::build(*load_unet_config(dir.path + "/bf16/config.json"));
+  auto u2 = UNet2DConditionModel::build(*load_unet_config(dir.path + "/bf16/config.json"));
+  REQUIRE((u1.is_ok() && u2.is_ok()));
+  (*u1)->visit(**eager_store);
+  (*u2)->visit(**lazy_store);
+  REQUIRE(((*eager_store)->finish().is_ok() && (*lazy_store)->finish().is_ok()));
+  CHECK((*eager_store)->owned_bytes() >= size_t(largest));
+  CHECK((*lazy_store)->owned_bytes() == 0);
 }

@@ -88,10 +88,12 @@ void ClipTextModel::visit(ParamVisitor& v) {
 
 void ClipTextModel::pack(Precision p) {
   precision_ = p;
-  tok_.assign(token_embedding.data, token_embedding.data + token_embedding.numel());
-  pos_.assign(position_embedding.data, position_embedding.data + position_embedding.numel());
-  token_embedding = Param();
-  position_embedding = Param();
+  for (auto [param, dst] : {std::pair{&token_embedding, &tok_}, {&position_embedding, &pos_}}) {
+    dst->resize(size_t(param->numel()));
+    read_param_f32(*param, dst->data());
+    release_param(*param);
+    *param = Param();
+  }
   for (ClipEncoderLayer& l : layers) l.pack(p);
   final_layer_norm.pack();
 }
@@ -101,7 +103,9 @@ Result<std::unique_ptr<ClipTextModel>> ClipTextModel::load(const std::string& fo
   MACRO_ASSIGN_OR_RETURN(ClipTextConfig cfg, load_clip_text_config(folder + "/config.json"));
   MACRO_ASSIGN_OR_RETURN(std::string weights, clip_text_weights_path(folder));
   MACRO_ASSIGN_OR_RETURN(auto model, build(cfg));
-  MACRO_ASSIGN_OR_RETURN(auto store, WeightStore::open(weights));
+  WeightStoreOptions opt;
+  opt.lazy = true;  // each tensor read once, when its module packs
+  MACRO_ASSIGN_OR_RETURN(auto store, WeightStore::open(weights, opt));
   model->visit(*store);
   MACRO_TRY(store->finish());
   model->pack(precision);

@@ -1,6 +1,7 @@
 // The single-step Difix pipeline (see difix.h).
 #include "attention/nets/difix.h"
 
+#include <algorithm>
 #include <nlohmann/json.hpp>
 
 #include "attention/runtime/file_io.h"
@@ -63,21 +64,36 @@ Result<std::unique_ptr<DifixPipeline>> DifixPipeline::load(const std::string& fo
   return p;
 }
 
+size_t DifixPipeline::step_workspace_bytes(int64_t views, int64_t h, int64_t w,
+                                           int64_t ctx_tokens) const {
+  const int64_t f = vae_->downscale();
+  return std::max({vae_->encode_workspace_bytes(h, w),
+                   unet_->workspace_bytes(views, h / f, w / f, ctx_tokens),
+                   vae_->decode_workspace_bytes(h, w)});
+}
+
 Result<DifixOutputs> DifixPipeline::step(const TensorView& images, const TensorView& ctx,
                                          const UNetMasks& masks, ThreadPool* pool,
                                          int timestep) const {
   MACRO_ASSIGN_OR_RETURN(double abar, alpha_bar(schedule_, timestep));
   (void)abar;
+  std::lock_guard<std::mutex> lock(mu_);
+  const int64_t f = vae_->downscale();
+  if (images.rank == 4 && images.dim(0) >= 1 && images.dim(2) >= f && images.dim(3) >= f &&
+      images.dim(2) % f == 0 && images.dim(3) % f == 0 && ctx.rank == 3 && ctx.dim(1) >= 1)
+    arena_.reserve(step_workspace_bytes(images.dim(0), images.dim(2), images.dim(3), ctx.dim(1)));
+  // (otherwise encode/forward report the bad shape)
   DifixOutputs o;
-  MACRO_ASSIGN_OR_RETURN(VaeEncoding enc, vae_->encode(images, /*keep_skips=*/1, pool));
+  MACRO_ASSIGN_OR_RETURN(VaeEncoding enc, vae_->encode(images, /*keep_skips=*/1, pool, &arena_));
   o.z = std::move(enc.z);
-  MACRO_ASSIGN_OR_RETURN(o.eps, unet_->forward(o.z, float(timestep), ctx, masks, pool));
+  MACRO_ASSIGN_OR_RETURN(o.eps,
+                         unet_->forward(o.z, float(timestep), ctx, masks, pool, {}, &arena_));
   o.z0 = Tensor::f32(o.z.shape());
   MACRO_TRY(ddpm_x0(schedule_, timestep, o.z.f32(), o.eps.f32(), o.z0.f32(), size_t(o.z.numel())));
   const TensorView z0_view0 = o.z0.view().slice(0, 0, 1);
   std::vector<TensorView> skips;
   for (const Tensor& s : enc.skips) skips.push_back(s.view());
-  MACRO_ASSIGN_OR_RETURN(o.image, vae_->decode(z0_view0, skips, pool));
+  MACRO_ASSIGN_OR_RETURN(o.image, vae_->decode(z0_view0, skips, pool, &arena_));
   return o;
 }
 

@@ -14,10 +14,13 @@
 //   eps = unet(z, t, ctx, masks)                    [V, 4, h, w]   (attn1 joint over the views)
 //   z0  = (z - sqrt(1 - abar_t) eps) / sqrt(abar_t) [V, 4, h, w]
 //   image = vae.decode(z0[0], skips of view 0)      [1, 3, H, W]   (not clamped)
-// t = 199 by default. Only view 0's encoder skips are kept.
+// t = 199 by default. Only view 0's encoder skips are kept. Every stage runs on one scratch arena
+// owned by the pipeline, reserved once to the largest stage of the input shape and reused by later
+// steps (steps are serialised on it).
 #pragma once
 
 #include <memory>
+#include <mutex>
 #include <string>
 
 #include "attention/nets/prompt_cache.h"
@@ -44,6 +47,12 @@ class DifixPipeline {
 
   Result<DifixOutputs> step(const TensorView& images, const TensorView& ctx, const UNetMasks& masks,
                             ThreadPool* pool, int timestep = kDefaultTimestep) const;
+  // Scratch bytes of one step for V views at H x W pixels with Lc context tokens: the largest of
+  // encode, U-Net and decode (what the shared arena is reserved to).
+  size_t step_workspace_bytes(int64_t views, int64_t h, int64_t w, int64_t ctx_tokens = 77) const;
+  // Bytes the loaded networks hold (packed weights, norm/bias vectors).
+  size_t weight_bytes() const { return unet_->weight_bytes() + vae_->weight_bytes(); }
+  size_t arena_capacity() const { return arena_.capacity(); }
 
   // The text context [1, Lc, Dc] of `prompt` from the folder's text_encoder/ and tokenizer/
   // (computed in fp32 once, then read from the prompt cache); its width must be the U-Net's
@@ -66,6 +75,8 @@ class DifixPipeline {
   std::unique_ptr<DifixVae> vae_;
   DdpmSchedule schedule_;
   std::string folder_;
+  mutable std::mutex mu_;  // guards arena_
+  mutable Arena arena_;
 };
 
 // scheduler/scheduler_config.json: fields present override the SD-Turbo defaults; an unsupported

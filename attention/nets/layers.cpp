@@ -37,6 +37,21 @@ float* Workspace::alloc(int64_t floats) {
   return static_cast<float*>(arena_->alloc(size_t(floats) * sizeof(float)));
 }
 
+Arena& prepare_arena(Arena* arena, Arena& local, size_t bytes) {
+  Arena& a = arena ? *arena : local;
+  MACRO_CHECK(a.used() == 0);
+  a.reserve(bytes);  // grows only
+  return a;
+}
+
+size_t packed_bytes(const PackedWeights& w) {
+  return w.bytes();
+}
+
+size_t packed_bytes(const ConvWeights& w) {
+  return w.packed().bytes() + (w.has_bias() ? size_t(w.c_out()) * sizeof(float) : 0);
+}
+
 void Workspace::reset(size_t mark) {
   MACRO_CHECK(mark <= used_);
   used_ = mark;
@@ -123,13 +138,34 @@ void Linear::visit(const std::string& prefix, ParamVisitor& v) {
   if (has_bias) v.param(join_name(prefix, "bias"), bias, {out});
 }
 
+namespace {
+
+WeightType weight_type(Precision p) {
+  return p == Precision::kBf16 ? WeightType::kBf16 : WeightType::kF32;
+}
+
+// Norm/bias vectors: a plain fp32 copy, then the file pages are dropped.
+void take_vector(Param& p, std::vector<float>& dst) {
+  dst.resize(size_t(p.numel()));
+  read_param_f32(p, dst.data());
+  release_param(p);
+  p = Param();
+}
+
+}  // namespace
+
 void Linear::pack(Precision p) {
   MACRO_CHECK(weight.loaded());
-  packed = PackedWeights::pack(weight.data, out, in, in,
-                               p == Precision::kBf16 ? WeightType::kBf16 : WeightType::kF32);
-  if (has_bias) b.assign(bias.data, bias.data + out);
+  // bf16 files pack straight from the mapping; anything else goes through one transient fp32 copy.
+  if (const uint16_t* wb = p == Precision::kBf16 ? param_bf16(weight) : nullptr) {
+    packed = PackedWeights::pack(wb, out, in, in);
+  } else {
+    ParamF32 w(weight);
+    packed = PackedWeights::pack(w.data(), out, in, in, weight_type(p));
+  }
+  release_param(weight);
   weight = Param();
-  bias = Param();
+  if (has_bias) take_vector(bias, b);
 }
 
 void Linear::forward(const Run& r, int64_t m, const float* x, int64_t ldx, float* y, int64_t ldy,
@@ -155,16 +191,32 @@ void FusedLinear::pack(const std::vector<const Linear*>& parts, Precision p) {
     out += l->out;
     any_bias |= l->has_bias;
   }
-  std::vector<float> w(size_t(out * in));
   b.assign(any_bias ? size_t(out) : 0, 0.0f);
+  bool all_bf16 = p == Precision::kBf16;
+  for (const Linear* l : parts) all_bf16 = all_bf16 && param_bf16(l->weight) != nullptr;
   int64_t row = 0;
+  if (all_bf16) {  // concatenate the file's bf16 rows, pack without widening
+    std::vector<uint16_t> w(size_t(out * in));
+    for (const Linear* l : parts) {
+      std::memcpy(w.data() + row * in, param_bf16(l->weight), size_t(l->out * in) * 2);
+      row += l->out;
+    }
+    packed = PackedWeights::pack(w.data(), out, in, in);
+  } else {
+    WidenedBuffer w(out * in);
+    for (const Linear* l : parts) {
+      read_param_f32(l->weight, w.data() + row * in);
+      row += l->out;
+    }
+    packed = PackedWeights::pack(w.data(), out, in, in, weight_type(p));
+  }
+  row = 0;
   for (const Linear* l : parts) {
-    std::memcpy(w.data() + row * in, l->weight.data, size_t(l->out * in) * sizeof(float));
-    if (l->has_bias) std::memcpy(b.data() + row, l->bias.data, size_t(l->out) * sizeof(float));
+    if (l->has_bias) read_param_f32(l->bias, b.data() + row);
+    release_param(l->weight);
+    if (l->has_bias) release_param(l->bias);
     row += l->out;
   }
-  packed = PackedWeights::pack(w.data(), out, in, in,
-                               p == Precision::kBf16 ? WeightType::kBf16 : WeightType::kF32);
 }
 
 void FusedLinear::forward(const Run& r, int64_t m, const float* x, int64_t ldx, float* y,
@@ -192,21 +244,29 @@ void Conv2d::visit(const std::string& prefix, ParamVisitor& v) {
 
 void Conv2d::pack(Precision p) {
   MACRO_CHECK(weight.loaded());
-  const int64_t n = c_out * c_in * k * k;
-  std::vector<float> w(weight.data, weight.data + n);
-  if (weight_scale != 1.0f)
-    for (float& x : w) x *= weight_scale;
-  if (p == Precision::kBf16) round_to_bf16(w.data(), n);
-  packed = ConvWeights::pack(w.data(), has_bias ? bias.data : nullptr, c_out, c_in, k, k);
+  std::vector<float> bv;
+  if (has_bias) take_vector(bias, bv);
+  const float* bp = has_bias ? bv.data() : nullptr;
+  // bf16: the conv kernel takes bf16 weights (packed from the rounded fp32 values) and rounds its
+  // input itself; fp32 F32 files pack straight from the mapping.
+  if (weight_scale == 1.0f) {
+    ParamF32 w(weight);
+    packed = ConvWeights::pack(w.data(), bp, c_out, c_in, k, k, weight_type(p));
+  } else {
+    WidenedBuffer w(weight.numel());
+    read_param_f32(weight, w.data());
+    for (int64_t i = 0; i < w.size(); ++i) w.data()[i] *= weight_scale;
+    packed = ConvWeights::pack(w.data(), bp, c_out, c_in, k, k, weight_type(p));
+  }
+  release_param(weight);
   weight = Param();
-  bias = Param();
 }
 
 void Conv2d::forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* y,
                      const float* residual, int stride, int pt, int pl, int pb, int pr) const {
-  if (!r.bf16())
+  if (!r.bf16() || packed.type() == WeightType::kBf16)
     return forward_scratch(r, const_cast<float*>(x), n, h, w, y, residual, stride, pt, pl, pb,
-                           pr);  // fp32: x is only read
+                           pr);  // fp32 / bf16 kernel: x is only read
   ScratchFrame frame(r);
   float* t = r.alloc(n * c_in * h * w);
   copy_floats(r, t, x, n * c_in * h * w);
@@ -217,7 +277,7 @@ void Conv2d::forward_scratch(const Run& r, float* x, int64_t n, int64_t h, int64
                              const float* residual, int stride, int pt, int pl, int pb,
                              int pr) const {
   if (r.planning()) return;
-  round_if_bf16(r, x, n * c_in * h * w);
+  if (packed.type() != WeightType::kBf16) round_if_bf16(r, x, n * c_in * h * w);
   Conv2dShape s;
   s.n = n, s.c_in = c_in, s.h = h, s.w = w, s.c_out = c_out, s.kh = k, s.kw = k;
   s.stride = stride;
@@ -239,10 +299,8 @@ void GroupNorm::visit(const std::string& prefix, ParamVisitor& v) {
 }
 
 void GroupNorm::pack() {
-  gamma.assign(weight.data, weight.data + c);
-  beta.assign(bias.data, bias.data + c);
-  weight = Param();
-  bias = Param();
+  take_vector(weight, gamma);
+  take_vector(bias, beta);
 }
 
 void GroupNorm::forward(const Run& r, float* dst, const float* src, int64_t n, int64_t hw,
@@ -266,10 +324,8 @@ void LayerNorm::visit(const std::string& prefix, ParamVisitor& v) {
 }
 
 void LayerNorm::pack() {
-  gamma.assign(weight.data, weight.data + d);
-  beta.assign(bias.data, bias.data + d);
-  weight = Param();
-  bias = Param();
+  take_vector(weight, gamma);
+  take_vector(bias, beta);
 }
 
 void LayerNorm::forward(const Run& r, float* dst, const float* src, int64_t m) const {
@@ -311,17 +367,19 @@ void ResnetBlock2D::pack(Precision p) {
 }
 
 void ResnetBlock2D::forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w,
-                            const float* temb_silu, float* out) const {
+                            const float* temb_silu, float* out, bool x_is_scratch) const {
   const int64_t hw = h * w;
   ScratchFrame frame(r);
-  float* t1 = r.alloc(n * c_in * hw);   // SiLU(GN1(x)), then conv1's bf16-rounded input
+  // t1 = SiLU(GN1(x)), conv1's input (rounded in place on the fp32-kernel bf16 path). It lives
+  // until conv1 has run, so it can borrow `out` whenever the shortcut is written after conv1.
+  const bool t1_in_out = c_in <= c_out;
+  const bool t1_in_x = !t1_in_out && x_is_scratch;
+  float* t1 = t1_in_out ? out : t1_in_x ? const_cast<float*>(x) : r.alloc(n * c_in * hw);
   float* t2 = r.alloc(n * c_out * hw);  // conv1 output (+ temb), then SiLU(GN2(.))
   float* tp = temb > 0 ? r.alloc(c_out) : nullptr;
-  const float* residual = x;
-  if (has_shortcut) {
+  const float* residual = has_shortcut ? out : x;
+  if (has_shortcut && !t1_in_out)
     conv_shortcut.forward(r, x, n, h, w, out, nullptr, 1, 0, 0, 0, 0);  // out = shortcut(x)
-    residual = out;
-  }
   norm1.forward(r, t1, x, n, hw, /*silu=*/true);
   conv1.forward_scratch(r, t1, n, h, w, t2, nullptr, 1, 1, 1, 1, 1);
   if (temb > 0) {
@@ -331,6 +389,8 @@ void ResnetBlock2D::forward(const Run& r, const float* x, int64_t n, int64_t h, 
       for (int64_t i = 0; i < n; ++i)
         add_channel_broadcast(t2 + i * c_out * hw, t2 + i * c_out * hw, tp, c_out, hw, r.pool);
   }
+  if (has_shortcut && t1_in_out)
+    conv_shortcut.forward(r, x, n, h, w, out, nullptr, 1, 0, 0, 0, 0);  // out = shortcut(x)
   norm2.forward(r, t2, t2, n, hw, /*silu=*/true);
   conv2.forward_scratch(r, t2, n, h, w, out, residual, 1, 1, 1, 1, 1);  // out = residual + h
 }
@@ -370,6 +430,12 @@ void Upsample2D::forward(const Run& r, const float* x, int64_t n, int64_t c, int
   float* t = r.alloc(n * c * oh * ow);
   if (!r.planning()) upsample_nearest(t, x, n * c, h, w, oh, ow, r.pool);
   conv.forward_scratch(r, t, n, oh, ow, out, nullptr, 1, 1, 1, 1, 1);
+}
+
+void Upsample2D::forward_in_place(const Run& r, float* x, int64_t n, int64_t c, int64_t h,
+                                  int64_t w, int64_t oh, int64_t ow, float* tmp) const {
+  if (!r.planning()) upsample_nearest(tmp, x, n * c, h, w, oh, ow, r.pool);
+  conv.forward_scratch(r, tmp, n, oh, ow, x, nullptr, 1, 1, 1, 1, 1);
 }
 
 // ---- VAE attention -----------------------------------------------------------------------------

@@ -17,8 +17,17 @@
 //
 // Precision::kBf16: weights rounded to bf16, every matmul/conv input rounded to bf16, fp32
 // accumulation; norms, softmax, residual adds and activations stay fp32. Linear layers use the
-// bf16 GEMM kernels; conv2d has no bf16 kernel yet, so convs run the fp32 kernel on bf16-rounded
-// operands (same numerics, no speed-up).
+// bf16 GEMM kernels, convs the bf16 conv kernel (ConvWeights with WeightType::kBf16).
+//
+// Memory while loading (see weights.h): a lazy WeightStore binds Params to the mapped file; each
+// module's pack() reads its tensors once (bf16 files pack straight from the mapping when the
+// precision is bf16; otherwise one transient fp32 copy of that tensor, a WidenedBuffer), then drops
+// the tensors' file pages. A loaded model holds only its packed weights and norm/bias vectors
+// (weight_bytes()).
+//
+// Arenas: forwards take an optional Arena. When given, it is reserved to the planned size (it only
+// grows) and reused, so a caller running many forwards of one input shape allocates once; its
+// stale contents never leak into results (every scratch value is written before it is read).
 #pragma once
 
 #include <cstdint>
@@ -64,6 +73,13 @@ struct Run {
   float* alloc(int64_t n) const { return ws->alloc(n); }
 };
 
+// The arena a forward runs on: `arena` (reserved to at least `bytes`; must be empty) or `local`.
+Arena& prepare_arena(Arena* arena, Arena& local, size_t bytes);
+
+// Bytes of packed weights and fp32 vectors a loaded module holds.
+size_t packed_bytes(const PackedWeights& w);
+size_t packed_bytes(const ConvWeights& w);
+
 // RAII stack frame over the run's workspace.
 struct ScratchFrame {
   Workspace* ws;
@@ -85,6 +101,7 @@ struct Linear {
   void init(int64_t in_features, int64_t out_features, bool with_bias);
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack(Precision p);
+  size_t bytes() const { return packed.bytes() + b.size() * sizeof(float); }
   // y [M, out] (row stride ldy) = x [M, in] (row stride ldx) W^T + b (+ residual [M, ldy], may
   // alias y). trans_x: x given as [in, M] (an NCHW plane: ldx = HW).
   void forward(const Run& r, int64_t m, const float* x, int64_t ldx, float* y, int64_t ldy,
@@ -97,6 +114,7 @@ struct FusedLinear {
   PackedWeights packed;
   std::vector<float> b;  // empty when no part has a bias
   void pack(const std::vector<const Linear*>& parts, Precision p);
+  size_t bytes() const { return packed.bytes() + b.size() * sizeof(float); }
   void forward(const Run& r, int64_t m, const float* x, int64_t ldx, float* y, int64_t ldy,
                bool trans_x = false) const;
 };
@@ -112,6 +130,7 @@ struct Conv2d {
   void init(int64_t cin, int64_t cout, int kernel, bool with_bias = true);
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack(Precision p);
+  size_t bytes() const { return packed_bytes(packed); }
   // y [N, Cout, OH, OW] = conv(x [N, Cin, H, W]) + b (+ residual, may alias y). Pads: top, left,
   // bottom, right. In bf16 mode x is rounded into a scratch copy (forward) or in place
   // (forward_scratch: x is the caller's scratch and may be modified).
@@ -136,6 +155,7 @@ struct GroupNorm {
   void init(int64_t channels, int num_groups, float epsilon);
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack();
+  size_t bytes() const { return (gamma.size() + beta.size()) * sizeof(float); }
   // dst, src [N, C, HW] (may alias); silu fuses the activation.
   void forward(const Run& r, float* dst, const float* src, int64_t n, int64_t hw, bool silu) const;
 };
@@ -149,6 +169,7 @@ struct LayerNorm {
   void init(int64_t features, float epsilon);
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack();
+  size_t bytes() const { return (gamma.size() + beta.size()) * sizeof(float); }
   void forward(const Run& r, float* dst, const float* src, int64_t m) const;  // [M, D]
 };
 
@@ -164,10 +185,16 @@ struct ResnetBlock2D {
   void init(int64_t cin, int64_t cout, int64_t temb_channels, int groups, float eps);
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack(Precision p);
+  size_t bytes() const {
+    return norm1.bytes() + norm2.bytes() + conv1.bytes() + conv2.bytes() + conv_shortcut.bytes() +
+           time_emb_proj.bytes();
+  }
   // x [N, Cin, H, W] -> out [N, Cout, H, W] (out must not alias x). temb_silu: SiLU(emb) [T],
-  // shared by all N items, or null when temb == 0.
+  // shared by all N items, or null when temb == 0. Scratch: GN1's output goes to `out` when
+  // Cin <= Cout (the shortcut is then computed after conv1), else in place over x when
+  // x_is_scratch (the caller no longer needs x), else to a Cin-sized temporary.
   void forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w,
-               const float* temb_silu, float* out) const;
+               const float* temb_silu, float* out, bool x_is_scratch = false) const;
 };
 
 // Stride-2 3x3 conv. UNet: symmetric pad 1 (out = ceil(n/2)); VAE encoder: pad right/bottom 1 only.
@@ -179,6 +206,7 @@ struct Downsample2D {
     conv.visit(join_name(prefix, "conv"), v);
   }
   void pack(Precision p) { conv.pack(p); }
+  size_t bytes() const { return conv.bytes(); }
   void out_size(int64_t h, int64_t w, int64_t* oh, int64_t* ow) const;
   void forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* out) const;
 };
@@ -192,8 +220,13 @@ struct Upsample2D {
     conv.visit(join_name(prefix, "conv"), v);
   }
   void pack(Precision p) { conv.pack(p); }
+  size_t bytes() const { return conv.bytes(); }
   void forward(const Run& r, const float* x, int64_t n, int64_t c, int64_t h, int64_t w, int64_t oh,
                int64_t ow, float* out) const;
+  // The same without a temporary: x is resized into `tmp`, then the conv writes back over `x`.
+  // Both buffers must hold [N, C, oh, ow]; the result is in x.
+  void forward_in_place(const Run& r, float* x, int64_t n, int64_t c, int64_t h, int64_t w,
+                        int64_t oh, int64_t ow, float* tmp) const;
 };
 
 // VAE mid-block attention: GN(eps) -> tokens -> single-head attention (q/k/v/out with biases,
@@ -207,6 +240,7 @@ struct VaeAttention {
   void init(int64_t channels, int groups, float eps);
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack(Precision p);
+  size_t bytes() const { return group_norm.bytes() + qkv.bytes() + to_out.bytes(); }
   void forward(const Run& r, float* x, int64_t n, int64_t hw) const;
 };
 

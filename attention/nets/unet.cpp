@@ -75,6 +75,13 @@ void BasicTransformerBlock::pack(Precision p) {
   ff_out.pack(p);
 }
 
+namespace {
+// Token rows per feed-forward chunk: the GEGLU projection [rows, 8C] and its output [rows, 4C] are
+// only ever this tall (instead of the whole M = V*HW), which keeps the 10-view case's scratch
+// small; 4096 rows still give the GEMM full-size tiles.
+constexpr int64_t kFeedForwardRows = 4096;
+}  // namespace
+
 void BasicTransformerBlock::forward(const Run& r, float* x, int64_t views, int64_t hw,
                                     const float* ctx, int64_t ctx_views, int64_t lc,
                                     const BlockSparseMask* mask) const {
@@ -82,9 +89,11 @@ void BasicTransformerBlock::forward(const Run& r, float* x, int64_t views, int64
   const int64_t dc = attn2.ctx_dim;
   const int heads = attn1.heads;
   ScratchFrame frame(r);
-  float* n = r.alloc(m * c);        // LayerNorm output, then attention output [M, C]
-  float* big = r.alloc(m * 8 * c);  // q|k|v [M, 3C], q2 [M, C], GEGLU projection [M, 8C]
-  float* g = r.alloc(m * 4 * c);    // GEGLU output [M, 4C]
+  const int64_t ff_rows = std::min(m, kFeedForwardRows);
+  float* n = r.alloc(m * c);                    // LayerNorm output, then attention output [M, C]
+  float* big = r.alloc(m * 3 * c);              // q|k|v [M, 3C], then q2 [M, C]
+  float* proj = r.alloc(ff_rows * 8 * c);       // GEGLU projection of a row chunk [rows, 8C]
+  float* g = r.alloc(ff_rows * 4 * c);          // GEGLU output of the chunk [rows, 4C]
   float* kv = r.alloc(ctx_views * lc * 2 * c);  // cross k|v [Vc*Lc, 2C]
 
   // attn1: joint self-attention over all views' tokens (view-major), optionally masked.
@@ -129,11 +138,14 @@ void BasicTransformerBlock::forward(const Run& r, float* x, int64_t views, int64
   }
   attn2.to_out.forward(r, m, n, c, x, c, x);
 
-  // Feed-forward: GEGLU (value = first half, gate = second half, exact-erf GELU).
+  // Feed-forward: GEGLU (value = first half, gate = second half, exact-erf GELU), by row chunks.
   norm3.forward(r, n, x, m);
-  ff_proj.forward(r, m, n, c, big, 8 * c);
-  if (!r.planning()) geglu(g, big, m, 4 * c, r.pool);
-  ff_out.forward(r, m, g, 4 * c, x, c, x);
+  for (int64_t r0 = 0; r0 < m; r0 += ff_rows) {
+    const int64_t rows = std::min(ff_rows, m - r0);
+    ff_proj.forward(r, rows, n + r0 * c, c, proj, 8 * c);    // [rows, 8C]
+    if (!r.planning()) geglu(g, proj, rows, 4 * c, r.pool);  // [rows, 4C]
+    ff_out.forward(r, rows, g, 4 * c, x + r0 * c, c, x + r0 * c);
+  }
 }
 
 void Transformer2D::init(int64_t channels, int64_t context_dim, int num_heads, int groups) {
@@ -181,6 +193,13 @@ void UNetBlock::visit(const std::string& prefix, ParamVisitor& v) {
     attentions[j].visit(join_name(prefix, "attentions." + std::to_string(j)), v);
   if (has_down) downsampler.visit(join_name(prefix, "downsamplers.0"), v);
   if (has_up) upsampler.visit(join_name(prefix, "upsamplers.0"), v);
+}
+
+size_t UNetBlock::bytes() const {
+  size_t n = downsampler.bytes() + upsampler.bytes();
+  for (const auto& rb : resnets) n += rb.bytes();
+  for (const auto& at : attentions) n += at.bytes();
+  return n;
 }
 
 void UNetBlock::pack(Precision p) {
@@ -295,11 +314,21 @@ Result<std::unique_ptr<UNet2DConditionModel>> UNet2DConditionModel::load(const s
   MACRO_ASSIGN_OR_RETURN(UNetConfig cfg, load_unet_config(folder + "/config.json"));
   MACRO_ASSIGN_OR_RETURN(std::string weights, component_weights_path(folder));
   MACRO_ASSIGN_OR_RETURN(auto model, build(cfg));
-  MACRO_ASSIGN_OR_RETURN(auto store, WeightStore::open(weights));
+  WeightStoreOptions opt;
+  opt.lazy = true;  // each tensor read once, when its module packs (see weights.h)
+  MACRO_ASSIGN_OR_RETURN(auto store, WeightStore::open(weights, opt));
   model->visit(*store);
   MACRO_TRY(store->finish());
   model->pack(precision);
   return model;
+}
+
+size_t UNet2DConditionModel::weight_bytes() const {
+  size_t n = conv_in.bytes() + conv_out.bytes() + time_linear_1.bytes() + time_linear_2.bytes() +
+             mid_block.bytes() + conv_norm_out.bytes();
+  for (const auto& b : down_blocks) n += b.bytes();
+  for (const auto& b : up_blocks) n += b.bytes();
+  return n;
 }
 
 std::vector<std::pair<int64_t, int64_t>> UNet2DConditionModel::level_grids(int64_t h,
@@ -426,7 +455,7 @@ void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t vi
       }
       float* o = hbuf[which];
       which ^= 1;
-      b.resnets[j].forward(r, cat, views, hh, ww, emb, o);
+      b.resnets[j].forward(r, cat, views, hh, ww, emb, o, /*x_is_scratch=*/true);
       cc = b.c_out;
       if (!b.attentions.empty())
         b.attentions[j].forward(r, o, views, hw, ctx, ctx_views, lc, mask_at(level));
@@ -436,10 +465,8 @@ void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t vi
       // diffusers upsamples to the next skip's size (forward_upsample_size for odd latents).
       const int64_t oh = skips.empty() ? 2 * hh : skips.back().h;
       const int64_t ow = skips.empty() ? 2 * ww : skips.back().w;
-      float* o = hbuf[which];
-      which ^= 1;
-      b.upsampler.forward(r, cur, views, cc, hh, ww, oh, ow, o);
-      cur = o;
+      MACRO_CHECK(cur == hbuf[which ^ 1]);  // both buffers hold max_h: resize into the other one
+      b.upsampler.forward_in_place(r, cur, views, cc, hh, ww, oh, ow, hbuf[which]);
       hh = oh, ww = ow;
     }
     emit("up_blocks." + std::to_string(i), cur, cc, hh, ww);
@@ -461,7 +488,8 @@ size_t UNet2DConditionModel::workspace_bytes(int64_t views, int64_t h, int64_t w
 
 Result<Tensor> UNet2DConditionModel::forward(const TensorView& z, float timestep,
                                              const TensorView& ctx, const UNetMasks& masks,
-                                             ThreadPool* pool, const UNetTap& tap) const {
+                                             ThreadPool* pool, const UNetTap& tap,
+                                             Arena* arena) const {
   if (z.dtype != DType::kF32 || z.rank != 4 || !z.is_contiguous() || z.dim(1) != cfg_.in_channels ||
       z.dim(0) < 1 || z.dim(2) < 1 || z.dim(3) < 1)
     return Status::error("unet: z: expected contiguous F32 [V," + std::to_string(cfg_.in_channels) +
@@ -492,10 +520,12 @@ Result<Tensor> UNet2DConditionModel::forward(const TensorView& z, float timestep
   Workspace plan;
   forward_impl(Run{&plan, pool, precision_}, nullptr, views, h, w, timestep, nullptr, ctx.dim(0),
                ctx.dim(1), masks, nullptr, tap);
-  Arena arena(plan.peak());
-  Workspace ws(&arena);
+  Arena local;
+  Arena& a = prepare_arena(arena, local, plan.peak());
+  Workspace ws(&a);
   forward_impl(Run{&ws, pool, precision_}, z.f32(), views, h, w, timestep, ctx.f32(), ctx.dim(0),
                ctx.dim(1), masks, eps.f32(), tap);
+  a.reset();
   return eps;
 }
 

@@ -41,6 +41,7 @@ struct CrossAttention {
   void init(int64_t channels, int64_t context_dim, int num_heads, bool self_attention);
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack(Precision p);
+  size_t bytes() const { return qkv.bytes() + to_q.bytes() + to_out.bytes(); }
 };
 
 struct BasicTransformerBlock {
@@ -52,6 +53,10 @@ struct BasicTransformerBlock {
   void init(int64_t channels, int64_t context_dim, int num_heads);
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack(Precision p);
+  size_t bytes() const {
+    return norm1.bytes() + norm2.bytes() + norm3.bytes() + attn1.bytes() + attn2.bytes() +
+           ff_proj.bytes() + ff_out.bytes();
+  }
   // x [V*HW, C] in place; ctx [Vc, Lc, Dc] with Vc = V or 1 (shared by all views).
   void forward(const Run& r, float* x, int64_t views, int64_t hw, const float* ctx,
                int64_t ctx_views, int64_t lc, const BlockSparseMask* mask) const;
@@ -66,6 +71,7 @@ struct Transformer2D {
   void init(int64_t channels, int64_t context_dim, int num_heads, int groups);
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack(Precision p);
+  size_t bytes() const { return norm.bytes() + proj_in.bytes() + proj_out.bytes() + block.bytes(); }
   // x [V, C, HW] in place.
   void forward(const Run& r, float* x, int64_t views, int64_t hw, const float* ctx,
                int64_t ctx_views, int64_t lc, const BlockSparseMask* mask) const;
@@ -81,6 +87,7 @@ struct UNetBlock {  // down, mid or up block
 
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack(Precision p);
+  size_t bytes() const;
 };
 
 // Per-level attn1 masks (null entries: unmasked). Pointers must outlive the forward.
@@ -100,6 +107,8 @@ class UNet2DConditionModel {
   static Result<std::unique_ptr<UNet2DConditionModel>> build(const UNetConfig& cfg);
   void visit(ParamVisitor& v);
   void pack(Precision p);
+  // Bytes the loaded model holds: packed weights plus fp32 norm/bias vectors.
+  size_t weight_bytes() const;
 
   const UNetConfig& config() const { return cfg_; }
   Precision precision() const { return precision_; }
@@ -109,8 +118,10 @@ class UNet2DConditionModel {
 
   // z [V, Cin, h, w], ctx [V or 1, Lc, Dc], one timestep for all views -> eps [V, Cout, h, w].
   // Shapes and masks are validated (errors name `what` and the argument).
+  // `arena` (optional, empty): scratch reused across calls (grown to the planned size if needed).
   Result<Tensor> forward(const TensorView& z, float timestep, const TensorView& ctx,
-                         const UNetMasks& masks, ThreadPool* pool, const UNetTap& tap = {}) const;
+                         const UNetMasks& masks, ThreadPool* pool, const UNetTap& tap = {},
+                         Arena* arena = nullptr) const;
   // Scratch bytes one forward takes (the planned arena size) for V views of a latent h x w.
   size_t workspace_bytes(int64_t views, int64_t h, int64_t w, int64_t ctx_tokens = 77) const;
 

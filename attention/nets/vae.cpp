@@ -152,12 +152,23 @@ void DifixVae::pack(Precision p) {
   dec_conv_out.pack(p);
 }
 
+size_t DifixVae::weight_bytes() const {
+  size_t n = enc_conv_in.bytes() + enc_conv_out.bytes() + quant_conv.bytes() + enc_mid.bytes() +
+             enc_norm_out.bytes() + post_quant_conv.bytes() + dec_conv_in.bytes() +
+             dec_conv_out.bytes() + dec_mid.bytes() + dec_norm_out.bytes();
+  for (const auto& b : down_blocks) n += b.bytes();
+  for (const auto& b : up_blocks) n += b.bytes();
+  for (const auto& s : skip_convs) n += s.bytes();
+  return n;
+}
+
 Result<std::unique_ptr<DifixVae>> DifixVae::load(const std::string& folder, Precision precision) {
   MACRO_ASSIGN_OR_RETURN(VaeConfig cfg, load_vae_config(folder + "/config.json"));
   MACRO_ASSIGN_OR_RETURN(std::string weights, component_weights_path(folder));
   MACRO_ASSIGN_OR_RETURN(auto model, build(cfg));
   WeightStoreOptions opt;
   opt.lora_scale = cfg.lora_rank > 0 ? cfg.lora_scale : 0.0;
+  opt.lazy = true;  // each tensor read once, when its module packs (LoRA merged then)
   MACRO_ASSIGN_OR_RETURN(auto store, WeightStore::open(weights, opt));
   model->visit(*store);
   MACRO_TRY(store->finish());
@@ -226,8 +237,8 @@ size_t DifixVae::decode_workspace_bytes(int64_t h, int64_t w) const {
   return plan.peak();
 }
 
-Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skips,
-                                     ThreadPool* pool) const {
+Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skips, ThreadPool* pool,
+                                     Arena* arena) const {
   const int64_t f = downscale();
   if (images.dtype != DType::kF32 || images.rank != 4 || !images.is_contiguous() ||
       images.dim(1) != cfg_.in_channels || images.dim(0) < 1 || images.dim(2) < f ||
@@ -262,13 +273,14 @@ Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skip
   Workspace plan;
   std::vector<float*> none(size_t(levels()), nullptr);
   encode_impl(Run{&plan, pool, precision_}, nullptr, H, W, nullptr, none);
-  Arena arena(plan.peak());
+  Arena local;
+  Arena& a = prepare_arena(arena, local, plan.peak());
   const int64_t in_img = cfg_.in_channels * H * W;
   for (int64_t img = 0; img < n; ++img) {
-    arena.reset();
-    Workspace ws(&arena);
+    Workspace ws(&a);
     encode_impl(Run{&ws, pool, precision_}, images.f32() + img * in_img, H, W,
                 enc.moments.f32() + img * 2 * lat * h * w, skip_ptrs(img));
+    a.reset();
   }
   // z = scaling * mean (first L channels of the moments).
   const float s = float(cfg_.scaling_factor);
@@ -316,14 +328,13 @@ void DifixVae::decode_impl(const Run& r, const float* z, int64_t h, int64_t w,
     }
     for (const ResnetBlock2D& rb : b.resnets) {
       float* o = other(cur);
-      rb.forward(r, cur, 1, hh, ww, nullptr, o);
+      rb.forward(r, cur, 1, hh, ww, nullptr, o, /*x_is_scratch=*/true);
       cur = o;
       cc = rb.c_out;
     }
-    if (b.has_up) {
-      float* o = other(cur);
-      b.upsampler.forward(r, cur, 1, cc, hh, ww, 2 * hh, 2 * ww, o);
-      cur = o;
+    if (b.has_up) {  // both ping-pong buffers hold max_act: resize into the other one
+      MACRO_CHECK(cur == buf[0] || cur == buf[1]);
+      b.upsampler.forward_in_place(r, cur, 1, cc, hh, ww, 2 * hh, 2 * ww, other(cur));
       hh *= 2, ww *= 2;
     }
   }
@@ -333,7 +344,7 @@ void DifixVae::decode_impl(const Run& r, const float* z, int64_t h, int64_t w,
 }
 
 Result<Tensor> DifixVae::decode(const TensorView& z, const std::vector<TensorView>& skips,
-                                ThreadPool* pool) const {
+                                ThreadPool* pool, Arena* arena) const {
   const int64_t lat = cfg_.latent_channels, f = downscale();
   if (z.dtype != DType::kF32 || z.rank != 4 || !z.is_contiguous() || z.dim(0) != 1 ||
       z.dim(1) != lat || z.dim(2) < 1 || z.dim(3) < 1)
@@ -357,9 +368,11 @@ Result<Tensor> DifixVae::decode(const TensorView& z, const std::vector<TensorVie
   Tensor out = Tensor::f32({1, cfg_.out_channels, h * f, w * f});
   Workspace plan;
   decode_impl(Run{&plan, pool, precision_}, nullptr, h, w, ptrs, nullptr);
-  Arena arena(plan.peak());
-  Workspace ws(&arena);
+  Arena local;
+  Arena& a = prepare_arena(arena, local, plan.peak());
+  Workspace ws(&a);
   decode_impl(Run{&ws, pool, precision_}, z.f32(), h, w, ptrs, out.f32());
+  a.reset();
   return out;
 }
 

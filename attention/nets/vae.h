@@ -33,6 +33,11 @@ struct VaeBlock {
   int64_t c_in = 0, c_out = 0;
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack(Precision p);
+  size_t bytes() const {
+    size_t n = downsampler.bytes() + upsampler.bytes();
+    for (const auto& rb : resnets) n += rb.bytes();
+    return n;
+  }
 };
 
 struct VaeMidBlock {
@@ -41,6 +46,7 @@ struct VaeMidBlock {
   void init(int64_t c, int groups);
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack(Precision p);
+  size_t bytes() const { return resnet0.bytes() + resnet1.bytes() + attention.bytes(); }
   // x [N, C, H, W] -> out (a and out scratch-sized like x; x is left unchanged).
   void forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* a,
                float* out) const;
@@ -58,6 +64,8 @@ class DifixVae {
   static Result<std::unique_ptr<DifixVae>> build(const VaeConfig& cfg);
   void visit(ParamVisitor& v);
   void pack(Precision p);
+  // Bytes the loaded model holds: packed weights plus fp32 norm/bias vectors.
+  size_t weight_bytes() const;
 
   const VaeConfig& config() const { return cfg_; }
   int levels() const { return int(cfg_.block_out_channels.size()); }
@@ -66,12 +74,14 @@ class DifixVae {
   int64_t skip_channels(int i) const;
 
   // images [N, Cin, H, W] (H, W multiples of downscale()). Skips are kept for the first
-  // `keep_skips` images (0..N). Images are encoded one at a time (the convs are threaded inside).
-  Result<VaeEncoding> encode(const TensorView& images, int64_t keep_skips, ThreadPool* pool) const;
+  // `keep_skips` images (0..N). Images are encoded one at a time (the convs are threaded inside),
+  // all on one arena: `arena` (optional, empty; reused across calls, grown if needed) or a local.
+  Result<VaeEncoding> encode(const TensorView& images, int64_t keep_skips, ThreadPool* pool,
+                             Arena* arena = nullptr) const;
   // z [1, L, h, w] with that image's skips S_i [1, C_i, H_i, W_i] (views of any encoding with
   // matching sizes) -> image [1, Cout, H, W], not clamped.
-  Result<Tensor> decode(const TensorView& z, const std::vector<TensorView>& skips,
-                        ThreadPool* pool) const;
+  Result<Tensor> decode(const TensorView& z, const std::vector<TensorView>& skips, ThreadPool* pool,
+                        Arena* arena = nullptr) const;
   // Scratch bytes of one image's encode / decode at H x W pixels (the planned arena sizes).
   size_t encode_workspace_bytes(int64_t h, int64_t w) const;
   size_t decode_workspace_bytes(int64_t h, int64_t w) const;

@@ -1,6 +1,10 @@
 #include "attention/nets/weights.h"
 
+#include <sys/mman.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <atomic>
 #include <cstring>
 
 #include "attention/runtime/half.h"
@@ -9,14 +13,17 @@ namespace macro::nets {
 namespace {
 
 bool ends_with(const std::string& s, const std::string& suffix) {
-  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+  return s.size() >= suffix.size() &&
+         s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
 // Copy any supported dtype to fp32.
 Status to_f32(const TensorEntry& e, float* out) {
   const int64_t n = e.numel();
   switch (e.dtype) {
-    case DType::kF32: std::memcpy(out, e.data, size_t(n) * 4); return Status::ok();
+    case DType::kF32:
+      std::memcpy(out, e.data, size_t(n) * 4);
+      return Status::ok();
     case DType::kBF16:
       for (int64_t i = 0; i < n; ++i) {
         uint16_t h;
@@ -46,8 +53,10 @@ Status to_f32(const TensorEntry& e, float* out) {
 
 // Legacy VAE attention names -> current ones.
 std::string modern_name(const std::string& name, bool* renamed) {
-  static const std::pair<const char*, const char*> kRenames[] = {
-      {".query.", ".to_q."}, {".key.", ".to_k."}, {".value.", ".to_v."}, {".proj_attn.", ".to_out.0."}};
+  static const std::pair<const char*, const char*> kRenames[] = {{".query.", ".to_q."},
+                                                                 {".key.", ".to_k."},
+                                                                 {".value.", ".to_v."},
+                                                                 {".proj_attn.", ".to_out.0."}};
   for (const auto& [from, to] : kRenames) {
     size_t p = name.find(from);
     if (p != std::string::npos && name.find("attentions.") != std::string::npos) {
@@ -59,7 +68,96 @@ std::string modern_name(const std::string& name, bool* renamed) {
   return name;
 }
 
+bool is_float_dtype(DType d) {
+  return d == DType::kF32 || d == DType::kBF16 || d == DType::kF16 || d == DType::kF64;
+}
+
+// The parameter's fp32 values (converted, LoRA merged) into out[numel]; dtypes were checked when
+// the source was bound.
+void widen(const WeightSource& src, float* out) {
+  const TensorEntry& e = *src.entry;
+  MACRO_CHECK(to_f32(e, out).is_ok());
+  if (!src.lora_a) return;
+  // W[o, rest] += scale * sum_r B[o, r] * A[r, rest]
+  const int64_t n_out = e.shape[0], r = src.lora_a->shape[0];
+  const int64_t rest = e.numel() / n_out;
+  std::vector<float> A(size_t(src.lora_a->numel())), B(size_t(src.lora_b->numel()));
+  MACRO_CHECK(to_f32(*src.lora_a, A.data()).is_ok());
+  MACRO_CHECK(to_f32(*src.lora_b, B.data()).is_ok());
+  for (int64_t o = 0; o < n_out; ++o) {
+    for (int64_t j = 0; j < rest; ++j) {
+      double acc = 0;
+      for (int64_t q = 0; q < r; ++q)
+        acc += double(B[size_t(o * r + q)]) * double(A[size_t(q * rest + j)]);
+      out[o * rest + j] = float(double(out[o * rest + j]) + src.lora_scale * acc);
+    }
+  }
+}
+
+std::atomic<size_t> g_widened_live{0}, g_widened_peak{0};
+
 }  // namespace
+
+// ---- reading bound parameters ------------------------------------------------------------------
+
+const uint16_t* param_bf16(const Param& p) {
+  if (!p.source || p.source->lora_a) return nullptr;
+  const TensorEntry& e = *p.source->entry;
+  if (e.dtype != DType::kBF16 || reinterpret_cast<uintptr_t>(e.data) % 2 != 0) return nullptr;
+  return reinterpret_cast<const uint16_t*>(e.data);
+}
+
+void read_param_f32(const Param& p, float* dst) {
+  MACRO_CHECK(p.loaded());
+  if (p.data) {
+    std::memcpy(dst, p.data, size_t(p.numel()) * sizeof(float));
+    return;
+  }
+  MACRO_CHECK(p.source->entry->numel() == p.numel());
+  widen(*p.source, dst);
+}
+
+void release_param(const Param& p) {
+  if (!p.source) return;
+  static const uintptr_t page = uintptr_t(sysconf(_SC_PAGESIZE));
+  for (const TensorEntry* e : {p.source->entry, p.source->lora_a, p.source->lora_b}) {
+    if (!e) continue;
+    const uintptr_t b = reinterpret_cast<uintptr_t>(e->data), end = b + e->bytes;
+    const uintptr_t lo = (b + page - 1) / page * page, hi = end / page * page;
+    // The mapping is read-only and private: dropped pages are re-read from the file if touched.
+    if (hi > lo) madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_DONTNEED);
+  }
+}
+
+WidenedBuffer::WidenedBuffer(int64_t floats) : v_(size_t(floats)) {
+  const size_t live = g_widened_live += v_.size() * sizeof(float);
+  size_t peak = g_widened_peak.load();
+  while (live > peak && !g_widened_peak.compare_exchange_weak(peak, live)) {
+  }
+}
+
+WidenedBuffer::~WidenedBuffer() {
+  g_widened_live -= v_.size() * sizeof(float);
+}
+
+WidenStats widen_stats() {
+  return {g_widened_live.load(), g_widened_peak.load()};
+}
+
+void reset_widen_peak() {
+  g_widened_peak = g_widened_live.load();
+}
+
+ParamF32::ParamF32(const Param& p) {
+  MACRO_CHECK(p.loaded());
+  if (p.data) {
+    ptr_ = p.data;
+    return;
+  }
+  buf_ = std::make_unique<WidenedBuffer>(p.numel());
+  read_param_f32(p, buf_->data());
+  ptr_ = buf_->data();
+}
 
 std::string shape_string(const std::vector<int64_t>& s) {
   std::string t = "[";
@@ -80,6 +178,7 @@ Result<std::unique_ptr<WeightStore>> WeightStore::open(const std::string& path,
 
 Status WeightStore::prepare(const WeightStoreOptions& options) {
   lora_scale_ = options.lora_scale;
+  lazy_ = options.lazy;
   const std::string& path = file_.path();
   // LoRA triples first: group by module.
   std::map<std::string, Source> lora_modules;
@@ -102,7 +201,8 @@ Status WeightStore::prepare(const WeightStoreOptions& options) {
     if (a_at != std::string::npos || b_at != std::string::npos) {
       std::string module = name.substr(0, a_at != std::string::npos ? a_at : b_at);
       if (!ends_with(name, ".weight"))
-        return Status::error(path + ": tensor '" + name + "': expected a LoRA '.weight', found another leaf");
+        return Status::error(path + ": tensor '" + name +
+                             "': expected a LoRA '.weight', found another leaf");
       Source& m = lora_modules[module];
       (a_at != std::string::npos ? m.lora_a : m.lora_b) = e;
       m.file_names.push_back(name);
@@ -111,7 +211,8 @@ Status WeightStore::prepare(const WeightStoreOptions& options) {
     bool renamed = false;
     std::string canonical = modern_name(name, &renamed);
     if (sources_.count(canonical))
-      return Status::error(path + ": tensor '" + name + "': a second tensor maps to '" + canonical + "'");
+      return Status::error(path + ": tensor '" + name + "': a second tensor maps to '" + canonical +
+                           "'");
     Source& s = sources_[canonical];
     s.entry = e;
     s.shape = e->shape;
@@ -128,21 +229,25 @@ Status WeightStore::prepare(const WeightStoreOptions& options) {
       return Status::error(path + ": LoRA module '" + module + "': expected '" + module +
                            ".base_layer.weight', found only the adapter");
     if (!m.lora_a || !m.lora_b)
-      return Status::error(path + ": LoRA module '" + module + "': expected both lora_A and lora_B, found " +
+      return Status::error(path + ": LoRA module '" + module +
+                           "': expected both lora_A and lora_B, found " +
                            (m.lora_a ? "only lora_A" : "only lora_B"));
     if (lora_scale_ <= 0)
-      return Status::error(path + ": tensor '" + m.lora_a->name +
-                           "': unmerged LoRA found but no LoRA scale is configured (lora_rank in config.json)");
+      return Status::error(
+          path + ": tensor '" + m.lora_a->name +
+          "': unmerged LoRA found but no LoRA scale is configured (lora_rank in config.json)");
     const auto& W = m.entry->shape;
     const auto& A = m.lora_a->shape;
     const auto& B = m.lora_b->shape;
-    // A: [r, in, kh, kw] or [r, in]; B: [out, r, 1, 1] or [out, r]; W: [out, in, kh, kw] or [out, in].
+    // A: [r, in, kh, kw] or [r, in]; B: [out, r, 1, 1] or [out, r]; W: [out, in, kh, kw] or [out,
+    // in].
     bool ok = A.size() == W.size() && B.size() == W.size() && A.size() >= 2 && B[0] == W[0] &&
               A[0] == B[1] && A[1] == W[1];
     for (size_t i = 2; ok && i < W.size(); ++i) ok = A[i] == W[i] && B[i] == 1;
     if (!ok)
       return Status::error(path + ": LoRA module '" + module + "': shapes do not compose: base " +
-                           shape_string(W) + ", lora_A " + shape_string(A) + ", lora_B " + shape_string(B));
+                           shape_string(W) + ", lora_A " + shape_string(A) + ", lora_B " +
+                           shape_string(B));
     Source& s = sources_[wname];
     s.lora_a = m.lora_a;
     s.lora_b = m.lora_b;
@@ -153,27 +258,18 @@ Status WeightStore::prepare(const WeightStoreOptions& options) {
 
 Result<const float*> WeightStore::materialise(const std::string& name, const Source& src) {
   const TensorEntry& e = *src.entry;
+  for (const TensorEntry* t : {src.entry, src.lora_a, src.lora_b})
+    if (t && !is_float_dtype(t->dtype))
+      return Status::error(file_.path() + ": tensor '" + t->name +
+                           "': expected a floating-point dtype, found " + dtype_name(t->dtype));
   if (e.dtype == DType::kF32 && !src.lora_a && reinterpret_cast<uintptr_t>(e.data) % 4 == 0)
     return reinterpret_cast<const float*>(e.data);
+  if (lazy_) return nullptr;  // read when the module packs it
+  (void)name;
   auto buf = std::make_unique<std::vector<float>>(size_t(e.numel()));
-  MACRO_TRY(to_f32(e, buf->data()).with_context(file_.path()));
-  if (src.lora_a) {
-    // W[o, rest] += scale * sum_r B[o, r] * A[r, rest]
-    const int64_t out = e.shape[0], r = src.lora_a->shape[0];
-    const int64_t rest = e.numel() / out;
-    std::vector<float> A(size_t(src.lora_a->numel())), B(size_t(src.lora_b->numel()));
-    MACRO_TRY(to_f32(*src.lora_a, A.data()).with_context(file_.path()));
-    MACRO_TRY(to_f32(*src.lora_b, B.data()).with_context(file_.path()));
-    float* W = buf->data();
-    for (int64_t o = 0; o < out; ++o) {
-      for (int64_t j = 0; j < rest; ++j) {
-        double acc = 0;
-        for (int64_t q = 0; q < r; ++q) acc += double(B[size_t(o * r + q)]) * double(A[size_t(q * rest + j)]);
-        W[o * rest + j] = float(double(W[o * rest + j]) + lora_scale_ * acc);
-      }
-    }
-    ++lora_merged_;
-  }
+  widen(src.lazy, buf->data());
+  if (src.lora_a) ++lora_merged_;
+  owned_bytes_ += buf->size() * sizeof(float);
   owned_.push_back(std::move(buf));
   return owned_.back()->data();
 }
@@ -190,19 +286,24 @@ void WeightStore::param(const std::string& name, Param& p, const std::vector<int
                          shape_string(it->second.shape));
     return;
   }
-  auto data = materialise(name, it->second);
+  Source& src = it->second;
+  src.lazy = WeightSource{src.entry, src.lora_a, src.lora_b, lora_scale_};
+  auto data = materialise(name, src);
   if (!data) {
     misshaped_.push_back(name + ": " + data.status().message());
     return;
   }
   p.data = *data;
+  p.source = lazy_ ? &src.lazy : nullptr;
+  if (lazy_ && src.lora_a) ++lora_merged_;
   p.shape = shape;
 }
 
 Status WeightStore::finish() const {
   std::vector<std::string> unused;
   for (const auto& [name, src] : sources_)
-    if (!used_.count(name)) unused.push_back(src.file_names.empty() ? name : src.file_names.front());
+    if (!used_.count(name))
+      unused.push_back(src.file_names.empty() ? name : src.file_names.front());
   if (missing_.empty() && misshaped_.empty() && unused.empty()) return Status::ok();
   std::string msg = file_.path() + ": checkpoint does not match the model config:";
   auto list = [&](const char* what, const std::vector<std::string>& items) {

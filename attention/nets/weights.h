@@ -2,12 +2,13 @@
 //
 // Modules (attention/nets/*) mirror the diffusers tensor names and expose
 //   void visit(const std::string& prefix, ParamVisitor& v)
-// which calls v.param("<prefix>.<name>", param, {expected shape}) for each of their tensors. Loading
-// is a walk: WeightStore::bind() fills each Param and finish() reports, by name, every tensor that
-// was missing, mis-shaped, or present in the file but never used.
+// which calls v.param("<prefix>.<name>", param, {expected shape}) for each of their tensors.
+// Loading is a walk: WeightStore::bind() fills each Param and finish() reports, by name, every
+// tensor that was missing, mis-shaped, or present in the file but never used.
 //
 // Name conversions (one table, here):
-//  * PEFT LoRA left unmerged (Difix VAE): `M.base_layer.{weight,bias}` + `M.lora_A.<adapter>.weight`
+//  * PEFT LoRA left unmerged (Difix VAE): `M.base_layer.{weight,bias}` +
+//  `M.lora_A.<adapter>.weight`
 //    [r, in(, kh, kw)] + `M.lora_B.<adapter>.weight` [out, r(, 1, 1)] are presented as `M.weight` =
 //    base + scale * B @ A and `M.bias`. The scale comes from the caller (VaeConfig::lora_scale).
 //  * Older VAE attention names: `query/key/value/proj_attn` -> `to_q/to_k/to_v/to_out.0`, their
@@ -27,17 +28,70 @@
 
 namespace macro::nets {
 
-// One parameter tensor, fp32, row-major. `data` points into the mapped file (F32 entries, zero copy)
-// or into storage owned by the WeightStore (converted or merged entries); the store must outlive it.
+class WeightStore;
+struct WeightSource;
+
+// One parameter tensor, row-major, as bound by a ParamVisitor. Two forms:
+//  * `data`: fp32 values the module may read directly. Set by visitors that own fp32 values
+//  (tests),
+//    by a WeightStore for F32 file entries (zero copy into the mapping), and for every entry when
+//    the store materialises (WeightStoreOptions::lazy == false: converted copies owned by the
+//    store).
+//  * `source`: the checkpoint entry behind the parameter (lazy stores). Modules then read it once,
+//    in the form they pack (param_bf16 / read_param_f32 below), and release its file pages.
+// Either form requires the store to outlive the module's pack().
 struct Param {
   const float* data = nullptr;
+  const WeightSource* source = nullptr;
   std::vector<int64_t> shape;
   int64_t numel() const {
     int64_t n = 1;
     for (int64_t d : shape) n *= d;
     return n;
   }
-  bool loaded() const { return data != nullptr; }
+  bool loaded() const { return data != nullptr || source != nullptr; }
+};
+
+// ---- reading bound parameters while packing ----------------------------------------------------
+// The file's bf16 values with no conversion (a BF16 entry, aligned, no LoRA merge), or null.
+const uint16_t* param_bf16(const Param& p);
+// The parameter as fp32 into dst[numel] (widening F16/BF16/F64, merging LoRA). Counted in
+// widen_stats() while the caller's buffer lives only if it is a WidenedBuffer.
+void read_param_f32(const Param& p, float* dst);
+// Drop the resident file pages behind a lazily bound parameter (its values were packed); a later
+// read faults them back in from the file. No-op for `data`-only parameters.
+void release_param(const Param& p);
+
+// A transient fp32 copy of parameters while one module packs: the process-wide live and peak
+// bytes of these are what loading holds beyond the packed weights (tests check the peak stays at
+// one module's tensors, never a whole checkpoint).
+class WidenedBuffer {
+ public:
+  explicit WidenedBuffer(int64_t floats);
+  ~WidenedBuffer();
+  WidenedBuffer(const WidenedBuffer&) = delete;
+  WidenedBuffer& operator=(const WidenedBuffer&) = delete;
+  float* data() { return v_.data(); }
+  int64_t size() const { return int64_t(v_.size()); }
+
+ private:
+  std::vector<float> v_;
+};
+struct WidenStats {
+  size_t live_bytes = 0, peak_bytes = 0;
+};
+WidenStats widen_stats();
+void reset_widen_peak();  // peak := live
+
+// fp32 view of a parameter: `data` when bound to fp32, else widened into a WidenedBuffer.
+class ParamF32 {
+ public:
+  explicit ParamF32(const Param& p);
+  const float* data() const { return ptr_; }
+
+ private:
+  std::unique_ptr<WidenedBuffer> buf_;
+  const float* ptr_ = nullptr;
 };
 
 class ParamVisitor {
@@ -47,8 +101,20 @@ class ParamVisitor {
 };
 
 struct WeightStoreOptions {
-  double lora_scale = 0.0;  // > 0: merge PEFT LoRA triples with this scale (alpha / r)
+  double lora_scale = 0.0;        // > 0: merge PEFT LoRA triples with this scale (alpha / r)
   std::set<std::string> ignored;  // names present in files that are not parameters
+  // false: every bound Param gets fp32 `data` (converted/merged copies owned by the store).
+  // true: Params carry their `source` (plus zero-copy `data` for aligned F32 entries without a
+  // merge); nothing is converted until a module packs it. The networks load this way.
+  bool lazy = false;
+};
+
+// What a lazily bound Param points at (owned by the WeightStore).
+struct WeightSource {
+  const TensorEntry* entry = nullptr;   // plain tensor (or the LoRA base) in the mapped file
+  const TensorEntry* lora_a = nullptr;  // LoRA merge: base + scale * B @ A
+  const TensorEntry* lora_b = nullptr;
+  double lora_scale = 0.0;
 };
 
 class WeightStore : public ParamVisitor {
@@ -68,19 +134,22 @@ class WeightStore : public ParamVisitor {
   std::vector<std::string> names() const;
   const std::string& path() const { return file_.path(); }
   size_t lora_merged() const { return lora_merged_; }
+  // Bytes of fp32 copies the store owns (materialised entries); 0 for a lazy store.
+  size_t owned_bytes() const { return owned_bytes_; }
 
  private:
   WeightStore() = default;
   Status prepare(const WeightStoreOptions& options);
 
   struct Source {
-    const TensorEntry* entry = nullptr;     // plain tensor in the file
-    std::vector<int64_t> shape;             // as presented (after renames/squeezes)
-    bool legacy_squeeze = false;            // 1x1-conv-shaped legacy Linear
+    WeightSource lazy;                   // what lazily bound Params point at
+    const TensorEntry* entry = nullptr;  // plain tensor in the file
+    std::vector<int64_t> shape;          // as presented (after renames/squeezes)
+    bool legacy_squeeze = false;         // 1x1-conv-shaped legacy Linear
     // LoRA merge: base + scale * B @ A
     const TensorEntry* lora_a = nullptr;
     const TensorEntry* lora_b = nullptr;
-    std::vector<std::string> file_names;    // the file's own names behind this entry
+    std::vector<std::string> file_names;  // the file's own names behind this entry
   };
   Result<const float*> materialise(const std::string& name, const Source& src);
 
@@ -91,6 +160,8 @@ class WeightStore : public ParamVisitor {
   std::vector<std::string> missing_, misshaped_;
   std::vector<std::unique_ptr<std::vector<float>>> owned_;
   size_t lora_merged_ = 0;
+  size_t owned_bytes_ = 0;
+  bool lazy_ = false;
 };
 
 std::string shape_string(const std::vector<int64_t>& shape);

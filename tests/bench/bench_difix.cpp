@@ -8,16 +8,21 @@
 // same thread count, probed before the stages; the step row uses the mean of the probes before and
 // after; the bf16 dot-product peak, about twice the FMA peak, is printed beside it). Peak RSS is
 // getrusage's ru_maxrss: the process high-water mark so far (weights load + every run before); run
-// one precision per process
-// (--precision f32 / bf16) for a per-precision figure. Medians of --reps runs (default 1, no
-// warm-up: one full-size step is tens of seconds).
+// one precision per process (--precision f32 / bf16) for a per-precision figure. Beside it, per
+// phase, the kernel's VmHWM reset between phases (/proc/self/clear_refs 5): the peak while loading
+// and the peak while running the stages, and the bytes the networks hold (packed weights) and the
+// one scratch arena every stage shares (reserved once per input shape, as DifixPipeline::step
+// does). Medians of --reps runs (default 1, no warm-up: one full-size step is tens of seconds;
+// --warmup adds one unmeasured run per stage first, for the steady state of repeated steps).
 //
 //   bench difix [--size 512|960|all] [--stage all|encode|unet|decode] [--precision f32|bf16|both]
-//               [--threads 1,2] [--reps R] [--dir DIR] [--storage bf16|f32] [--golden DIR]
+//               [--threads 1,2] [--reps R] [--warmup] [--views V] [--dir DIR]
+//               [--storage bf16|f32] [--golden DIR]
+// --views V: V views (default 2; the MACRO case runs 10 at 960x536).
 //
 // The synthetic folder is written once (default <bench dir>/bench-data/difix-synthetic-<storage>)
-// and reused; --storage bf16 (default) halves it (U-Net 1.7 GB instead of 3.5 GB; weights are
-// widened to fp32 at load, which only changes the random values, not the work).
+// and reused; --storage bf16 (default) halves it (U-Net 1.7 GB instead of 3.5 GB; a bf16 run packs
+// it without widening, an fp32 run widens one tensor at a time).
 #include <sys/resource.h>
 #include <time.h>
 #include <unistd.h>
@@ -46,10 +51,33 @@ namespace {
 namespace fs = std::filesystem;
 using nets::Precision;
 
+constexpr double kGiB = 1024.0 * 1024.0 * 1024.0;
+
 double peak_rss_gb() {
   rusage u{};
   getrusage(RUSAGE_SELF, &u);
   return double(u.ru_maxrss) / (1024.0 * 1024.0);  // ru_maxrss is in KiB on Linux
+}
+
+// A "VmHWM:" / "VmRSS:" line of /proc/self/status in GiB (-1 if unavailable).
+double proc_status_gb(const char* key) {
+  FILE* f = std::fopen("/proc/self/status", "r");
+  if (!f) return -1;
+  char line[256];
+  double v = -1;
+  const size_t n = std::strlen(key);
+  while (std::fgets(line, sizeof line, f))
+    if (!std::strncmp(line, key, n)) v = std::atof(line + n) / (1024.0 * 1024.0);  // kB
+  std::fclose(f);
+  return v;
+}
+
+// Reset the kernel's peak-RSS mark (VmHWM) to the current RSS.
+void reset_peak_rss() {
+  if (FILE* f = std::fopen("/proc/self/clear_refs", "w")) {
+    std::fputs("5", f);
+    std::fclose(f);
+  }
 }
 
 // fp32 FMA peak of `threads` threads at once: GFLOP per wall-second, and per CPU-second.
@@ -57,18 +85,21 @@ Timing fma_peak(int threads, bool bf16 = false) {
   const auto probe = bf16 ? kernels().probe_bf16 : kernels().probe_fma;
   const int64_t iters = 2000000;
   ThreadPool* pool = threads > 1 ? &ThreadPool::global() : nullptr;
-  const Timing t = median_timing(3, [&] {
-    if (!pool) {
-      probe(iters);
-      return;
-    }
-    pool->parallel_for(
-        size_t(threads),
-        [&](size_t b, size_t e, int) {
-          for (size_t i = b; i < e; ++i) probe(iters);
-        },
-        1);
-  }, /*warmup=*/false);
+  const Timing t = median_timing(
+      3,
+      [&] {
+        if (!pool) {
+          probe(iters);
+          return;
+        }
+        pool->parallel_for(
+            size_t(threads),
+            [&](size_t b, size_t e, int) {
+              for (size_t i = b; i < e; ++i) probe(iters);
+            },
+            1);
+      },
+      /*warmup=*/false);
   const double flop = probe(1) * double(iters) * threads;
   return {flop / t.wall * 1e-9, flop / t.cpu * 1e-9};
 }
@@ -216,6 +247,8 @@ struct Options {
   std::vector<Precision> precisions = {Precision::kF32, Precision::kBf16};
   std::vector<int> threads = {1, 2};
   int reps = 1;
+  bool warmup = false;
+  int64_t views = 2;
   std::string dir, storage = "bf16", golden;
 };
 
@@ -270,6 +303,14 @@ int run(int argc, char** argv) {
       }
     } else if (!std::strcmp(a, "--threads")) {
       o.threads = parse_list(next());
+    } else if (!std::strcmp(a, "--warmup")) {
+      o.warmup = true;
+    } else if (!std::strcmp(a, "--views")) {
+      o.views = std::atoi(next());
+      if (o.views < 1 || o.views > 64) {
+        std::fprintf(stderr, "bench difix: --views: expected 1..64\n");
+        return 2;
+      }
     } else if (!std::strcmp(a, "--reps")) {
       o.reps = std::max(1, std::atoi(next()));
     } else if (!std::strcmp(a, "--dir")) {
@@ -314,25 +355,30 @@ int run(int argc, char** argv) {
     std::printf("  written in %.1f s\n", now_seconds() - t0);
   }
 
-  std::printf("bench difix: Difix-ref step, 2 views, t=199, synthetic full-size weights (%s)\n",
-              o.dir.c_str());
+  std::printf("bench difix: Difix-ref step, %lld views, t=199, synthetic full-size weights (%s)\n",
+              (long long)o.views, o.dir.c_str());
   std::printf(
       "machine: %s path, %ld online CPUs; FLOPs per difix-spec 4.5; medians of %d; "
       "%% = of the fp32 FMA-loop peak at the same thread count, same run\n",
       isa_name(active_isa()), sysconf(_SC_NPROCESSORS_ONLN), o.reps);
   const bool all = o.stage == "all";
   for (Precision prec : o.precisions) {
+    reset_peak_rss();
     const double l0 = now_seconds(), lc0 = cpu_seconds();
     auto pipe = nets::DifixPipeline::load(o.dir, prec);
     if (!pipe.is_ok()) {
       std::fprintf(stderr, "bench difix: %s\n", pipe.status().message().c_str());
       return 1;
     }
-    std::printf("\n[%s] loaded in %.1f s (cpu %.1f s), peak RSS %.2f GB\n",
-                nets::precision_name(prec), now_seconds() - l0, cpu_seconds() - lc0, peak_rss_gb());
     const nets::DifixPipeline& p = **pipe;
+    std::printf(
+        "\n[%s] loaded in %.1f s (cpu %.1f s): networks hold %.2f GiB; peak RSS while loading "
+        "%.2f GiB, resident after %.2f GiB (ru_maxrss so far %.2f GB)\n",
+        nets::precision_name(prec), now_seconds() - l0, cpu_seconds() - lc0,
+        double(p.weight_bytes()) / kGiB, proc_status_gb("VmHWM:"), proc_status_gb("VmRSS:"),
+        peak_rss_gb());
     for (const auto& [hh, ww] : o.sizes) {
-      const int64_t views = 2, f = p.vae().downscale();
+      const int64_t views = o.views, f = p.vae().downscale();
       const int64_t h = hh / f, w = ww / f;
       std::mt19937 rng(7);
       std::uniform_real_distribution<float> u(-1.0f, 1.0f);
@@ -346,10 +392,11 @@ int run(int argc, char** argv) {
       const double dec_flop =
           2 * vae_decoder_macs(vc, hh, ww, skip_conv_macs(vae_manifest, hh, ww));
       std::printf(
-          "  %lldx%lld (latent %lldx%lld), 2 views: encode %.2f + unet %.2f + decode %.2f "
+          "  %lldx%lld (latent %lldx%lld), %lld views: encode %.2f + unet %.2f + decode %.2f "
           "= %.2f TFLOP\n",
-          (long long)ww, (long long)hh, (long long)w, (long long)h, enc_flop * 1e-12,
-          unet_flop * 1e-12, dec_flop * 1e-12, (enc_flop + unet_flop + dec_flop) * 1e-12);
+          (long long)ww, (long long)hh, (long long)w, (long long)h, (long long)views,
+          enc_flop * 1e-12, unet_flop * 1e-12, dec_flop * 1e-12,
+          (enc_flop + unet_flop + dec_flop) * 1e-12);
       for (int threads : o.threads) {
         ThreadPool::set_global_threads(threads);
         ThreadPool* pool = threads > 1 ? &ThreadPool::global() : nullptr;
@@ -359,11 +406,21 @@ int run(int argc, char** argv) {
             "   threads %d, fp32 FMA peak %.1f GFLOP/s (%.1f per cpu-s); bf16 dot peak %.1f "
             "GFLOP/s (%.1f per cpu-s)\n",
             threads, pk0.wall, pk0.cpu, pkb.wall, pkb.cpu);
+        // One scratch arena for every stage, reserved once for this shape (as DifixPipeline::step).
+        const size_t ews = p.vae().encode_workspace_bytes(hh, ww);
+        const size_t uws = p.unet().workspace_bytes(views, h, w);
+        const size_t dws = p.vae().decode_workspace_bytes(hh, ww);
+        Arena arena;
+        arena.reserve(std::max({ews, uws, dws}));
+        std::printf("    scratch arena %.2f GiB (encode %.2f, unet %.2f, decode %.2f)\n",
+                    double(arena.capacity()) / kGiB, double(ews) / kGiB, double(uws) / kGiB,
+                    double(dws) / kGiB);
+        reset_peak_rss();
         // Stage inputs: encode always runs once (its outputs feed the later stages).
         nets::VaeEncoding enc;
         Status err = Status::ok();
         auto do_encode = [&] {
-          auto r = p.vae().encode(images, 1, pool);
+          auto r = p.vae().encode(images, 1, pool, &arena);
           if (!r.is_ok()) {
             err = r.status();
             return;
@@ -372,7 +429,7 @@ int run(int argc, char** argv) {
         };
         Tensor eps;
         auto do_unet = [&] {
-          auto r = p.unet().forward(enc.z, 199.0f, ctx, nets::UNetMasks{}, pool);
+          auto r = p.unet().forward(enc.z, 199.0f, ctx, nets::UNetMasks{}, pool, {}, &arena);
           if (!r.is_ok()) {
             err = r.status();
             return;
@@ -383,7 +440,7 @@ int run(int argc, char** argv) {
         auto do_decode = [&] {
           std::vector<TensorView> skips;
           for (const Tensor& s : enc.skips) skips.push_back(s.view());
-          auto r = p.vae().decode(enc.z.view().slice(0, 0, 1), skips, pool);
+          auto r = p.vae().decode(enc.z.view().slice(0, 0, 1), skips, pool, &arena);
           if (!r.is_ok()) {
             err = r.status();
             return;
@@ -392,7 +449,7 @@ int run(int argc, char** argv) {
         };
         Timing te{}, tu{}, td{};
         if (all || o.stage == "encode") {
-          te = median_timing(o.reps, do_encode, /*warmup=*/false);
+          te = median_timing(o.reps, do_encode, o.warmup);
         } else {
           do_encode();
         }
@@ -402,7 +459,7 @@ int run(int argc, char** argv) {
         }
         if (all || o.stage == "encode") row("encode", enc_flop, te, pk0);
         if (all || o.stage == "unet") {
-          tu = median_timing(o.reps, do_unet, /*warmup=*/false);
+          tu = median_timing(o.reps, do_unet, o.warmup);
           if (!err) {
             std::fprintf(stderr, "bench difix: %s\n", err.message().c_str());
             return 1;
@@ -410,7 +467,7 @@ int run(int argc, char** argv) {
           row("unet", unet_flop, tu, pk0);
         }
         if (all || o.stage == "decode") {
-          td = median_timing(o.reps, do_decode, /*warmup=*/false);
+          td = median_timing(o.reps, do_decode, o.warmup);
           if (!err) {
             std::fprintf(stderr, "bench difix: %s\n", err.message().c_str());
             return 1;
@@ -423,8 +480,10 @@ int run(int argc, char** argv) {
           const Timing pk{0.5 * (pk0.wall + pk1.wall), 0.5 * (pk0.cpu + pk1.cpu)};
           row("step", enc_flop + unet_flop + dec_flop, tot, pk);
         }
-        std::printf("    (FMA peak after: %.1f GFLOP/s; peak RSS so far %.2f GB)\n", pk1.wall,
-                    peak_rss_gb());
+        std::printf(
+            "    (FMA peak after: %.1f GFLOP/s; peak RSS while running the stages %.2f GiB; "
+            "ru_maxrss so far %.2f GB)\n",
+            pk1.wall, proc_status_gb("VmHWM:"), peak_rss_gb());
         std::fflush(stdout);
       }
     }
