@@ -293,16 +293,37 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
   const int mr = kern.mr, nr = kern.nr;
   const int64_t esz = packed_elem_bytes(kern.layout);
   const Tuning& tun = tuning();
-  const int64_t KC = tun.kc > 0 ? round_up(tun.kc, kern.k_align) : kern.kc;
+  // K blocks of equal length (K = 1280 runs as 4 x 320, not 3 x 384 + 128: a short last block
+  // pays the C read-back and the epilogue for few FMAs). KC depends on K only, never on the thread
+  // count, so every split below gives bit-identical results.
+  const int64_t kc_max = tun.kc > 0 ? round_up(tun.kc, kern.k_align) : kern.kc;
+  const int64_t k_blocks = std::max<int64_t>(1, (K + kc_max - 1) / kc_max);
+  const int64_t KC = round_up((K + k_blocks - 1) / k_blocks, kern.k_align);
   const int64_t threads = pool ? pool->size() : 1;
-  const int64_t mc_target = tun.mc > 0 ? tun.mc : 192, nc_target = tun.nc > 0 ? tun.nc : 512;
-  const int64_t mc = s.mc > 0 ? s.mc : int64_t(mr) * std::max<int64_t>(1, mc_target / mr);
+  // B block KC x NC (streamed through L2 once per MR rows): about 448 KB, half of a 1 MB L2,
+  // leaving room for the A block (MC x KC, <= ~300 KB) and C.
+  const int64_t nc_target =
+      tun.nc > 0 ? tun.nc : std::max<int64_t>(nr, (448 * 1024) / std::max<int64_t>(1, KC * esz));
   const int64_t nc = s.nc > 0 ? s.nc : int64_t(nr) * std::max<int64_t>(1, nc_target / nr);
-  const int64_t m_tasks = (M + mc - 1) / mc;
-  // Split N across tasks only as far as needed to give every thread a few tasks.
-  int64_t n_tasks =
-      std::clamp<int64_t>((4 * threads + m_tasks - 1) / m_tasks, 1, (N + nr - 1) / nr);
-  if (threads == 1) n_tasks = 1;
+  // Tasks: row blocks of about MC rows, as many as a multiple of the thread count so the threads
+  // get equal shares, but at least 4 micro-rows each; the columns are split only when there are
+  // fewer row blocks than threads (then every task repacks its A block, so only as far as needed).
+  const int64_t mc_target = tun.mc > 0 ? tun.mc : 192;
+  int64_t mc, m_tasks, n_tasks;
+  if (s.mc > 0) {
+    mc = s.mc;
+    m_tasks = (M + mc - 1) / mc;
+  } else {
+    m_tasks = (M + mc_target - 1) / mc_target;
+    if (threads > 1)
+      m_tasks = std::min(round_up(m_tasks, threads), std::max<int64_t>(1, M / (4 * mr)));
+    mc = round_up((M + m_tasks - 1) / m_tasks, mr);
+    m_tasks = (M + mc - 1) / mc;
+  }
+  if (threads == 1 || (s.mc == 0 && m_tasks >= threads))
+    n_tasks = 1;
+  else
+    n_tasks = std::clamp<int64_t>((4 * threads + m_tasks - 1) / m_tasks, 1, (N + nr - 1) / nr);
   const int64_t n_per_task = round_up((N + n_tasks - 1) / n_tasks, nr);
   n_tasks = (N + n_per_task - 1) / n_per_task;
 

@@ -47,6 +47,27 @@ void micro_f32(const MicroTile& t) {
   store_tile<kMrF32>(t, c0, c1);
 }
 
+// A panel [kcp][w] from row-major fp32 rows: 16 k x 4 rows per step, masked
+// loads past valid_k and zero rows past valid_rows, transposed in registers (gemm_store_avx512.h).
+void pack_a_f32(const float* src, int64_t ld, int valid_rows, int64_t valid_k, int64_t kcp, int w,
+                void* dst) {
+  float* d = static_cast<float*>(dst);
+  const __m512 zero = _mm512_setzero_ps();
+  for (int64_t k0 = 0; k0 < kcp; k0 += 16) {
+    const int64_t left = valid_k - k0;
+    const __mmask16 m = left >= 16 ? __mmask16(0xffff)
+                        : left <= 0 ? __mmask16(0)
+                                    : __mmask16((1u << left) - 1);
+    const int nk = int(kcp - k0 < 16 ? kcp - k0 : 16);
+    for (int g = 0; g < w; g += 4) {
+      __m512 r[4];
+      for (int i = 0; i < 4; ++i)
+        r[i] = g + i < valid_rows ? _mm512_maskz_loadu_ps(m, src + (g + i) * ld + k0) : zero;
+      transpose_store_4x16(r[0], r[1], r[2], r[3], nk, w - g < 4 ? w - g : 4, w, d + k0 * w + g);
+    }
+  }
+}
+
 // bf16 pairs without vdpbf16ps: lane i of a 32-bit view holds (even | odd << 16); even << 16 and
 // odd & 0xffff0000 are the exact fp32 values. Odd products first, as vdpbf16ps does.
 constexpr int kMrBf16 = 12;
@@ -100,7 +121,8 @@ double probe_fma(int64_t iters) {
 
 namespace detail {
 void fill_avx512_kernels(KernelTable& t) {
-  t.f32 = GemmKernel{kMrF32, kNr, 1, 384, PackLayout::kF32, micro_f32, "avx512 f32 12x32"};
+  t.f32 = GemmKernel{kMrF32,           kNr,       1, 384, PackLayout::kF32, micro_f32,
+                     "avx512 f32 12x32", pack_a_f32};
   t.bf16 = GemmKernel{kMrBf16,
                       kNr,
                       2,

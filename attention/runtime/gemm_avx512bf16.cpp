@@ -36,35 +36,32 @@ void micro_bf16(const MicroTile& t) {
 }
 
 // A panel [kcp/2][w] of pair words from row-major fp32 rows: 32 floats -> 16 pair words with one
-// vcvtne2ps2bf16 (nearest even; like the hardware, fp32 denormal inputs become zero), then scalar
-// stores into the panel's column r.
+// vcvtne2ps2bf16 (nearest even; like the hardware, fp32 denormal inputs become zero), four rows at
+// a time transposed into the panel.
 void pack_a_pairs(const float* src, int64_t ld, int valid_rows, int64_t valid_k, int64_t kcp, int w,
                   void* dst) {
-  uint32_t* d = static_cast<uint32_t*>(dst);
+  float* d = static_cast<float*>(dst);  // pair words, moved as 32-bit lanes
   const int64_t pairs = kcp / 2;
-  alignas(64) uint32_t words[16];
-  for (int r = 0; r < w; ++r) {
-    if (r >= valid_rows) {
-      for (int64_t q = 0; q < pairs; ++q) d[q * w + r] = 0;
-      continue;
-    }
-    const float* s = src + r * ld;
-    for (int64_t q0 = 0; q0 < pairs; q0 += 16) {
-      const int64_t k = 2 * q0;
-      const int64_t left = valid_k - k;
-      __m512 lo, hi;
-      if (left >= 32) {
-        lo = _mm512_loadu_ps(s + k);
-        hi = _mm512_loadu_ps(s + k + 16);
-      } else {
-        const int64_t n0 = left <= 0 ? 0 : (left >= 16 ? 16 : left);
-        const int64_t n1 = left <= 16 ? 0 : left - 16;
-        lo = _mm512_maskz_loadu_ps(__mmask16((1u << n0) - 1), s + k);
-        hi = _mm512_maskz_loadu_ps(__mmask16((1u << n1) - 1), s + k + 16);
+  for (int64_t q0 = 0; q0 < pairs; q0 += 16) {
+    const int64_t k = 2 * q0;
+    const int64_t left = valid_k - k;
+    const int64_t n0 = left <= 0 ? 0 : (left >= 16 ? 16 : left);
+    const int64_t n1 = left <= 16 ? 0 : (left >= 32 ? 16 : left - 16);
+    const __mmask16 m0 = n0 == 16 ? __mmask16(0xffff) : __mmask16((1u << n0) - 1);
+    const __mmask16 m1 = n1 == 16 ? __mmask16(0xffff) : __mmask16((1u << n1) - 1);
+    const int nq = int(pairs - q0 < 16 ? pairs - q0 : 16);
+    for (int g = 0; g < w; g += 4) {
+      __m512 r[4];
+      for (int i = 0; i < 4; ++i) {
+        if (g + i < valid_rows) {
+          const float* s = src + (g + i) * ld + k;
+          r[i] = _mm512_castsi512_ps((__m512i)_mm512_cvtne2ps_pbh(_mm512_maskz_loadu_ps(m1, s + 16),
+                                                                   _mm512_maskz_loadu_ps(m0, s)));
+        } else {
+          r[i] = _mm512_setzero_ps();
+        }
       }
-      _mm512_store_si512(words, (__m512i)_mm512_cvtne2ps_pbh(hi, lo));
-      const int64_t nq = pairs - q0 < 16 ? pairs - q0 : 16;
-      for (int64_t j = 0; j < nq; ++j) d[(q0 + j) * w + r] = words[j];
+      transpose_store_4x16(r[0], r[1], r[2], r[3], nq, w - g < 4 ? w - g : 4, w, d + q0 * w + g);
     }
   }
 }
