@@ -14,14 +14,19 @@ constexpr const char* kUsage =
     "usage: macro enhance --scene-dir DIR --closeup FRAME --out OUT.png\n"
     "         [--method 3dgs|difix|macro|macro-unmasked|warp] [--weights DIFIX_DIR]\n"
     "         [--precision fp32|bf16] [--ctx CTX.safetensors] [--refs K] [--planes P|auto]\n"
-    "         [--max-planes P] [--mask released|paper|none] [--threads N] [--quiet]\n"
+    "         [--max-planes P] [--mask released|paper|none] [--crop full|tight]\n"
+    "         [--occlusion] [--threads N] [--quiet]\n"
     "  DIR is a DL3DV-Closeup scene folder (see macro plan --help). DIFIX_DIR is the Difix-ref\n"
     "  pipeline in diffusers layout (Hugging Face nvidia/difix_ref: unet/, vae/, text_encoder/,\n"
     "  tokenizer/, scheduler/, model_index.json); every method but 3dgs needs it. Without\n"
     "  text_encoder/ + tokenizer/, --ctx gives the prompt embedding (tensor 'ctx' [1, 77, D]).\n"
     "  Methods: 3dgs = the raw render; difix = one reference, whole image, no mask; macro = the\n"
     "  full method (K=3, P=3, masks 'released'); macro-unmasked = mask 'none'; warp = the\n"
-    "  backward-warp ablation (not implemented yet). The output has the close-up render's size.\n";
+    "  backward-warp ablation (each reference warped into the close-up by its depth replaces the\n"
+    "  crops). --crop tight: crops of only the region each plane occupies (padded onto the model\n"
+    "  canvas, padding masked out). --occlusion: the paper's occlusion test (references that\n"
+    "  cannot see the close-up are discarded; warp: occluded pixels are invalid).\n"
+    "  The output has the close-up render's size.\n";
 
 int run_enhance(std::vector<std::string> argv) {
   Args args(std::move(argv));
@@ -43,6 +48,8 @@ int run_enhance(std::vector<std::string> argv) {
   const std::string planes = args.value_or("--planes", "3");
   const int max_planes = args.int_or("--max-planes", 5, 1, 64);
   const std::string mask = args.value_or("--mask", "released");
+  const std::string crop = args.value_or("--crop", "full");
+  o.plan.occlusion = args.flag("--occlusion");
   if (Status s = args.finish(); !s)
     return fail("enhance", Status::error(s.message() + " (macro enhance --help for usage)"));
   auto m = enhance::parse_method(method);
@@ -65,8 +72,11 @@ int run_enhance(std::vector<std::string> argv) {
   auto mm = enhance::parse_mask_mode(mask);
   if (!mm) return fail("enhance", mm.status());
   o.plan.mask = *mm;
+  auto cr = enhance::parse_crop_mode(crop);
+  if (!cr) return fail("enhance", cr.status());
+  o.plan.crops.crop = *cr;
   // Missing weights fail before the scene is even loaded.
-  if (o.method != enhance::EnhanceMethod::k3dgs && o.method != enhance::EnhanceMethod::kWarp)
+  if (o.method != enhance::EnhanceMethod::k3dgs)
     if (Status s = enhance::check_difix_weights(o.weights); !s) return fail("enhance", s);
 
   auto inputs = enhance::load_scene_inputs(in);

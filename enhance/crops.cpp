@@ -200,6 +200,28 @@ std::vector<uint8_t> crop_view_validity(const Crop& crop, int ref_w, int ref_h) 
   return m;
 }
 
+std::vector<uint8_t> crop_model_validity(const Crop& crop, int ref_w, int ref_h, Size2 model) {
+  MACRO_CHECK(crop.view.w <= model.w && crop.view.h <= model.h);
+  const std::vector<uint8_t> v = crop_view_validity(crop, ref_w, ref_h);
+  if (crop.view == model) return v;
+  std::vector<uint8_t> m(size_t(model.w) * size_t(model.h), kCanvasPad);
+  for (int y = 0; y < crop.view.h; ++y)
+    std::copy_n(v.begin() + std::ptrdiff_t(size_t(y) * size_t(crop.view.w)), crop.view.w,
+                m.begin() + std::ptrdiff_t(size_t(y) * size_t(model.w)));
+  return m;
+}
+
+gs::Image paste_on_canvas(const gs::Image& view, Size2 model) {
+  MACRO_CHECK(view.width <= model.w && view.height <= model.h);
+  if (view.width == model.w && view.height == model.h) return view;
+  gs::Image out(model.w, model.h, view.channels);
+  for (int y = 0; y < view.height; ++y)
+    std::copy_n(view.data.begin() + std::ptrdiff_t(size_t(y) * view.width * view.channels),
+                size_t(view.width) * view.channels,
+                out.data.begin() + std::ptrdiff_t(size_t(y) * model.w * view.channels));
+  return out;
+}
+
 gs::Image cut_crop_canvas(const gs::Image& ref, const CropBox& box) {
   gs::Image out(box.width(), box.height(), 3);
   for (int y = 0; y < box.height(); ++y) {

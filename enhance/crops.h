@@ -28,6 +28,7 @@
 #include "attention/runtime/status.h"
 #include "attention/runtime/thread_pool.h"
 #include "enhance/depth_planes.h"
+#include "enhance/plane_masks.h"
 #include "enhance/reference_selection.h"
 #include "enhance/resample.h"
 #include "gs/camera.h"
@@ -86,6 +87,15 @@ std::vector<Crop> compute_crops(const DepthView& closeup, const PlaneResult& pla
 // Validity of the crop's view pixels (1 = inside the reference) [view.h * view.w]: view pixel x
 // maps to canvas column nearest_index(x, box width, view width).
 std::vector<uint8_t> crop_view_validity(const Crop& crop, int ref_width, int ref_height);
+
+// The crop's validity on the model-size canvas [model.h * model.w]: crop_view_validity at the
+// top-left (view.w x view.h), kCanvasPad (plane_masks.h) elsewhere. A full crop (view == model)
+// has no canvas. Tight crops are batched with the model-size views this way (plane_masks.h).
+std::vector<uint8_t> crop_model_validity(const Crop& crop, int ref_width, int ref_height,
+                                         Size2 model);
+// A view [view.h, view.w, C] pasted at the top-left of a black model-size canvas (copied when it
+// already has the model size).
+gs::Image paste_on_canvas(const gs::Image& view, Size2 model);
 
 // The padded canvas cut from the reference image (black outside), [box h, box w, 3].
 gs::Image cut_crop_canvas(const gs::Image& ref, const CropBox& box);

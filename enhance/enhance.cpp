@@ -11,6 +11,7 @@
 #include "attention/nets/scheduler.h"
 #include "attention/runtime/progress.h"
 #include "attention/runtime/safetensors.h"
+#include "enhance/warp.h"
 #include "gs/rasterizer.h"
 
 namespace macro::enhance {
@@ -130,10 +131,6 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
     res.timings.ms_total = ms_since(t_all);
     return res;
   }
-  if (o.method == EnhanceMethod::kWarp)
-    return Status::error(
-        "--method warp (the backward-warp ablation, macro-method.md §6) is not implemented yet");
-
   // Everything the network needs is checked before any work.
   MACRO_TRY(check_difix_weights(o.weights));
   const bool text_encoder = nets::has_text_encoder(o.weights);
@@ -157,6 +154,8 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
     po.mask = MaskMode::kNone;
   } else if (o.method == EnhanceMethod::kMacroUnmasked) {
     po.mask = MaskMode::kNone;
+  } else if (o.method == EnhanceMethod::kWarp) {
+    po.crops.crop = CropMode::kFull;  // whole warped frames replace the crops (warp.h)
   }
   auto t0 = Clock::now();
   MACRO_ASSIGN_OR_RETURN(MacroPlan plan, build_plan(in, po));
@@ -178,7 +177,16 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
   std::vector<gs::Image> views;
   nets::UNetMasks masks;
   LanczosUpsampler lanczos;
-  if (o.method == EnhanceMethod::kDifix) {
+  WarpViews warp;  // --method warp: its views and masks (the masks must outlive the U-Net)
+  if (o.method == EnhanceMethod::kWarp) {
+    WarpOptions wo;
+    wo.occlusion = po.occlusion;
+    wo.tolerance = po.occlusion_tolerance;
+    wo.render = po.render;
+    MACRO_ASSIGN_OR_RETURN(warp, build_warp_views(plan, in, wo, *pool));
+    views = std::move(warp.images);
+    for (const BlockSparseMask& m : warp.masks.masks) masks.level.push_back(&m);
+  } else if (o.method == EnhanceMethod::kDifix) {
     views.push_back(resize_lanczos(res.render, plan.model.w, plan.model.h, *pool));
     if (plan.ref_candidates.empty()) return Status::error("no reference was selected");
     MACRO_ASSIGN_OR_RETURN(gs::Image ref, load_candidate_image(in, plan.ref_candidates[0]));

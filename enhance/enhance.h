@@ -13,7 +13,10 @@
 //                   size, no planes, no mask (Difix's native joint attention), V = 2;
 //   macro           the full method, masks of the chosen mode (released by default);
 //   macro-unmasked  macro with mask mode "none";
-//   warp            the backward-warp ablation: not implemented (fails naming it).
+//   warp            the paper's backward-warp ablation (enhance/warp.h): each reference
+//                   backward-warped into the close-up replaces its crops (full frames, no crop,
+//                   no SR), masks of the chosen mode over the warp's validity; --occlusion adds
+//                   the per-pixel occlusion test.
 // View 0 is the close-up: DifixPipeline keeps view 0's VAE-encoder skips for the decoder, which
 // is what the released code achieves by encoding the close-up last. The latent is the posterior
 // mean (the released code samples it with a seeded generator; we do not reproduce torch's RNG).

@@ -104,15 +104,14 @@ Result<MacroPlan> build_plan(const SceneInputs& in, const PlanOptions& o) {
   if (plan.latent_h < 1 || plan.latent_w < 1)
     return Status::error("close-up '" + in.closeup.name + "' is smaller than 8x8 pixels");
   plan.latent_planes = latent_plane_map(plan.planes.labels, in.closeup.width, in.closeup.height, P);
-  bool same_size = true;
-  for (const Crop& c : plan.crops) same_size &= c.view == plan.model;
-  if (same_size) {
+  {
+    // Tight crops sit on the model-size canvas, the rest marked kCanvasPad (plane_masks.h).
     std::vector<int32_t> crop_plane;
     std::vector<std::vector<uint8_t>> valid;
     for (const Crop& c : plan.crops) {
       crop_plane.push_back(c.plane);
       const gs::Camera& rc = plan.ref_cameras[size_t(c.ref)];
-      valid.push_back(crop_view_validity(c, rc.width, rc.height));
+      valid.push_back(crop_model_validity(c, rc.width, rc.height, plan.model));
     }
     MACRO_ASSIGN_OR_RETURN(
         plan.masks, build_plane_masks(o.mask, P, crop_plane, plan.latent_planes, plan.latent_h,
@@ -142,12 +141,13 @@ Result<PlanViews> build_views(const MacroPlan& plan, const SceneInputs& in,
   for (const Crop& c : plan.crops) {
     const gs::Image& ref = refs[size_t(c.ref)];
     const gs::Image canvas = cut_crop_canvas(ref, c.box);
-    MACRO_ASSIGN_OR_RETURN(gs::Image view, upsampler.resize(canvas, c.view.w, c.view.h));
-    std::vector<uint8_t> valid = crop_view_validity(c, ref.width, ref.height);
+    MACRO_ASSIGN_OR_RETURN(gs::Image up, upsampler.resize(canvas, c.view.w, c.view.h));
+    gs::Image view = paste_on_canvas(up, plan.model);  // tight crops: top-left of the canvas
+    std::vector<uint8_t> valid = crop_model_validity(c, ref.width, ref.height, plan.model);
     for (size_t p = 0; p < valid.size(); ++p)
       for (int ch = 0; ch < view.channels; ++ch) {
         float& x = view.data[p * size_t(view.channels) + size_t(ch)];
-        x = valid[p] ? std::min(std::max(x, 0.f), 1.f) : 0.f;
+        x = valid[p] == 1 ? std::min(std::max(x, 0.f), 1.f) : 0.f;
       }
     v.images.push_back(std::move(view));
     v.validity.push_back(std::move(valid));
@@ -273,7 +273,10 @@ Status write_plan_debug(const MacroPlan& p, const PlanViews& views, const std::s
     const Crop& c = p.crops[v - 1];
     gs::Image img = views.images[v];
     for (size_t k = 0; k < views.validity[v].size(); ++k)
-      if (!views.validity[v][k]) img.data[k * 3] = 0.6f;  // padding tinted red
+      if (views.validity[v][k] == 0)
+        img.data[k * 3] = 0.6f;  // padding tinted red
+      else if (views.validity[v][k] == kCanvasPad)
+        img.data[k * 3 + 2] = 0.6f;  // canvas: blue
     char name[96];
     std::snprintf(name, sizeof name, "/crop_%02zu_p%d_r%d.png", v - 1, c.plane, c.ref);
     MACRO_TRY(gs::write_png(dir + name, img));

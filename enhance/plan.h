@@ -58,7 +58,7 @@ struct MacroPlan {
   std::vector<CropRejection> rejected;
   std::vector<int32_t> latent_planes;  // [H/8, W/8] majority vote (render resolution)
   int latent_h = 0, latent_w = 0;
-  bool masks_built = false;  // false for tight crops (views of several sizes)
+  bool masks_built = false;  // true once built (tight crops too: padded onto the model canvas)
   PlaneMaskSet masks;
   PlanTimings timings;
   int64_t view_tokens() const;  // level-0 tokens over all views
@@ -66,11 +66,13 @@ struct MacroPlan {
 
 Result<MacroPlan> build_plan(const SceneInputs& inputs, const PlanOptions& options);
 
-// The view images: [0] the close-up Lanczos-resized to the model size, then each crop (canvas cut
-// from its reference, black padding, upsampled to its view size, padding forced back to black).
+// The view images, all at the model size: [0] the close-up Lanczos-resized to the model size,
+// then each crop (canvas cut from its reference, black padding, upsampled to its view size,
+// padding forced back to black; a tight crop pasted at the top-left of a black model-size canvas).
 struct PlanViews {
-  std::vector<gs::Image> images;               // [V]
-  std::vector<std::vector<uint8_t>> validity;  // [V] view-size masks (close-up: all 1)
+  std::vector<gs::Image> images;               // [V] model size
+  std::vector<std::vector<uint8_t>> validity;  // [V] model-size masks: 1 valid, 0 padding,
+                                               // kCanvasPad outside a tight crop (close-up: all 1)
 };
 Result<PlanViews> build_views(const MacroPlan& plan, const SceneInputs& inputs,
                               const Upsampler& upsampler);

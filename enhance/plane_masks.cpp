@@ -90,9 +90,10 @@ Result<BlockSparseMask> build_level_mask(MaskMode mode, int n_tok, int planes,
                                          const std::vector<uint8_t>& crop_valid) {
   MACRO_TRY(check_inputs(n_tok, planes, closeup_plane, crop_plane, crop_valid));
   const int n = int(crop_plane.size());
-  // Query groups: close-up plane p -> p; crop c -> planes + c (paper) or planes + its plane.
-  // Key groups: close-up -> 0; crop c valid -> 1 + 2c, padding -> 2 + 2c.
-  const int gq = planes + std::max(n, planes), gk = 1 + 2 * n;
+  // Query groups: close-up plane p -> p; crop c -> planes + c (paper) or planes + its plane;
+  // canvas -> gq - 1 (sees nothing). Key groups: close-up -> 0; crop c valid -> 1 + 2c,
+  // padding -> 2 + 2c; canvas -> gk - 1 (seen by nobody).
+  const int gq = planes + std::max(n, planes) + 1, gk = 2 + 2 * n;
   std::vector<int32_t> qg(size_t(n_tok) * size_t(1 + n)), kg(qg.size());
   for (int t = 0; t < n_tok; ++t) {
     qg[size_t(t)] = closeup_plane[size_t(t)];
@@ -104,8 +105,9 @@ Result<BlockSparseMask> build_level_mask(MaskMode mode, int n_tok, int planes,
   for (int c = 0; c < n; ++c)
     for (int t = 0; t < n_tok; ++t) {
       const size_t i = size_t(1 + c) * size_t(n_tok) + size_t(t);
-      qg[i] = crop_row_group(c);
-      kg[i] = crop_valid[size_t(c) * n_tok + size_t(t)] ? 1 + 2 * c : 2 + 2 * c;
+      const uint8_t v = crop_valid[size_t(c) * n_tok + size_t(t)];
+      qg[i] = v == kCanvasPad ? gq - 1 : crop_row_group(c);
+      kg[i] = v == kCanvasPad ? gk - 1 : v ? 1 + 2 * c : 2 + 2 * c;
     }
   std::vector<uint8_t> allowed(size_t(gq) * size_t(gk), 0);
   auto allow = [&](int q, int k) { allowed[size_t(q) * gk + size_t(k)] = 1; };
@@ -144,7 +146,13 @@ std::vector<uint8_t> build_level_mask_dense(MaskMode mode, int n_tok,
       for (int kv = 0; kv <= n; ++kv)
         for (int kt = 0; kt < n_tok; ++kt) {
           bool a;
-          if (qv == 0 && kv == 0) {
+          const bool q_canvas =
+              qv > 0 && crop_valid[size_t(qv - 1) * n_tok + size_t(qt)] == kCanvasPad;
+          const bool k_canvas =
+              kv > 0 && crop_valid[size_t(kv - 1) * n_tok + size_t(kt)] == kCanvasPad;
+          if (q_canvas || k_canvas) {
+            a = false;
+          } else if (qv == 0 && kv == 0) {
             a = true;
           } else if (qv == 0) {
             const int c = kv - 1;
@@ -180,15 +188,21 @@ std::vector<int64_t> PlaneMaskSet::view_pair_counts(int level) const {
   for (int32_t l : cp) ++per_plane[size_t(l)];
   std::vector<int64_t> out(size_t(V) * V, 0);
   out[0] = N * N;
+  std::vector<int64_t> nv(size_t(n), 0), nin(size_t(n), 0);  // valid, in-view tokens per crop
+  for (int c = 0; c < n; ++c)
+    for (int64_t t = 0; t < N; ++t) {
+      const uint8_t v = valid[size_t(c) * size_t(N) + size_t(t)];
+      nv[size_t(c)] += v != 0 && v != kCanvasPad;
+      nin[size_t(c)] += v != kCanvasPad;
+    }
   for (int c = 0; c < n; ++c) {
-    int64_t nv = 0;
-    for (int64_t t = 0; t < N; ++t) nv += valid[size_t(c) * size_t(N) + size_t(t)] != 0;
-    out[size_t(1 + c)] =
-        mode == MaskMode::kNone ? N * N : per_plane[size_t(crop_plane[size_t(c)])] * nv;
+    out[size_t(1 + c)] = mode == MaskMode::kNone
+                             ? N * nin[size_t(c)]
+                             : per_plane[size_t(crop_plane[size_t(c)])] * nv[size_t(c)];
     for (int d = 0; d < n; ++d) {
       const bool sees =
           mode == MaskMode::kPaper ? c == d : crop_plane[size_t(c)] == crop_plane[size_t(d)];
-      out[size_t(1 + c) * V + size_t(1 + d)] = sees ? N * N : 0;
+      out[size_t(1 + c) * V + size_t(1 + d)] = sees ? nin[size_t(c)] * nin[size_t(d)] : 0;
     }
   }
   return out;

@@ -17,6 +17,11 @@
 //   paper     close-up rows as released; each crop sees only itself (the golden case-macro-masked
 //             rule and the paper's "cross-reference attention is blocked").
 //   none      (macro_unmasked) close-up rows see every token of every view; crop rows as released.
+// Tight crops (--crop tight) are smaller than the model size. The U-Net batches views as one
+// [V, C, h, w] tensor, so every view has the model-size token grid: a tight crop is pasted at the
+// top-left of a black model-size canvas and the rest of the canvas is marked kCanvasPad in its
+// validity. Canvas tokens are outside the view: no query may see them (in every mode) and their
+// own rows see nothing (the attention kernel gives such rows zeros), so they cost no attention.
 // Masks are BlockSparseMasks built from token groups (close-up tokens grouped by plane), so the
 // attention cost follows the allowed pairs; to_dense() exports the uint8 [V*N_l, V*N_l] form.
 #pragma once
@@ -32,6 +37,9 @@ namespace macro::enhance {
 
 inline constexpr int kLatentPatch = 8;  // VAE downsampling: 8x8 pixels per latent cell
 inline constexpr int kUNetLevels = 4;   // SD-Turbo: latent, /2, /4, /8 (mid block)
+// Crop validity values: 0 = black padding outside the reference, 1 (any other non-zero) = valid,
+// kCanvasPad = canvas around a tight crop (not part of the view).
+inline constexpr uint8_t kCanvasPad = 2;
 
 enum class MaskMode { kReleased, kPaper, kNone };
 const char* mask_mode_name(MaskMode mode);  // "released", "paper", "none"
@@ -63,7 +71,7 @@ std::vector<T> resize_nearest(const std::vector<T>& src, int src_h, int src_w, i
 }
 
 // One level's mask. closeup_plane [N] in [0, planes); crop_plane [n] in [0, planes);
-// crop_valid [n, N]. Errors name the argument.
+// crop_valid [n, N] (0, 1 or kCanvasPad). Errors name the argument.
 Result<BlockSparseMask> build_level_mask(MaskMode mode, int tokens_per_view, int planes,
                                          const std::vector<int32_t>& closeup_plane,
                                          const std::vector<int32_t>& crop_plane,

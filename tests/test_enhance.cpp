@@ -168,10 +168,6 @@ TEST_CASE("enhance difix and macro-unmasked run and differ from macro", "[enhanc
               mean_abs_diff(unmasked->image, macro->image), mean_abs_diff(difix->image, macro->image),
               mean_abs_diff(paper->image, macro->image));
   CHECK(mean_abs_diff(paper->image, macro->image) < 0.02);  // measured 0.0038
-  o.method = EnhanceMethod::kWarp;
-  auto warp = enhance_closeup(in, o);
-  REQUIRE_FALSE(warp.is_ok());
-  CHECK_THAT(warp.status().message(), Catch::Contains("not implemented"));
 }
 
 TEST_CASE("enhance CLI: macro, difix, macro-unmasked, 3dgs = the render, missing weights",
