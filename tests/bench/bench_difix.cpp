@@ -15,7 +15,8 @@
 // does). Medians of --reps runs (default 1, no warm-up: one full-size step is tens of seconds;
 // --warmup adds one unmeasured run per stage first, for the steady state of repeated steps).
 //
-//   bench difix [--size 512|960|all] [--stage all|encode|unet|decode] [--precision f32|bf16|both]
+//   bench difix [--size 512|960|all] [--stage all|encode|unet|decode|load]
+//               [--precision f32|bf16|both]
 //               [--threads 1,2] [--reps R] [--warmup] [--views V] [--dir DIR]
 //               [--storage bf16|f32] [--golden DIR]
 // --views V: V views (default 2; the MACRO case runs 10 at 960x536).
@@ -283,8 +284,10 @@ int run(int argc, char** argv) {
       }
     } else if (!std::strcmp(a, "--stage")) {
       o.stage = next();
-      if (o.stage != "all" && o.stage != "encode" && o.stage != "unet" && o.stage != "decode") {
-        std::fprintf(stderr, "bench difix: --stage: expected all|encode|unet|decode, found '%s'\n",
+      if (o.stage != "all" && o.stage != "encode" && o.stage != "unet" && o.stage != "decode" &&
+          o.stage != "load") {
+        std::fprintf(stderr,
+                     "bench difix: --stage: expected all|encode|unet|decode|load, found '%s'\n",
                      o.stage.c_str());
         return 2;
       }
@@ -377,6 +380,7 @@ int run(int argc, char** argv) {
         nets::precision_name(prec), now_seconds() - l0, cpu_seconds() - lc0,
         double(p.weight_bytes()) / kGiB, proc_status_gb("VmHWM:"), proc_status_gb("VmRSS:"),
         peak_rss_gb());
+    if (o.stage == "load") continue;  // the load's memory only
     for (const auto& [hh, ww] : o.sizes) {
       const int64_t views = o.views, f = p.vae().downscale();
       const int64_t h = hh / f, w = ww / f;
