@@ -146,6 +146,53 @@ TEST_CASE("conv2d: bf16 weights and activations, every path", "[kernels][conv]")
   }
 }
 
+TEST_CASE("conv2d: fused ReLU epilogue (after bias and residual), fp32 and bf16, every path",
+          "[kernels][conv]") {
+  IsaGuard guard;
+  auto relu = [](std::vector<float> v) {
+    for (float& x : v) x = x > 0.0f ? x : 0.0f;
+    return v;
+  };
+  auto round = [](std::vector<float> v) {
+    for (float& x : v) x = bf16_to_f32(f32_to_bf16(x));
+    return v;
+  };
+  // Panels that straddle output rows (W 35, 70), no padding, right/bottom-only padding, stride 2.
+  const Conv2dShape shapes[] = {shape(1, 20, 13, 35, 24, 3, 1, 1, 1, 1, 1),
+                                shape(2, 7, 6, 70, 13, 3, 1, 0, 0, 0, 0),
+                                shape(1, 9, 9, 33, 6, 3, 1, 0, 0, 1, 1),
+                                shape(1, 16, 13, 11, 19, 3, 2, 1, 1, 1, 1)};
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    for (const Conv2dShape& s : shapes) {
+      auto x = random_vec(size_t(s.n * s.c_in * s.h * s.w), 11);
+      auto w = random_vec(size_t(s.c_out * s.c_in * s.kh * s.kw), 12);
+      auto b = random_vec(size_t(s.c_out), 13);
+      const size_t ny = size_t(s.n * s.c_out * s.out_h() * s.out_w());
+      auto r = random_vec(ny, 14);
+      std::vector<float> ref(ny), ref16(ny), y(ny, NAN);
+      conv2d_reference(s, x.data(), w.data(), b.data(), r.data(), ref.data());
+      ref = relu(ref);
+      INFO(isa_name(isa) << " Cin=" << s.c_in << " " << s.h << "x" << s.w << " Cout=" << s.c_out
+                         << " s=" << s.stride << " pad=" << s.pad_top << "," << s.pad_bottom);
+      ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, s.kh, s.kw);
+      conv2d(s, x.data(), cw, r.data(), y.data(), ConvAct::kRelu, nullptr);
+      REQUIRE(max_rel_err(y, ref) <= 1e-5);
+      size_t zeros = 0;
+      for (float v : y) zeros += v == 0.0f;
+      REQUIRE(zeros > ny / 4);  // the activation did clamp (about half the outputs)
+      auto x16 = round(x), w16 = round(w);
+      conv2d_reference(s, x16.data(), w16.data(), b.data(), r.data(), ref16.data());
+      ref16 = relu(ref16);
+      ConvWeights cw16 =
+          ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, s.kh, s.kw, WeightType::kBf16);
+      std::fill(y.begin(), y.end(), NAN);
+      conv2d(s, x.data(), cw16, r.data(), y.data(), ConvAct::kRelu, nullptr);
+      REQUIRE(max_rel_err(y, ref16) <= 1e-5);
+    }
+  }
+}
+
 TEST_CASE("conv2d: threaded result equals single-threaded bit for bit", "[kernels][conv]") {
   ThreadPool pool(2);
   const Conv2dShape s = shape(1, 24, 31, 45, 40, 3, 1, 1, 1, 1, 1);

@@ -82,6 +82,7 @@ std::vector<float> reference(const RefArgs& r) {
       if (r.p.bias_n) v += r.p.bias_n[j];
       if (r.p.bias_m) v += r.p.bias_m[i];
       if (r.p.residual) v += r.p.residual[i * r.p.ldr + j];
+      if (r.p.relu) v = v > 0.0 ? v : 0.0;
       out[size_t(i * r.ldc + j)] = float(v);
     }
   return out;
@@ -158,6 +159,41 @@ TEST_CASE("gemm_f32: alpha, beta, biases and residual on every path", "[kernels]
     // Columns past N are untouched.
     for (int64_t i = 0; i < M; ++i)
       for (int64_t j = N; j < ldc; ++j) REQUIRE(C[i * ldc + j] == C0[i * ldc + j]);
+  }
+}
+
+TEST_CASE("gemm: fused ReLU after bias and residual, K split in blocks, every path",
+          "[kernels][gemm]") {
+  IsaGuard guard;
+  // K = 1000 runs as several K blocks: the activation must apply once, after the last.
+  const int64_t M = 29, N = 45, K = 1000, ldc = 50;
+  auto A = random_vec(size_t(M * K), 21);
+  auto B = random_vec(size_t(N * K), 22);
+  auto C0 = random_vec(size_t(M * ldc), 23);
+  auto bn = random_vec(size_t(N), 24);
+  GemmParams p;
+  p.trans_b = true;
+  p.beta = 0.5f;
+  p.bias_n = bn.data();
+  p.relu = true;
+  auto ref = reference({M, N, K, A.data(), K, false, B.data(), K, true, C0.data(), ldc, p});
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    INFO(isa_name(isa));
+    auto C = C0;
+    gemm_f32(M, N, K, A.data(), K, B.data(), K, C.data(), ldc, p);
+    REQUIRE(max_rel_err(C, ref, M, N, ldc) <= 1e-5);
+    int64_t zeros = 0;
+    for (int64_t i = 0; i < M; ++i)
+      for (int64_t j = 0; j < N; ++j) zeros += C[i * ldc + j] == 0.0f;
+    REQUIRE(zeros > M * N / 4);
+    PackedWeights pw = PackedWeights::pack(B.data(), N, K, K, WeightType::kBf16);
+    GemmParams q = p;
+    q.beta = 0.0f;
+    std::vector<float> c16(size_t(M * ldc), NAN);
+    gemm_packed(M, A.data(), K, pw, c16.data(), ldc, q);
+    for (int64_t i = 0; i < M; ++i)
+      for (int64_t j = 0; j < N; ++j) REQUIRE(c16[i * ldc + j] >= 0.0f);
   }
 }
 

@@ -5,8 +5,13 @@
 //
 // bf16 weights: K is ordered (dy, dx, ci) with Cin padded to even, so a bf16 k pair is two
 // neighbouring channels under the same tap. The input is converted once per call into channel-pair
-// planes xp[Cin2/2][H][W] of 32-bit words (even channel in the low half) and the pair panels are
-// then gathered exactly like the fp32 ones, one 32-bit word per pixel.
+// planes xp[Cin2/2][H][W] of 32-bit words (even channel in the low half; a per-thread buffer grown
+// once, not allocated per call) and the pair panels are then gathered exactly like the fp32 ones,
+// one 32-bit word per pixel.
+//
+// Stride-1 gathers into 32-column panels use the path's vector gather when it has one
+// (KernelTable::conv_rows32: masked loads per output-row run); otherwise, and for stride 2, the
+// portable fill_row below.
 #include "attention/runtime/conv.h"
 
 #include <algorithm>
@@ -23,13 +28,10 @@ struct Im2colCtx {
   const uint32_t* xp;  // bf16: one image's channel-pair planes [Cin2/2, H, W]
   int64_t cin2;        // bf16: Cin rounded up to even
   int64_t oh, ow;
+  ConvGatherRows32 rows32;  // the path's vector gather (stride 1, 32-column panels), or null
 };
 
-// One run of consecutive output pixels on the same output row.
-struct Segment {
-  int col, len;
-  int64_t oy, ox;
-};
+using Segment = ConvSegment;  // one run of consecutive output pixels on the same output row
 
 // Output pixels [px0, px0 + count) split into runs on the same output row.
 int make_segments(const Im2colCtx& c, int64_t px0, int count, Segment* segs) {
@@ -101,6 +103,23 @@ void pack_im2col(const void* ctx, const GemmKernel& kern, bool is_a, int64_t r0,
     const int64_t px0 = r0 + p * w;
     const int count = int(std::min<int64_t>(w, r0 + rows - px0));
     const int nseg = make_segments(c, px0, count, segs);
+    if (c.rows32 && s.stride == 1 && w == 32) {
+      ConvRows a;
+      const bool f32 = kern.layout == PackLayout::kF32;
+      a.x = f32 ? reinterpret_cast<const uint32_t*>(c.x) : c.xp;
+      a.hw = HW, a.h = s.h, a.w = s.w;
+      a.pad_top = s.pad_top, a.pad_left = s.pad_left, a.kh = s.kh, a.kw = s.kw;
+      a.tap_major = !f32;
+      a.planes = f32 ? s.c_in : c.cin2 / 2;
+      a.k0 = f32 ? k0 : k0 / 2;
+      a.nrows = f32 ? kc : (kc + 1) / 2;
+      a.rows_padded = f32 ? kcp : kcp / 2;
+      a.segs = segs;
+      a.nseg = nseg;
+      a.dst = static_cast<uint32_t*>(dst_v) + p * a.rows_padded * w;
+      c.rows32(a);
+      continue;
+    }
     if (kern.layout == PackLayout::kF32) {
       // k = (ci, dy, dx)
       const int64_t khw = int64_t(s.kh) * s.kw;
@@ -171,8 +190,16 @@ ConvWeights ConvWeights::pack(const float* w, const float* bias, int64_t c_out, 
   return cw;
 }
 
+// bf16 channel-pair planes of one image: grown once per calling thread, reused by every call.
+thread_local std::vector<uint32_t> t_pair_planes;
+
 void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const float* residual,
             float* y, ThreadPool* pool) {
+  conv2d(s, x, w, residual, y, ConvAct::kNone, pool);
+}
+
+void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const float* residual,
+            float* y, ConvAct act, ThreadPool* pool) {
   MACRO_CHECK(w.c_out() == s.c_out && w.c_in() == s.c_in && w.kh() == s.kh && w.kw() == s.kw);
   MACRO_CHECK(s.stride >= 1 && s.pad_top >= 0 && s.pad_left >= 0 && s.pad_bottom >= 0 &&
               s.pad_right >= 0);
@@ -183,8 +210,8 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
   const int64_t cin2 = (s.c_in + 1) / 2 * 2;
   const int64_t K = bf16 ? cin2 * s.kh * s.kw : s.c_in * s.kh * s.kw;
   const int64_t npix = oh * ow, HW = s.h * s.w;
-  std::vector<uint32_t> xp;  // bf16: channel-pair planes of one image, allocated once per call
-  if (bf16) xp.resize(size_t(cin2 / 2 * HW));
+  std::vector<uint32_t>& xp = t_pair_planes;
+  if (bf16 && xp.size() < size_t(cin2 / 2 * HW)) xp.resize(size_t(cin2 / 2 * HW));
   for (int64_t b = 0; b < s.n; ++b) {
     const float* xb = x + b * s.c_in * HW;
     if (bf16) {
@@ -206,7 +233,7 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
       else
         convert(0, size_t(cin2 / 2), 0);
     }
-    Im2colCtx ctx{&s, xb, xp.data(), cin2, oh, ow};
+    Im2colCtx ctx{&s, xb, xp.data(), cin2, oh, ow, kernels_for(w.packed().isa()).conv_rows32};
     detail::Operand oa{nullptr, nullptr, w.packed().panels(), w.packed().k_padded()};
     detail::Operand ob{pack_im2col, &ctx, nullptr, 0};
     detail::DriverShape ds;
@@ -220,6 +247,7 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
     ds.nc = int64_t(kern.nr) * std::max(1, 256 / kern.nr);
     GemmParams p;
     p.bias_m = w.bias();
+    p.relu = act == ConvAct::kRelu;
     if (residual) {
       p.residual = residual + b * s.c_out * npix;
       p.ldr = npix;

@@ -73,6 +73,12 @@ class ConvWeights {
 void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const float* residual,
             float* y, ThreadPool* pool = nullptr);
 
+// The same with a fused activation in the GEMM epilogue: y = act(conv(x) + bias + residual)
+// (TAESD's and LPIPS's conv + ReLU; saves a pass over y).
+enum class ConvAct { kNone, kRelu };
+void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const float* residual,
+            float* y, ConvAct act, ThreadPool* pool = nullptr);
+
 // Convenience for tests and one-off calls: packs the weights on each call.
 void conv2d(const Conv2dShape& s, const float* x, const float* weight, const float* bias,
             const float* residual, float* y, ThreadPool* pool = nullptr);

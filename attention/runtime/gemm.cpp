@@ -34,6 +34,7 @@ void scalar_store(const MicroTile& t, const float* acc, int ld) {
       if (t.bias_n) v += t.bias_n[j];
       if (t.bias_m) v += t.bias_m[i];
       if (t.res) v += t.res[i * t.ldr + j];
+      if (t.relu) v = v > 0.0f ? v : 0.0f;
       c[j] = v;
     }
   }
@@ -336,6 +337,7 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
         if (p.bias_n) v += p.bias_n[j];
         if (p.bias_m) v += p.bias_m[i];
         if (p.residual) v += p.residual[i * p.ldr + j];
+        if (p.relu) v = v > 0.0f ? v : 0.0f;
         c = v;
       }
     return;
@@ -396,6 +398,7 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
             mt.c = s.C + i * s.ldc + j;
             mt.bias_n = last && p.bias_n ? p.bias_n + j : nullptr;
             mt.res = last && p.residual ? p.residual + i * p.ldr + j : nullptr;
+            mt.relu = last && p.relu;
             kern.micro(mt);
           }
         }

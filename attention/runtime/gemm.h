@@ -1,7 +1,7 @@
 // Matrix multiply, fp32 and bf16, over raw pointers with leading dimensions.
 //
 //   C[M, N] = alpha * A[M, K] . B[K, N] + beta * C + bias_n[N] (per column) + bias_m[M] (per row)
-//             + residual[M, N]
+//             + residual[M, N]            then, if p.relu, C = max(0, C)
 //
 // Legend: M rows (tokens for a Linear, output channels for a conv), N columns (output features;
 // pixels for a conv), K the reduction (input features; Cin*kh*kw for a conv). All matrices are
@@ -38,6 +38,7 @@ struct GemmParams {
   const float* bias_m = nullptr;    // [M], added to every column
   const float* residual = nullptr;  // [M, ldr], added after everything else (may alias C only if
   int64_t ldr = 0;                  //  beta == 0 and ldr == ldc)
+  bool relu = false;                // C = max(0, C) after everything else (fused activation)
 };
 
 // fp32 GEMM with both operands given unpacked.

@@ -26,6 +26,7 @@ inline void store_tile(const MicroTile& t, const __m256* c0, const __m256* c1) {
         if (t.bias_n) v += t.bias_n[j];
         if (t.bias_m) v += t.bias_m[i];
         if (t.res) v += t.res[i * t.ldr + j];
+        if (t.relu) v = v > 0.0f ? v : 0.0f;
         c[j] = v;
       }
     }
@@ -55,6 +56,10 @@ inline void store_tile(const MicroTile& t, const __m256* c0, const __m256* c1) {
       const float* rr = t.res + r * t.ldr;
       v0 = _mm256_add_ps(v0, _mm256_loadu_ps(rr));
       v1 = _mm256_add_ps(v1, _mm256_loadu_ps(rr + 8));
+    }
+    if (t.relu) {
+      v0 = _mm256_max_ps(v0, _mm256_setzero_ps());
+      v1 = _mm256_max_ps(v1, _mm256_setzero_ps());
     }
     _mm256_storeu_ps(c, v0);
     _mm256_storeu_ps(c + 8, v1);

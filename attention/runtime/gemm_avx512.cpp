@@ -132,6 +132,7 @@ void fill_avx512_kernels(KernelTable& t) {
                       "avx512 bf16 12x32 (shift-widened)"};
   t.probe_fma = probe_fma;
   t.probe_bf16 = probe_fma;
+  t.conv_rows32 = avx512_conv_rows32();
 }
 }  // namespace detail
 

@@ -48,6 +48,10 @@ inline void store_tile(const MicroTile& t, const __m512* c0, const __m512* c1) {
       v0 = _mm512_add_ps(v0, _mm512_maskz_loadu_ps(k0, rr));
       v1 = _mm512_add_ps(v1, _mm512_maskz_loadu_ps(k1, rr + 16));
     }
+    if (t.relu) {
+      v0 = _mm512_max_ps(v0, _mm512_setzero_ps());
+      v1 = _mm512_max_ps(v1, _mm512_setzero_ps());
+    }
     _mm512_mask_storeu_ps(c, k0, v0);
     _mm512_mask_storeu_ps(c + 16, k1, v1);
   }

@@ -40,6 +40,7 @@ struct MicroTile {
   const float* bias_m = nullptr;  // [m]
   const float* res = nullptr;     // [m, ldr]
   int64_t ldr = 0;
+  bool relu = false;  // max(0, .) applied last, after the residual
 };
 using MicroKernel = void (*)(const MicroTile& t);
 
@@ -48,6 +49,29 @@ using MicroKernel = void (*)(const MicroTile& t);
 // of k_align). When null the generic packer in gemm.cpp is used.
 using PackPanelF32 = void (*)(const float* src, int64_t ld, int valid_rows, int64_t valid_k,
                               int64_t kcp, int w, void* dst);
+
+// Stride-1 conv im2col rows (conv.cpp) for a B panel of 32 columns of 32-bit elements (fp32 bits,
+// or bf16 channel-pair words): output pixels split into runs on one output row (ConvSegment), and
+// k rows that each name an input plane and a tap (dy, dx). Row r of dst (r < rows_padded) gets
+// plane[(oy + dy - pad_top) * w + ox + dx - pad_left] for each segment pixel, zero for padding,
+// for pixels past the segments and for rows r >= nrows.
+struct ConvSegment {
+  int col = 0, len = 0;  // panel columns [col, col + len)
+  int64_t oy = 0, ox = 0;
+};
+struct ConvRows {
+  const uint32_t* x = nullptr;  // planes [P][h][w], plane stride hw
+  int64_t hw = 0, h = 0, w = 0;
+  int pad_top = 0, pad_left = 0, kh = 1, kw = 1;
+  bool tap_major = false;  // false: k row = (plane, dy, dx); true: k row = (dy, dx, plane)
+  int64_t planes = 1;      // P
+  int64_t k0 = 0;          // index of the first row in that order
+  int64_t nrows = 0, rows_padded = 0;
+  const ConvSegment* segs = nullptr;
+  int nseg = 0;
+  uint32_t* dst = nullptr;  // [rows_padded][32]
+};
+using ConvGatherRows32 = void (*)(const ConvRows& a);
 
 struct GemmKernel {
   int mr = 0, nr = 0;  // register tile
@@ -67,6 +91,7 @@ struct KernelTable {
   // bf16 dot products) and return the number of floating-point operations done (1 FMA = 2).
   double (*probe_fma)(int64_t iters) = nullptr;
   double (*probe_bf16)(int64_t iters) = nullptr;
+  ConvGatherRows32 conv_rows32 = nullptr;  // null: conv.cpp's portable gather
 };
 
 // The table for the active path (active_isa()), and for a given path (it must be supported).
@@ -80,6 +105,7 @@ void fill_avx2_kernels(KernelTable& t);
 void fill_avx512_kernels(KernelTable& t);
 void fill_avx512bf16_kernels(KernelTable& t);
 void fill_amx_kernels(KernelTable& t);
+ConvGatherRows32 avx512_conv_rows32();  // conv_avx512.cpp
 }  // namespace detail
 
 }  // namespace macro
