@@ -228,11 +228,12 @@ Result<LpipsResult> LpipsAlex::run(const gs::Image& a, const gs::Image& b, Threa
     const int64_t oh = s.out_h(), ow = s.out_w();
     MACRO_CHECK(c_cur == cv.c_in && oh >= 1 && ow >= 1);
     next.assign(size_t(N * cv.c_out * oh * ow), 0.f);  // [2, Cout, OH, OW]
-    if (reference)
+    if (reference) {
       conv2d_reference(s, cur.data(), cv.weight.data(), cv.bias.data(), nullptr, next.data());
-    else
-      conv2d(s, cur.data(), cv.packed, nullptr, next.data(), pool);
-    activation(next.data(), next.data(), int64_t(next.size()), Act::kRelu, pool);
+      activation(next.data(), next.data(), int64_t(next.size()), Act::kRelu, pool);
+    } else {
+      conv2d(s, cur.data(), cv.packed, nullptr, next.data(), ConvAct::kRelu, pool);  // fused ReLU
+    }
     cur.swap(next);
     c_cur = cv.c_out, h = oh, w = ow;
     result.per_layer[size_t(k)] =

@@ -195,11 +195,12 @@ void TaesdNet::forward(const TensorView& x, float* y, Arena& arena, ThreadPool* 
       if (i != not_a && i != not_b) return i;
     return -1;
   };
-  // conv(src) -> dst (+ residual), shapes updated by the caller.
+  // act(conv(src) (+ residual)) -> dst, the ReLU fused into the conv epilogue; shapes updated by
+  // the caller.
   auto run_conv = [&](const TaesdConv& c, const float* src, int64_t h, int64_t w, float* dst,
-                      const float* residual) {
+                      const float* residual, ConvAct act = ConvAct::kNone) {
     const Conv2dShape s = Conv2dShape::make(N, c.c_in, h, w, c.c_out, 3, c.stride, 1);
-    conv2d(s, src, c.packed, residual, dst, pool);
+    conv2d(s, src, c.packed, residual, dst, act, pool);
   };
   for (size_t i = 0; i < layers.size(); ++i) {
     const TaesdLayer& l = layers[i];
@@ -215,11 +216,14 @@ void TaesdNet::forward(const TensorView& x, float* y, Arena& arena, ThreadPool* 
       case TaesdLayerKind::kConv: {
         const int d = other(cur_idx);
         float* dst = last ? y : buf[d];
-        run_conv(l.conv, cur, H, W, dst, nullptr);
+        // A ReLU layer right after the conv runs in the conv's epilogue (and is skipped below).
+        const bool relu_next = !last && layers[i + 1].kind == TaesdLayerKind::kRelu;
+        run_conv(l.conv, cur, H, W, dst, nullptr, relu_next ? ConvAct::kRelu : ConvAct::kNone);
         const Conv2dShape s =
             Conv2dShape::make(N, l.conv.c_in, H, W, l.conv.c_out, 3, l.conv.stride, 1);
         C = l.conv.c_out, H = s.out_h(), W = s.out_w();
         cur = dst, cur_idx = last ? -1 : d;
+        if (relu_next) ++i;
         break;
       }
       case TaesdLayerKind::kRelu:
@@ -238,13 +242,9 @@ void TaesdNet::forward(const TensorView& x, float* y, Arena& arena, ThreadPool* 
         float* xb = buf[cur_idx];
         float* t1 = buf[other(cur_idx)];
         float* t2 = buf[other(cur_idx, other(cur_idx))];
-        const int64_t n = N * C * H * W;
-        run_conv(l.block.conv[0], xb, H, W, t1, nullptr);  // [N,64,H,W]
-        activation(t1, t1, n, Act::kRelu, pool);
-        run_conv(l.block.conv[1], t1, H, W, t2, nullptr);
-        activation(t2, t2, n, Act::kRelu, pool);
-        run_conv(l.block.conv[2], t2, H, W, xb, xb);  // conv.4(t2) + x, in place
-        activation(xb, xb, n, Act::kRelu, pool);
+        run_conv(l.block.conv[0], xb, H, W, t1, nullptr, ConvAct::kRelu);  // [N,64,H,W]
+        run_conv(l.block.conv[1], t1, H, W, t2, nullptr, ConvAct::kRelu);
+        run_conv(l.block.conv[2], t2, H, W, xb, xb, ConvAct::kRelu);  // relu(conv.4(t2) + x)
         break;
       }
     }
