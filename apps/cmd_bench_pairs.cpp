@@ -69,8 +69,11 @@ int run_pairs(Args& args) {
     p.seed = *seed;
   }
   p.progress = !quiet();
-  if (name.empty()) name = fs::path(scene).lexically_normal().filename().string();
-  if (name.empty() || name == ".") name = fs::absolute(scene).lexically_normal().filename().string();
+  if (name.empty()) {  // the scene folder's name ("/data/scene/" -> "scene")
+    fs::path dir = fs::absolute(scene).lexically_normal();
+    if (dir.filename().empty()) dir = dir.parent_path();
+    name = dir.filename().string();
+  }
 
   auto model = gs::find_colmap_model_folder(scene);
   if (!model) return fail("bench pairs", model.status());

@@ -117,16 +117,27 @@ CameraDepth camera_depth(const gs::Camera& cam, const std::vector<Eigen::Vector3
   const double tx = 0.5 * cam.width / cam.fx, ty = 0.5 * cam.height / cam.fy;
   const double half = std::atan(std::sqrt(tx * tx + ty * ty));
   d.half_fov_deg = half * kRadToDeg;
-  const double cos_half = std::cos(half);
-  std::vector<double> depths;
-  for (size_t m = 0; m < points.size(); ++m) {
-    const Eigen::Vector3d r = points[m] - d.center;
-    const double z = r.dot(d.axis);
-    if (!(z > 0.0)) continue;
-    if (!(z > cos_half * r.norm())) continue;  // z / |r| > cos(theta / 2)
-    depths.push_back(z);
-    if (bits) (*bits)[m >> 6] |= uint64_t(1) << (m & 63);
+  // z > cos(half) |r| with z > 0  <=>  z > 0 and z^2 > cos^2(half) |r|^2: no square root, and
+  // the loop is branch-free (visible depths are compacted by a conditional index).
+  const double cos2 = std::cos(half) * std::cos(half);
+  const Eigen::Vector3d c = d.center, v = d.axis;
+  std::vector<double> depths(points.size());
+  size_t count = 0;
+  for (size_t base = 0; base < points.size(); base += 64) {
+    const size_t end = std::min(points.size(), base + 64);
+    uint64_t word = 0;
+    for (size_t m = base; m < end; ++m) {
+      const double rx = points[m].x() - c.x(), ry = points[m].y() - c.y(), rz = points[m].z() - c.z();
+      const double z = rx * v.x() + ry * v.y() + rz * v.z();
+      const double r2 = rx * rx + ry * ry + rz * rz;
+      const bool in = z > 0.0 && z * z > cos2 * r2;
+      depths[count] = z;
+      count += in;
+      word |= uint64_t(in) << (m - base);
+    }
+    if (bits) (*bits)[base >> 6] = word;
   }
+  depths.resize(count);
   d.visible = int64_t(depths.size());
   if (depths.empty()) return d;
   d.p10 = percentile_linear(depths, 10.0);

@@ -592,7 +592,7 @@ TEST_CASE("macro bench pairs end to end, then bench run reads the split", "[pair
     return test::run_command(exe + " bench " + args + " > " + tmp.file("out.txt") + " 2>&1");
   };
   const auto out = [&]() { return *read_text_file(tmp.file("out.txt")); };
-  REQUIRE(sh("pairs --scene " + scene + " --out " + scene + "/split.json --copy-gt --quiet") == 0);
+  REQUIRE(sh("pairs --scene " + scene + "/ --out " + scene + "/split.json --copy-gt --quiet") == 0);
   INFO(out());
   CHECK(out().find("3 training views, 3 close-up pairs") != std::string::npos);
   auto split = gs::load_closeup_split(scene + "/split.json");
