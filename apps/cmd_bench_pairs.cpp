@@ -40,7 +40,8 @@ Status copy_gt(const std::string& scene, const std::string& out_dir, const std::
     return Status::error(src.string() + ": close-up image not found (--copy-gt)");
   std::error_code ec;
   fs::create_directories(dst.parent_path(), ec);
-  if (ec) return Status::error(dst.parent_path().string() + ": cannot create folder: " + ec.message());
+  if (ec)
+    return Status::error(dst.parent_path().string() + ": cannot create folder: " + ec.message());
   MACRO_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, read_file(src.string()));
   return write_file_atomic(dst.string(), bytes.data(), bytes.size());
 }
@@ -94,8 +95,7 @@ int run_pairs(Args& args) {
     log_info("bench pairs", "warning: the training pool holds " +
                                 std::to_string(pc->train_pool.size()) + " cameras, fewer than " +
                                 std::to_string(p.training_views) + " training views; all are used");
-  const std::string json =
-      enhance::split_json(*cameras, *pc, p, name, int64_t(points->size()));
+  const std::string json = enhance::split_json(*cameras, *pc, p, name, int64_t(points->size()));
   if (Status s = write_file_atomic(out, json); !s) return fail("bench pairs", s);
   if (want_gt) {
     const std::string out_dir = fs::absolute(out).parent_path().string();

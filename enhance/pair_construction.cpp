@@ -87,11 +87,11 @@ void CriteriaCounts::add(const PairMeasure& m) {
 }
 
 std::string CriteriaCounts::describe(const std::string& what, const PairParams& p) const {
-  return "of " + std::to_string(pairs) + " pairs (" + what + "): depth ratio >= " +
-         num(p.min_depth_ratio) + " holds for " + std::to_string(depth_ratio) + ", IoU >= " +
-         num(p.min_iou) + " for " + std::to_string(iou) + ", angle in [" + num(p.min_angle_deg) +
-         ", " + num(p.max_angle_deg) + "] deg for " + std::to_string(angle) + "; all three for " +
-         std::to_string(all);
+  return "of " + std::to_string(pairs) + " pairs (" + what +
+         "): depth ratio >= " + num(p.min_depth_ratio) + " holds for " +
+         std::to_string(depth_ratio) + ", IoU >= " + num(p.min_iou) + " for " +
+         std::to_string(iou) + ", angle in [" + num(p.min_angle_deg) + ", " + num(p.max_angle_deg) +
+         "] deg for " + std::to_string(angle) + "; all three for " + std::to_string(all);
 }
 
 double pair_score(double iou, double depth_ratio) {
@@ -127,7 +127,8 @@ CameraDepth camera_depth(const gs::Camera& cam, const std::vector<Eigen::Vector3
     const size_t end = std::min(points.size(), base + 64);
     uint64_t word = 0;
     for (size_t m = base; m < end; ++m) {
-      const double rx = points[m].x() - c.x(), ry = points[m].y() - c.y(), rz = points[m].z() - c.z();
+      const double rx = points[m].x() - c.x(), ry = points[m].y() - c.y(),
+                   rz = points[m].z() - c.z();
       const double z = rx * v.x() + ry * v.y() + rz * v.z();
       const double r2 = rx * rx + ry * ry + rz * rz;
       const bool in = z > 0.0 && z * z > cos2 * r2;
@@ -221,13 +222,12 @@ Result<PairConstruction> construct_pairs(const gs::CameraSet& cameras,
   const int n_test = fraction_count(p.test_fraction, n);
   const int n_train = fraction_count(p.train_fraction, n);
   if (n_test < 1 || n_train < 1)
-    return Status::error("pair construction: " + std::to_string(n) + " of " +
-                         std::to_string(n_cam) + " cameras see any 3D point; the " +
-                         num(100 * p.test_fraction) + "/" + num(100 * p.train_fraction) +
-                         " test/training split needs at least " +
-                         std::to_string(int(std::ceil(1.0 / std::min(p.test_fraction,
-                                                                     p.train_fraction)))) +
-                         " of them");
+    return Status::error(
+        "pair construction: " + std::to_string(n) + " of " + std::to_string(n_cam) +
+        " cameras see any 3D point; the " + num(100 * p.test_fraction) + "/" +
+        num(100 * p.train_fraction) + " test/training split needs at least " +
+        std::to_string(int(std::ceil(1.0 / std::min(p.test_fraction, p.train_fraction)))) +
+        " of them");
 
   // 3. Close and far sets, candidate pairs.
   const int n_close = fraction_count(p.close_fraction, n);
@@ -276,11 +276,10 @@ Result<PairConstruction> construct_pairs(const gs::CameraSet& cameras,
     s.near_ratio = max10 / min10;
     s.closeness = 1.0 / min_d;
     s.candidates = int64_t(pc.candidates.size());
-    s.score = s.candidates == 0 ? 0.0
-                                : s.depth_cv * (1 + std::log1p(s.mean_span)) *
-                                      (1 + std::log1p(s.near_ratio)) *
-                                      (1 + std::log1p(s.closeness)) *
-                                      std::log1p(double(s.candidates));
+    s.score = s.candidates == 0
+                  ? 0.0
+                  : s.depth_cv * (1 + std::log1p(s.mean_span)) * (1 + std::log1p(s.near_ratio)) *
+                        (1 + std::log1p(s.closeness)) * std::log1p(double(s.candidates));
   }
 
   // 5. Split and training views.
@@ -323,20 +322,20 @@ Result<PairConstruction> construct_pairs(const gs::CameraSet& cameras,
 
 Status check_pairs_found(const PairConstruction& pc, const PairParams& p) {
   if (pc.candidates.empty())
-    return Status::error("no candidate close-up pair (scene score 0): " +
-                         pc.candidate_counts.describe(
-                             std::to_string(pc.close_set.size()) + " close x " +
-                             std::to_string(pc.far_set.size()) + " far",
-                             p));
-  if (pc.eval_pairs.empty())
     return Status::error(
-        std::to_string(pc.candidates.size()) +
-        " candidate pairs, but no evaluation pair between the " +
-        std::to_string(pc.test_pool.size()) + " test candidates and the " +
-        std::to_string(pc.training.size()) + " training views: " +
-        pc.eval_counts.describe(std::to_string(pc.test_pool.size()) + " test x " +
-                                    std::to_string(pc.training.size()) + " training",
-                                p));
+        "no candidate close-up pair (scene score 0): " +
+        pc.candidate_counts.describe(std::to_string(pc.close_set.size()) + " close x " +
+                                         std::to_string(pc.far_set.size()) + " far",
+                                     p));
+  if (pc.eval_pairs.empty())
+    return Status::error(std::to_string(pc.candidates.size()) +
+                         " candidate pairs, but no evaluation pair between the " +
+                         std::to_string(pc.test_pool.size()) + " test candidates and the " +
+                         std::to_string(pc.training.size()) + " training views: " +
+                         pc.eval_counts.describe(std::to_string(pc.test_pool.size()) + " test x " +
+                                                     std::to_string(pc.training.size()) +
+                                                     " training",
+                                                 p));
   return Status::ok();
 }
 
@@ -345,8 +344,8 @@ std::string split_json(const gs::CameraSet& cameras, const PairConstruction& pc,
   using Json = nlohmann::ordered_json;
   const auto name = [&](int i) { return cameras.cameras[size_t(i)].name; };
   // Intrinsics of the first evaluation close-up (else the first training view).
-  const gs::Camera& k = cameras.cameras[size_t(
-      !pc.eval_pairs.empty() ? pc.eval_pairs.front().close : pc.training.front())];
+  const gs::Camera& k = cameras.cameras[size_t(!pc.eval_pairs.empty() ? pc.eval_pairs.front().close
+                                                                      : pc.training.front())];
   Json intr = {{"w", k.width}, {"h", k.height}, {"fl_x", k.fx},
                {"fl_y", k.fy}, {"cx", k.cx},    {"cy", k.cy}};
   if (k.model == gs::CameraModel::kOpenCV || k.model == gs::CameraModel::kOpenCVFisheye) {

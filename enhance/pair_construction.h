@@ -38,9 +38,9 @@ namespace macro::enhance {
 
 // Tuning constants of appendix D, named once.
 struct PairParams {
-  int training_views = 16;      // N of D.5
-  double min_depth_ratio = 2.0;  // d_far / d_close
-  double min_iou = 0.4;          // of the visible point sets
+  int training_views = 16;                            // N of D.5
+  double min_depth_ratio = 2.0;                       // d_far / d_close
+  double min_iou = 0.4;                               // of the visible point sets
   double min_angle_deg = 10.0, max_angle_deg = 60.0;  // between optical axes, inclusive
   double close_fraction = 0.4, far_fraction = 0.4;    // candidate sets (D.3)
   double test_fraction = 0.3, train_fraction = 0.3;   // split (D.5); the middle is discarded
@@ -49,7 +49,7 @@ struct PairParams {
 };
 
 struct CameraDepth {
-  int64_t visible = 0;  // |V_i|
+  int64_t visible = 0;                            // |V_i|
   double median = 0, p10 = 0, p90 = 0, span = 0;  // d_i, d_i^10, d_i^90, s_i (0 when visible == 0)
   Eigen::Vector3d center = Eigen::Vector3d::Zero();
   Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();  // unit optical axis v_i (world)
@@ -73,12 +73,12 @@ struct CriteriaCounts {
 };
 
 struct SceneScore {
-  double depth_cv = 0;      // sigma(d) / mu(d), population sigma
-  double mean_span = 0;     // s-bar
-  double near_ratio = 0;    // max d10 / min d10
-  double closeness = 0;     // 1 / min d (scene units)
-  int64_t candidates = 0;   // N_cand
-  double score = 0;         // S
+  double depth_cv = 0;     // sigma(d) / mu(d), population sigma
+  double mean_span = 0;    // s-bar
+  double near_ratio = 0;   // max d10 / min d10
+  double closeness = 0;    // 1 / min d (scene units)
+  int64_t candidates = 0;  // N_cand
+  double score = 0;        // S
 };
 
 struct PairConstruction {
@@ -90,10 +90,10 @@ struct PairConstruction {
   CriteriaCounts candidate_counts;      // over close x far
   SceneScore score;
   std::vector<int> test_pool, discarded, train_pool;  // D.5, each ascending d_i
-  std::vector<int> training;            // farthest-point order
-  std::vector<PairMeasure> eval_pairs;  // one per kept close-up, by close-up name
-  CriteriaCounts eval_counts;           // over test candidates x training views
-  std::vector<int> unpaired_tests;      // test candidates with no accepted training view
+  std::vector<int> training;                          // farthest-point order
+  std::vector<PairMeasure> eval_pairs;                // one per kept close-up, by close-up name
+  CriteriaCounts eval_counts;                         // over test candidates x training views
+  std::vector<int> unpaired_tests;  // test candidates with no accepted training view
 };
 
 // The whole construction. `points` are world positions (gs::ColmapPoints::xyz). Errors: too few
@@ -121,7 +121,6 @@ double pair_score(double iou, double depth_ratio);  // iou * log2(depth_ratio)
 // from the training views only), closeup_eval_pairs, closeup_poses (OpenGL c2w), counts, and a
 // pair_construction record (parameters, counts, scene score).
 std::string split_json(const gs::CameraSet& cameras, const PairConstruction& pc,
-                       const PairParams& params, const std::string& scene_name,
-                       int64_t num_points);
+                       const PairParams& params, const std::string& scene_name, int64_t num_points);
 
 }  // namespace macro::enhance

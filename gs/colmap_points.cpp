@@ -13,7 +13,9 @@
 namespace macro::gs {
 namespace {
 
-bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+bool is_space(char c) {
+  return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f';
+}
 
 // Next whitespace-separated token of `s` from `*pos`; empty at the end of the line.
 std::string_view next_token(std::string_view s, size_t* pos) {
@@ -139,9 +141,9 @@ Result<ColmapPoints> load_colmap_points_binary(const std::string& path) {
   read(&count, 8);
   constexpr uint64_t kMinPoint = 8 + 24 + 3 + 8 + 8;  // 51 bytes without the track
   if (count > left() / kMinPoint)
-    return Status::error(path + ": point count " + std::to_string(count) +
-                         " needs at least " + std::to_string(kMinPoint) + " bytes each, only " +
-                         std::to_string(left()) + " bytes left (truncated or not a COLMAP file)");
+    return Status::error(path + ": point count " + std::to_string(count) + " needs at least " +
+                         std::to_string(kMinPoint) + " bytes each, only " + std::to_string(left()) +
+                         " bytes left (truncated or not a COLMAP file)");
   ColmapPoints pts;
   pts.source = path;
   pts.ids.reserve(count);
@@ -192,8 +194,9 @@ Result<ColmapPoints> load_colmap_points(const std::string& folder) {
   const std::string dir = folder.empty() || folder.back() == '/' ? folder : folder + "/";
   if (file_exists(dir + "points3D.bin")) return load_colmap_points_binary(dir + "points3D.bin");
   if (file_exists(dir + "points3D.txt")) return load_colmap_points_text(dir + "points3D.txt");
-  return Status::error(folder + ": no points3D.bin or points3D.txt (the sparse 3D points of the "
-                                "COLMAP model are needed)");
+  return Status::error(folder +
+                       ": no points3D.bin or points3D.txt (the sparse 3D points of the "
+                       "COLMAP model are needed)");
 }
 
 Result<std::string> find_colmap_model_folder(const std::string& dir) {

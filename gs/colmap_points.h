@@ -2,7 +2,8 @@
 //
 //   points3D.txt: '#' comments, then per point one line
 //                 "POINT3D_ID X Y Z R G B ERROR TRACK[] as (IMAGE_ID POINT2D_IDX)".
-//   points3D.bin: little-endian (COLMAP src/colmap/scene/reconstruction_io.cc): u64 count; per point
+//   points3D.bin: little-endian (COLMAP src/colmap/scene/reconstruction_io.cc): u64 count; per
+//   point
 //                 u64 point3D_id, f64 x y z, u8 r g b, f64 error, u64 track_length, then
 //                 track_length x (u32 image_id, u32 point2D_idx)          (>= 51 bytes per point)
 //
@@ -23,14 +24,14 @@
 namespace macro::gs {
 
 struct ColmapPoints {
-  std::vector<int64_t> ids;                 // [M] POINT3D_ID
-  std::vector<Eigen::Vector3d> xyz;         // [M] world position (the COLMAP world frame)
-  std::vector<uint8_t> rgb;                 // [M*3]
-  std::vector<double> error;                // [M] reprojection error
-  std::vector<uint64_t> track_offsets;      // [M+1] point p observed by track_image_ids[o[p]..o[p+1])
-  std::vector<uint32_t> track_image_ids;    // [T] COLMAP image ids
-  std::vector<uint32_t> track_point2d;      // [T] POINT2D_IDX in that image
-  std::string source;                       // the file it was read from
+  std::vector<int64_t> ids;               // [M] POINT3D_ID
+  std::vector<Eigen::Vector3d> xyz;       // [M] world position (the COLMAP world frame)
+  std::vector<uint8_t> rgb;               // [M*3]
+  std::vector<double> error;              // [M] reprojection error
+  std::vector<uint64_t> track_offsets;    // [M+1] point p observed by track_image_ids[o[p]..o[p+1])
+  std::vector<uint32_t> track_image_ids;  // [T] COLMAP image ids
+  std::vector<uint32_t> track_point2d;    // [T] POINT2D_IDX in that image
+  std::string source;                     // the file it was read from
 
   size_t size() const { return xyz.size(); }
 };

@@ -280,8 +280,8 @@ TEST_CASE("pairs: ten-camera rig, accepted and rejected pairs and why", "[pairs]
   double mu = 0, var = 0, mean_span = 0;
   for (size_t i = 0; i < d.size(); ++i) mu += d[i] / 10, mean_span += span[i] / 10;
   for (double x : d) var += (x - mu) * (x - mu) / 10;
-  const double near = *std::max_element(d10.begin(), d10.end()) /
-                      *std::min_element(d10.begin(), d10.end());
+  const double near =
+      *std::max_element(d10.begin(), d10.end()) / *std::min_element(d10.begin(), d10.end());
   const double expect = std::sqrt(var) / mu * (1 + std::log(1 + mean_span)) *
                         (1 + std::log(1 + near)) * (1 + std::log(1 + 1 / 2.0)) * std::log(1 + 5.0);
   CHECK(pc->score.candidates == 5);
@@ -300,8 +300,8 @@ TEST_CASE("pairs: thresholds move pairs in and out, no-pair errors give the coun
     REQUIRE(pc.is_ok());
     std::set<std::string> accepted;
     for (const PairMeasure& m : pc->candidates) accepted.insert(pair_name(rig.cameras, m));
-    CHECK(accepted == std::set<std::string>{"cA-fB", "cA-fD", "cB-fA", "cB-fB", "cC-fA",
-                                            "cC-fB", "cD-fB", "cD-fD"});
+    CHECK(accepted == std::set<std::string>{"cA-fB", "cA-fD", "cB-fA", "cB-fB", "cC-fA", "cC-fB",
+                                            "cD-fB", "cD-fD"});
   }
   SECTION("angles 0-70 admit cA-fA, cB-fD (8 deg) and cC-fD (65 deg)") {
     p.min_angle_deg = 0;
@@ -310,8 +310,8 @@ TEST_CASE("pairs: thresholds move pairs in and out, no-pair errors give the coun
     REQUIRE(pc.is_ok());
     std::set<std::string> accepted;
     for (const PairMeasure& m : pc->candidates) accepted.insert(pair_name(rig.cameras, m));
-    CHECK(accepted == std::set<std::string>{"cA-fA", "cA-fB", "cA-fD", "cB-fB", "cB-fD",
-                                            "cC-fB", "cC-fD", "cD-fD"});
+    CHECK(accepted == std::set<std::string>{"cA-fA", "cA-fB", "cA-fD", "cB-fB", "cB-fD", "cC-fB",
+                                            "cC-fD", "cD-fD"});
   }
   SECTION("ratio 4 leaves no candidate: score 0 and an error with the counts") {
     p.min_depth_ratio = 4;
@@ -365,8 +365,7 @@ TEST_CASE("pairs: thresholds move pairs in and out, no-pair errors give the coun
   }
 }
 
-TEST_CASE("pairs: split proportions and 16 training views by farthest-point sampling",
-          "[pairs]") {
+TEST_CASE("pairs: split proportions and 16 training views by farthest-point sampling", "[pairs]") {
   // 100 cameras looking along +z at the cube from distances 2.00 .. 3.98 (step 0.02), with a
   // lateral offset on a 10 x 10 grid so that positions differ in x and y too.
   gs::CameraSet cams;
@@ -406,8 +405,7 @@ TEST_CASE("pairs: split proportions and 16 training views by farthest-point samp
   for (int k = 0; k < 20; ++k) pos.emplace_back(0.5 + 0.01 * k, 0.5 - 0.003 * k, 0.5 - 0.005 * k);
   for (int c = 0; c < 8; ++c) pos.emplace_back(c & 1, (c >> 1) & 1, (c >> 2) & 1);
   const std::vector<int> fps = enhance::farthest_point_sampling(pos, 8, std::nullopt);
-  CHECK(std::set<int>(fps.begin(), fps.end()) ==
-        std::set<int>{20, 21, 22, 23, 24, 25, 26, 27});
+  CHECK(std::set<int>(fps.begin(), fps.end()) == std::set<int>{20, 21, 22, 23, 24, 25, 26, 27});
   CHECK(fps[0] == 26);
   CHECK(fps[1] == 21);
   // With a seed the start is the seeded pick; 9 samples from a centre start still cover the
@@ -419,7 +417,8 @@ TEST_CASE("pairs: split proportions and 16 training views by farthest-point samp
   CHECK(enhance::farthest_point_sampling(pos, 100, std::nullopt).size() == pos.size());
 }
 
-// ---- points3D reader / writer --------------------------------------------------------------------
+// ---- points3D reader / writer
+// --------------------------------------------------------------------
 
 template <typename T>
 void put(std::vector<uint8_t>* b, T v) {
@@ -496,8 +495,9 @@ TEST_CASE("pairs: points3D text and binary readers agree, bad files are named er
   CHECK(text_error("1 0 0 0 1 2 3 0 5\n") ==
         bad + " line 1: TRACK[0] POINT2D_IDX: expected an unsigned integer, found 'end of line'");
   CHECK(text_error("1 0 zero 0 1 2 3 0\n") == bad + " line 1: Y: expected a number, found 'zero'");
-  CHECK(text_error("1 0 0 0 1 2 3\n") == bad + " line 1: ERROR: expected a number, found 'end "
-                                              "of line'");
+  CHECK(text_error("1 0 0 0 1 2 3\n") == bad +
+                                             " line 1: ERROR: expected a number, found 'end "
+                                             "of line'");
   CHECK(text_error("1 0 nan 0 1 2 3 0\n") ==
         bad + ": point 1: X Y Z: expected finite numbers, found a NaN or infinity");
   CHECK(text_error("4 0 0 0 1 2 3 0\n4 1 1 1 1 2 3 0\n") == bad + ": POINT3D_ID 4 appears twice");
@@ -522,8 +522,10 @@ TEST_CASE("pairs: points3D text and binary readers agree, bad files are named er
   std::vector<uint8_t> extra = bin;
   extra.push_back(0);
   CHECK(bin_error(extra) == tmp.file("bad.bin") + ": 1 unexpected bytes after 2 points");
-  CHECK(gs::load_colmap_points(tmp.file("nowhere")).status().message().find(
-            "no points3D.bin or points3D.txt") != std::string::npos);
+  CHECK(gs::load_colmap_points(tmp.file("nowhere"))
+            .status()
+            .message()
+            .find("no points3D.bin or points3D.txt") != std::string::npos);
 }
 
 // Writes the ten-camera rig as a COLMAP text scene: sparse/0 (cameras, images, points3D), and
@@ -575,8 +577,7 @@ TEST_CASE("pairs: COLMAP text round trip gives the in-memory construction", "[pa
   REQUIRE(disk->eval_pairs.size() == mem->eval_pairs.size());
   for (size_t k = 0; k < disk->eval_pairs.size(); ++k) {
     CHECK(pair_name(*cams, disk->eval_pairs[k]) == pair_name(rig.cameras, mem->eval_pairs[k]));
-    CHECK(disk->eval_pairs[k].depth_ratio ==
-          Approx(mem->eval_pairs[k].depth_ratio).epsilon(1e-12));
+    CHECK(disk->eval_pairs[k].depth_ratio == Approx(mem->eval_pairs[k].depth_ratio).epsilon(1e-12));
     CHECK(disk->eval_pairs[k].angle_deg == Approx(mem->eval_pairs[k].angle_deg).epsilon(1e-9));
   }
   CHECK(disk->score.score == Approx(mem->score.score).epsilon(1e-12));
@@ -620,11 +621,12 @@ TEST_CASE("macro bench pairs end to end, then bench run reads the split", "[pair
   CHECK(file_exists(scene + "/closeup_gt/c1_cB"));
 
   // bench run scores the three pairs (3dgs).
-  REQUIRE(sh("run --root " + tmp.file("root") + " --methods 3dgs --results " +
-             tmp.file("r.jsonl") + " --quiet") == 0);
+  REQUIRE(sh("run --root " + tmp.file("root") + " --methods 3dgs --results " + tmp.file("r.jsonl") +
+             " --quiet") == 0);
   std::ifstream f(tmp.file("r.jsonl"));
   int ok = 0, lines = 0;
-  for (std::string l; std::getline(f, l); ++lines) ok += l.find("\"status\":\"ok\"") != std::string::npos;
+  for (std::string l; std::getline(f, l); ++lines)
+    ok += l.find("\"status\":\"ok\"") != std::string::npos;
   CHECK(lines == 3);
   CHECK(ok == 3);
 
