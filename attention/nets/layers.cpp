@@ -367,7 +367,8 @@ void ResnetBlock2D::pack(Precision p) {
 }
 
 void ResnetBlock2D::forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w,
-                            const float* temb_silu, float* out, bool x_is_scratch) const {
+                            const float* temb_silu, float* out, bool x_is_scratch,
+                            int64_t out_capacity) const {
   const int64_t hw = h * w;
   ScratchFrame frame(r);
   // t1 = SiLU(GN1(x)), conv1's input (rounded in place on the fp32-kernel bf16 path). It lives
@@ -375,7 +376,9 @@ void ResnetBlock2D::forward(const Run& r, const float* x, int64_t n, int64_t h, 
   const bool t1_in_out = c_in <= c_out;
   const bool t1_in_x = !t1_in_out && x_is_scratch;
   float* t1 = t1_in_out ? out : t1_in_x ? const_cast<float*>(x) : r.alloc(n * c_in * hw);
-  float* t2 = r.alloc(n * c_out * hw);  // conv1 output (+ temb), then SiLU(GN2(.))
+  // t2 = conv1 output (+ temb), then SiLU(GN2(.)).
+  const int64_t out_n = n * c_out * hw;
+  float* t2 = out_capacity < 2 * out_n ? r.alloc(out_n) : r.planning() ? nullptr : out + out_n;
   float* tp = temb > 0 ? r.alloc(c_out) : nullptr;
   const float* residual = has_shortcut ? out : x;
   if (has_shortcut && !t1_in_out)

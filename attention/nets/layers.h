@@ -192,9 +192,12 @@ struct ResnetBlock2D {
   // x [N, Cin, H, W] -> out [N, Cout, H, W] (out must not alias x). temb_silu: SiLU(emb) [T],
   // shared by all N items, or null when temb == 0. Scratch: GN1's output goes to `out` when
   // Cin <= Cout (the shortcut is then computed after conv1), else in place over x when
-  // x_is_scratch (the caller no longer needs x), else to a Cin-sized temporary.
+  // x_is_scratch (the caller no longer needs x), else to a Cin-sized temporary. conv1's output
+  // t2 [N, Cout, H, W] goes behind the result in `out` when out_capacity (floats at out; 0 = just
+  // the result) holds twice the result, else to the run's workspace.
   void forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w,
-               const float* temb_silu, float* out, bool x_is_scratch = false) const;
+               const float* temb_silu, float* out, bool x_is_scratch = false,
+               int64_t out_capacity = 0) const;
 };
 
 // Stride-2 3x3 conv. UNet: symmetric pad 1 (out = ceil(n/2)); VAE encoder: pad right/bottom 1 only.

@@ -314,11 +314,7 @@ void DifixVae::decode_impl(const Run& r, const float* z, int64_t h, int64_t w,
   post_quant_conv.forward_scratch(r, d, 1, h, w, p, nullptr, 1, 0, 0, 0, 0);
   float* cur = buf[0];
   dec_conv_in.forward_scratch(r, p, 1, h, w, cur, nullptr, 1, 1, 1, 1, 1);
-  {
-    float* mid = r.alloc(up_blocks[0].c_in * h * w);
-    dec_mid.forward(r, cur, 1, h, w, other(cur), mid);
-    cur = mid;  // other(mid) is buf[0]: the ping-pong continues from there
-  }
+  dec_mid.forward(r, cur, 1, h, w, other(cur), cur);  // in place: x is dead after resnet0
   int64_t hh = h, ww = w, cc = up_blocks[0].c_in;
   for (int i = 0; i < n; ++i) {
     const VaeBlock& b = up_blocks[size_t(i)];
@@ -328,7 +324,9 @@ void DifixVae::decode_impl(const Run& r, const float* z, int64_t h, int64_t w,
     }
     for (const ResnetBlock2D& rb : b.resnets) {
       float* o = other(cur);
-      rb.forward(r, cur, 1, hh, ww, nullptr, o, /*x_is_scratch=*/true);
+      // At the full-resolution level the ping-pong buffers (sized for the widest upsampled
+      // tensor) have room for conv1's output behind the block's own output.
+      rb.forward(r, cur, 1, hh, ww, nullptr, o, /*x_is_scratch=*/true, /*out_capacity=*/max_act);
       cur = o;
       cc = rb.c_out;
     }

@@ -47,7 +47,7 @@ struct VaeMidBlock {
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack(Precision p);
   size_t bytes() const { return resnet0.bytes() + resnet1.bytes() + attention.bytes(); }
-  // x [N, C, H, W] -> out (a and out scratch-sized like x; x is left unchanged).
+  // x [N, C, H, W] -> out (a and out scratch-sized like x; out may be x, else x is unchanged).
   void forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* a,
                float* out) const;
 };
