@@ -65,30 +65,36 @@ double value_noise(double x, double y, uint32_t seed) {
 }
 
 // ---- fine texture ----------------------------------------------------------------------------------
-// Band limit: weight of a feature of size `period` on Gaussians `spacing` apart. The GT resolves
-// about 4 spacings (splats have sigma = spacing); 0 below 3 spacings, 1 above 6.
+// Band limit: weight of a feature of size `period` on Gaussians `spacing` apart: 0 below 2.5
+// spacings, 1 above 5 (splats have sigma = spacing, which passes a sinusoid of period 4 sigma at
+// 29% and 5 sigma at 45% of its amplitude).
 double band(double period, double spacing) {
-  const double t = std::clamp((period / spacing - 3.0) / 3.0, 0.0, 1.0);
+  const double t = std::clamp((period / spacing - 2.5) / 2.5, 0.0, 1.0);
   return t * t * (3 - 2 * t);
 }
 
-// Colour at plane (u, v) with fine detail on top of the gs/synth texture.
-//   grain      value noise at 4, 2.5, 1.6 mm periods (+-14% brightness each)
-//   hatching   in 8 cm regions (half of them), stripes of period 2-5 mm at a random angle (+-25%)
-//   scratches  in 5 cm regions (a third), one dark line 0.4-0.9 mm wide at a random angle
-//   specks     one disc of radius 1-2.5 mm per 10 mm cell with probability 0.35, dark or accent
-Vector3d fine_color(const gs::SynthTexture& tex, double u, double v, double spacing) {
+// Colour at plane (u, v) with fine detail on top of the gs/synth texture. Sizes are in units of
+// `px`, the training-pixel footprint on the surface (m), so the detail sits below what the training
+// photos resolve at every image size and shows from about 2x zoom (coarsest) to 6x (finest):
+//   grain      value noise at periods 1, 0.7, 0.5 px (+-14% brightness each)
+//   hatching   in 14 px regions (half of them), stripes of period 0.5-1 px at a random angle (+-25%)
+//   scratches  in 9 px regions (a third), one dark line 0.12-0.25 px wide at a random angle
+//   specks     one disc of radius 0.2-0.45 px per 1.6 px cell with probability 0.35, dark or accent
+// Each feature fades out (band) where the local spacing cannot carry it.
+Vector3d fine_color(const gs::SynthTexture& tex, double u, double v, double spacing, double px) {
   Vector3d rgb = gs::synth_texture_color(tex, u, v);
   const uint32_t seed = tex.seed ^ 0xA5F1523Du;
   double gain = 1.0;
-  double period = 0.004;
-  for (int o = 0; o < 3; ++o, period *= 0.63) {
-    const double w = band(period, spacing);
-    if (w > 0) gain += 0.28 * w * (value_noise(u / period, v / period, seed + uint32_t(o)) - 0.5);
+  const double periods[3] = {1.0 * px, 0.7 * px, 0.5 * px};
+  for (int o = 0; o < 3; ++o) {
+    const double w = band(periods[o], spacing);
+    if (w > 0)
+      gain += 0.28 * w * (value_noise(u / periods[o], v / periods[o], seed + uint32_t(o)) - 0.5);
   }
-  const int32_t ru = int32_t(std::floor(u / 0.08)), rv = int32_t(std::floor(v / 0.08));
+  const double region = 14 * px;
+  const int32_t ru = int32_t(std::floor(u / region)), rv = int32_t(std::floor(v / region));
   if (hash01(ru, rv, seed + 31u) < 0.5) {
-    const double p = 0.002 + 0.003 * hash01(ru, rv, seed + 37u);
+    const double p = (0.5 + 0.5 * hash01(ru, rv, seed + 37u)) * px;
     const double w = band(p, spacing);
     if (w > 0) {
       const double a = kPi * hash01(ru, rv, seed + 41u);
@@ -96,23 +102,24 @@ Vector3d fine_color(const gs::SynthTexture& tex, double u, double v, double spac
     }
   }
   rgb *= gain;
-  const int32_t su = int32_t(std::floor(u / 0.05)), sv = int32_t(std::floor(v / 0.05));
+  const double scratch = 9 * px;
+  const int32_t su = int32_t(std::floor(u / scratch)), sv = int32_t(std::floor(v / scratch));
   if (hash01(su, sv, seed + 67u) < 0.35) {
-    const double width = 0.0004 + 0.0005 * hash01(su, sv, seed + 71u);
+    const double width = (0.12 + 0.13 * hash01(su, sv, seed + 71u)) * px;
     const double w = band(4 * width, spacing);
     const double a = kPi * hash01(su, sv, seed + 73u);
-    const double cu = (su + 0.5) * 0.05, cv = (sv + 0.5) * 0.05;
+    const double cu = (su + 0.5) * scratch, cv = (sv + 0.5) * scratch;
     const double d = std::abs((u - cu) * std::sin(a) - (v - cv) * std::cos(a));
     if (w > 0 && d < width / 2) rgb *= 1 - 0.75 * w;
   }
-  constexpr double kCell = 0.010;
-  const int32_t cu = int32_t(std::floor(u / kCell)), cv = int32_t(std::floor(v / kCell));
+  const double cell = 1.6 * px;
+  const int32_t cu = int32_t(std::floor(u / cell)), cv = int32_t(std::floor(v / cell));
   if (hash01(cu, cv, seed + 43u) < 0.35) {
-    const double r = 0.001 + 0.0015 * hash01(cu, cv, seed + 47u);
+    const double r = (0.2 + 0.25 * hash01(cu, cv, seed + 47u)) * px;
     const double w = band(4 * r, spacing);
-    const double px = (cu + 0.5 + 0.2 * (hash01(cu, cv, seed + 53u) - 0.5)) * kCell;
-    const double py = (cv + 0.5 + 0.2 * (hash01(cu, cv, seed + 59u) - 0.5)) * kCell;
-    if (w > 0 && std::hypot(u - px, v - py) < r) {
+    const double x = (cu + 0.5 + 0.2 * (hash01(cu, cv, seed + 53u) - 0.5)) * cell;
+    const double y = (cv + 0.5 + 0.2 * (hash01(cu, cv, seed + 59u) - 0.5)) * cell;
+    if (w > 0 && std::hypot(u - x, v - y) < r) {
       const Vector3d dot = hash01(cu, cv, seed + 61u) < 0.6 ? Vector3d(0.06, 0.05, 0.05)
                                                              : tex.accent;
       rgb = rgb * (1 - w) + dot * w;
@@ -190,6 +197,7 @@ SynthCloseParams synthclose_params(SynthCloseSize size, uint64_t seed, int scene
       p.closeup_views = 3;
       p.base_gaussians = 250'000;
       p.kind = gs::SynthKind::kMixed;
+      p.background = false;
       break;
     case SynthCloseSize::kTiny:
       p.width = 160;
@@ -265,6 +273,7 @@ Result<SynthCloseScene> make_synthclose_scene(const SynthCloseParams& p) {
   gs::SynthParams sp;
   sp.seed = p.seed;
   sp.kind = p.kind;
+  sp.background = p.background;
   sp.gaussians = p.base_gaussians;
   sp.width = p.width;
   sp.height = p.height;
@@ -302,7 +311,7 @@ Result<SynthCloseScene> make_synthclose_scene(const SynthCloseParams& p) {
     // Tiles hold a few Gaussians at least where only training views see them.
     double train_fp = INFINITY;
     for (const gs::Camera* c : train) train_fp = std::min(train_fp, footprint(*c, pl.center, 1e9));
-    if (!std::isfinite(train_fp)) train_fp = 0;
+    if (!std::isfinite(train_fp)) train_fp = 0.25 * p.tile;  // seen by no training view
     const double tile = std::max(pl.background ? kBackgroundTile * p.tile : p.tile,
                                  4 * (pl.background ? p.background_spacing_px : p.train_spacing_px) * train_fp);
     const int tu = std::max(1, int(std::ceil(2 * pl.half_u / tile)));
@@ -333,7 +342,7 @@ Result<SynthCloseScene> make_synthclose_scene(const SynthCloseParams& p) {
           for (int i = 0; i < nu; ++i) {
             const double u = u0 + (i + 0.5) * du + kJitter * du * (2 * rng.uniform() - 1);
             const double v = v0 + (j + 0.5) * dv + kJitter * dv * (2 * rng.uniform() - 1);
-            const Vector3d rgb = fine_color(pl.texture, u, v, spacing);
+            const Vector3d rgb = fine_color(pl.texture, u, v, spacing, train_fp);
             writer.put(pl.center + u * pl.axis_u + v * pl.axis_v, rot, sigma, kOpacity,
                        (rgb - Vector3d::Constant(0.5)) / double(gs::kShC0));
             keys.push_back(cluster_key(surface, (u + pl.half_u) / cell, (v + pl.half_v) / cell, 0));
@@ -477,6 +486,7 @@ Result<SynthCloseSummary> write_synthclose(const std::string& dir, const SynthCl
     info["scene_index"] = k;
     info["scene_seed"] = sp.seed;
     info["kind"] = gs::synth_kind_name(sp.kind);
+    info["background"] = sp.background;
     info["width"] = sp.width;
     info["height"] = sp.height;
     info["supersample"] = sp.supersample;

@@ -4,7 +4,7 @@
 // and rods on even scenes, a training rig and close-ups zoomed 1.5x-6x onto the planes) with two
 // Gaussian clouds:
 //   - the ground truth (GT): the planes re-sampled densely, with a fine texture layer (grain,
-//     hatching, specks at 1.5-12 mm) on top of gs/synth's texture. The sampling spacing of each
+//     hatching, scratches, specks at 0.1-1 training pixel) on top of gs/synth's texture. The sampling spacing of each
 //     2 cm tile follows the finest view that sees it (train_spacing_px training pixels,
 //     closeup_spacing_px close-up pixels), and each fine feature is faded out where the spacing
 //     cannot carry it (band limit), so the detail exists wherever some view can resolve it and
@@ -48,6 +48,7 @@ const char* synthclose_size_name(SynthCloseSize size);
 struct SynthCloseParams {
   uint64_t seed = 1;
   gs::SynthKind kind = gs::SynthKind::kMixed;
+  bool background = true;         // the large backdrop plane (the demo has none: folder size)
   int width = 960, height = 536;  // every photo
   int training_views = 10;
   int closeup_views = 5;
@@ -55,7 +56,7 @@ struct SynthCloseParams {
   size_t base_gaussians = 600'000; // gs/synth budget: spheres and rods keep its sampling
   int supersample = 2;             // photo samples per pixel side
   double train_spacing_px = 0.7;   // GT spacing <= this many training pixels (where seen)
-  double closeup_spacing_px = 1.0; // ... and <= this many close-up pixels (where seen)
+  double closeup_spacing_px = 0.75; // ... and <= this many close-up pixels (where seen)
   double background_spacing_px = 1.5;  // the background plane: training pixels only (a backdrop)
   double min_spacing = 0.0006;     // m, floor of the GT spacing
   double tile = 0.02;              // m, sampling tile (background: 4x)
@@ -63,8 +64,8 @@ struct SynthCloseParams {
   double recon_cover = 0.7;        // merged in-surface sigma >= this x the cluster size
 };
 
-// Defaults of a size: full 960x536, 10 training views, 5 close-ups; demo 640x360, 6 + 3; tiny
-// 160x96, 4 + 3. `scene_index` varies the kind, the close-up cycle and the seed.
+// Defaults of a size: full 960x536, 10 training views, 5 close-ups; demo 640x360, 6 + 3, no
+// background plane; tiny 160x96, 4 + 3. `scene_index` varies the kind, the close-up cycle and the seed.
 SynthCloseParams synthclose_params(SynthCloseSize size, uint64_t seed, int scene_index);
 
 struct SynthCloseScene {
