@@ -558,29 +558,74 @@ void write_rig_scene(const Rig& rig, const std::string& dir, bool with_images) {
               .is_ok());
 }
 
-TEST_CASE("pairs: COLMAP text round trip gives the in-memory construction", "[pairs]") {
+// The rig as a COLMAP binary model (cameras.bin, images.bin, points3D.bin) in `folder`, byte
+// layouts as in gs/cameras_colmap_binary.cpp and gs/colmap_points.h.
+void write_rig_binary(const Rig& rig, const std::string& folder) {
+  fs::create_directories(folder);
+  std::vector<uint8_t> cams, images, points;
+  put<uint64_t>(&cams, 1);
+  put<uint32_t>(&cams, 1);
+  put<int32_t>(&cams, 1);  // PINHOLE
+  put<uint64_t>(&cams, 100);
+  put<uint64_t>(&cams, 100);
+  for (double v : {50.0, 50.0, 50.0, 50.0}) put(&cams, v);
+  put<uint64_t>(&images, rig.cameras.cameras.size());
+  for (size_t i = 0; i < rig.cameras.cameras.size(); ++i) {
+    const gs::Camera& c = rig.cameras.cameras[i];
+    put<uint32_t>(&images, uint32_t(i) + 1);
+    const Eigen::Vector4d q = gs::quaternion_wxyz_from_rotation(c.R);
+    for (int k = 0; k < 4; ++k) put(&images, q[k]);
+    for (int k = 0; k < 3; ++k) put(&images, c.t[k]);
+    put<uint32_t>(&images, 1);
+    images.insert(images.end(), c.name.begin(), c.name.end());
+    images.push_back(0);
+    put<uint64_t>(&images, 0);
+  }
+  put<uint64_t>(&points, rig.points.size());
+  for (size_t i = 0; i < rig.points.size(); ++i) {
+    put<uint64_t>(&points, i + 1);
+    for (int k = 0; k < 3; ++k) put(&points, rig.points[i][k]);
+    for (uint8_t c : {7, 8, 9}) put(&points, c);
+    put(&points, 0.25);
+    put<uint64_t>(&points, 1);
+    put<uint32_t>(&points, 1);
+    put<uint32_t>(&points, uint32_t(i));
+  }
+  REQUIRE(write_file_atomic(folder + "/cameras.bin", cams.data(), cams.size()).is_ok());
+  REQUIRE(write_file_atomic(folder + "/images.bin", images.data(), images.size()).is_ok());
+  REQUIRE(write_file_atomic(folder + "/points3D.bin", points.data(), points.size()).is_ok());
+}
+
+TEST_CASE("pairs: COLMAP text and binary models give the in-memory construction", "[pairs]") {
   test::TempDir tmp("pairs-colmap");
   const Rig rig = ten_camera_rig();
-  write_rig_scene(rig, tmp.file("scene"), false);
-  auto folder = gs::find_colmap_model_folder(tmp.file("scene"));
-  REQUIRE(folder.is_ok());
-  CHECK(*folder == tmp.file("scene/sparse/0"));
-  auto cams = gs::load_colmap_sparse(*folder);
-  REQUIRE(cams.is_ok());
-  auto pts = gs::load_colmap_points(*folder);
-  REQUIRE(pts.is_ok());
-  REQUIRE(pts->size() == rig.points.size());
-  auto disk = enhance::construct_pairs(*cams, pts->xyz, quiet_params());
+  write_rig_scene(rig, tmp.file("text"), false);
+  write_rig_binary(rig, tmp.file("binary/sparse/0"));
   auto mem = enhance::construct_pairs(rig.cameras, rig.points, quiet_params());
-  REQUIRE(disk.is_ok());
   REQUIRE(mem.is_ok());
-  REQUIRE(disk->eval_pairs.size() == mem->eval_pairs.size());
-  for (size_t k = 0; k < disk->eval_pairs.size(); ++k) {
-    CHECK(pair_name(*cams, disk->eval_pairs[k]) == pair_name(rig.cameras, mem->eval_pairs[k]));
-    CHECK(disk->eval_pairs[k].depth_ratio == Approx(mem->eval_pairs[k].depth_ratio).epsilon(1e-12));
-    CHECK(disk->eval_pairs[k].angle_deg == Approx(mem->eval_pairs[k].angle_deg).epsilon(1e-9));
+  for (const char* kind : {"text", "binary"}) {
+    INFO(kind);
+    auto folder = gs::find_colmap_model_folder(tmp.file(kind));
+    REQUIRE(folder.is_ok());
+    CHECK(*folder == tmp.file(std::string(kind) + "/sparse/0"));
+    auto cams = gs::load_colmap_sparse(*folder);
+    REQUIRE(cams.is_ok());
+    auto pts = gs::load_colmap_points(*folder);
+    REQUIRE(pts.is_ok());
+    REQUIRE(pts->size() == rig.points.size());
+    auto disk = enhance::construct_pairs(*cams, pts->xyz, quiet_params());
+    REQUIRE(disk.is_ok());
+    CHECK(names(*cams, disk->training) == names(rig.cameras, mem->training));
+    CHECK(disk->candidates.size() == mem->candidates.size());
+    REQUIRE(disk->eval_pairs.size() == mem->eval_pairs.size());
+    for (size_t k = 0; k < disk->eval_pairs.size(); ++k) {
+      CHECK(pair_name(*cams, disk->eval_pairs[k]) == pair_name(rig.cameras, mem->eval_pairs[k]));
+      CHECK(disk->eval_pairs[k].depth_ratio ==
+            Approx(mem->eval_pairs[k].depth_ratio).epsilon(1e-12));
+      CHECK(disk->eval_pairs[k].angle_deg == Approx(mem->eval_pairs[k].angle_deg).epsilon(1e-9));
+    }
+    CHECK(disk->score.score == Approx(mem->score.score).epsilon(1e-12));
   }
-  CHECK(disk->score.score == Approx(mem->score.score).epsilon(1e-12));
 }
 
 TEST_CASE("macro bench pairs end to end, then bench run reads the split", "[pairs][cli]") {
