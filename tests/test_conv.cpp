@@ -158,10 +158,9 @@ TEST_CASE("conv2d: fused ReLU epilogue (after bias and residual), fp32 and bf16,
     return v;
   };
   // Panels that straddle output rows (W 35, 70), no padding, right/bottom-only padding, stride 2.
-  const Conv2dShape shapes[] = {shape(1, 20, 13, 35, 24, 3, 1, 1, 1, 1, 1),
-                                shape(2, 7, 6, 70, 13, 3, 1, 0, 0, 0, 0),
-                                shape(1, 9, 9, 33, 6, 3, 1, 0, 0, 1, 1),
-                                shape(1, 16, 13, 11, 19, 3, 2, 1, 1, 1, 1)};
+  const Conv2dShape shapes[] = {
+      shape(1, 20, 13, 35, 24, 3, 1, 1, 1, 1, 1), shape(2, 7, 6, 70, 13, 3, 1, 0, 0, 0, 0),
+      shape(1, 9, 9, 33, 6, 3, 1, 0, 0, 1, 1), shape(1, 16, 13, 11, 19, 3, 2, 1, 1, 1, 1)};
   for (Isa isa : supported_isas()) {
     REQUIRE(set_isa(isa));
     for (const Conv2dShape& s : shapes) {

@@ -55,7 +55,7 @@ void pack_a_f32(const float* src, int64_t ld, int valid_rows, int64_t valid_k, i
   const __m512 zero = _mm512_setzero_ps();
   for (int64_t k0 = 0; k0 < kcp; k0 += 16) {
     const int64_t left = valid_k - k0;
-    const __mmask16 m = left >= 16 ? __mmask16(0xffff)
+    const __mmask16 m = left >= 16  ? __mmask16(0xffff)
                         : left <= 0 ? __mmask16(0)
                                     : __mmask16((1u << left) - 1);
     const int nk = int(kcp - k0 < 16 ? kcp - k0 : 16);
@@ -121,8 +121,8 @@ double probe_fma(int64_t iters) {
 
 namespace detail {
 void fill_avx512_kernels(KernelTable& t) {
-  t.f32 = GemmKernel{kMrF32,           kNr,       1, 384, PackLayout::kF32, micro_f32,
-                     "avx512 f32 12x32", pack_a_f32};
+  t.f32 =
+      GemmKernel{kMrF32, kNr, 1, 384, PackLayout::kF32, micro_f32, "avx512 f32 12x32", pack_a_f32};
   t.bf16 = GemmKernel{kMrBf16,
                       kNr,
                       2,

@@ -56,7 +56,7 @@ void pack_a_pairs(const float* src, int64_t ld, int valid_rows, int64_t valid_k,
         if (g + i < valid_rows) {
           const float* s = src + (g + i) * ld + k;
           r[i] = _mm512_castsi512_ps((__m512i)_mm512_cvtne2ps_pbh(_mm512_maskz_loadu_ps(m1, s + 16),
-                                                                   _mm512_maskz_loadu_ps(m0, s)));
+                                                                  _mm512_maskz_loadu_ps(m0, s)));
         } else {
           r[i] = _mm512_setzero_ps();
         }

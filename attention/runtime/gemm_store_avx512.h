@@ -1,6 +1,7 @@
-// The AVX-512 micro-tile epilogue and A-panel transpose shared by the fp32 and bf16 micro-kernels (gemm_avx512.cpp,
-// gemm_avx512bf16.cpp). Include ONLY from files compiled with AVX-512 flags. Internal linkage
-// (anonymous namespace), so each ISA file keeps its own copy compiled with its own flags.
+// The AVX-512 micro-tile epilogue and A-panel transpose shared by the fp32 and bf16 micro-kernels
+// (gemm_avx512.cpp, gemm_avx512bf16.cpp). Include ONLY from files compiled with AVX-512 flags.
+// Internal linkage (anonymous namespace), so each ISA file keeps its own copy compiled with its own
+// flags.
 #pragma once
 
 #include <immintrin.h>
@@ -58,22 +59,27 @@ inline void store_tile(const MicroTile& t, const __m512* c0, const __m512* c1) {
 }
 
 // Transposed store of four rows of 16 32-bit elements (fp32 values, or bf16 pair words):
-// dst[k * w + i] = row_i[k] for k < nk (<= 16), i < nrows (<= 4; the others are not written). This is the A-panel packing step ([K][MR]
-// from row-major rows): a 4x4 transpose inside each 128-bit lane, then one 16-byte store per k.
+// dst[k * w + i] = row_i[k] for k < nk (<= 16), i < nrows (<= 4; the others are not written). This
+// is the A-panel packing step ([K][MR] from row-major rows): a 4x4 transpose inside each 128-bit
+// lane, then one 16-byte store per k.
 inline void transpose_store_4x16(__m512 r0, __m512 r1, __m512 r2, __m512 r3, int nk, int nrows,
                                  int64_t w, float* dst) {
   const __m512 t0 = _mm512_unpacklo_ps(r0, r1), t1 = _mm512_unpackhi_ps(r0, r1);
   const __m512 t2 = _mm512_unpacklo_ps(r2, r3), t3 = _mm512_unpackhi_ps(r2, r3);
   // u_j lane l holds the four rows at k = 4 l + j.
-  const __m512 u0 = _mm512_castpd_ps(_mm512_unpacklo_pd(_mm512_castps_pd(t0), _mm512_castps_pd(t2)));
-  const __m512 u1 = _mm512_castpd_ps(_mm512_unpackhi_pd(_mm512_castps_pd(t0), _mm512_castps_pd(t2)));
-  const __m512 u2 = _mm512_castpd_ps(_mm512_unpacklo_pd(_mm512_castps_pd(t1), _mm512_castps_pd(t3)));
-  const __m512 u3 = _mm512_castpd_ps(_mm512_unpackhi_pd(_mm512_castps_pd(t1), _mm512_castps_pd(t3)));
+  const __m512 u0 =
+      _mm512_castpd_ps(_mm512_unpacklo_pd(_mm512_castps_pd(t0), _mm512_castps_pd(t2)));
+  const __m512 u1 =
+      _mm512_castpd_ps(_mm512_unpackhi_pd(_mm512_castps_pd(t0), _mm512_castps_pd(t2)));
+  const __m512 u2 =
+      _mm512_castpd_ps(_mm512_unpacklo_pd(_mm512_castps_pd(t1), _mm512_castps_pd(t3)));
+  const __m512 u3 =
+      _mm512_castpd_ps(_mm512_unpackhi_pd(_mm512_castps_pd(t1), _mm512_castps_pd(t3)));
   if (nk == 16 && nrows == 4) {
-#define MACRO_STORE_LANE(L)                                                   \
-  _mm_storeu_ps(dst + (4 * L + 0) * w, _mm512_extractf32x4_ps(u0, L));        \
-  _mm_storeu_ps(dst + (4 * L + 1) * w, _mm512_extractf32x4_ps(u1, L));        \
-  _mm_storeu_ps(dst + (4 * L + 2) * w, _mm512_extractf32x4_ps(u2, L));        \
+#define MACRO_STORE_LANE(L)                                            \
+  _mm_storeu_ps(dst + (4 * L + 0) * w, _mm512_extractf32x4_ps(u0, L)); \
+  _mm_storeu_ps(dst + (4 * L + 1) * w, _mm512_extractf32x4_ps(u1, L)); \
+  _mm_storeu_ps(dst + (4 * L + 2) * w, _mm512_extractf32x4_ps(u2, L)); \
   _mm_storeu_ps(dst + (4 * L + 3) * w, _mm512_extractf32x4_ps(u3, L));
     MACRO_STORE_LANE(0)
     MACRO_STORE_LANE(1)
