@@ -11,6 +11,7 @@
 #include <set>
 
 #include "attention/runtime/file_io.h"
+#include "attention/runtime/thread_pool.h"
 #include "enhance/pair_construction.h"
 #include "gs/camera.h"
 #include "gs/colmap_points.h"
@@ -395,6 +396,18 @@ TEST_CASE("pairs: split proportions and 16 training views by farthest-point samp
   // All axes are parallel: every pair fails the angle test, so there is no candidate.
   CHECK(pc->candidate_counts.angle == 0);
   CHECK(pc->candidates.empty());
+  // One camera per task, so one thread gives bit-identical depths and the same sets.
+  ThreadPool::set_global_threads(1);
+  auto one = enhance::construct_pairs(cams, pts, quiet_params());
+  ThreadPool::set_global_threads(0);
+  REQUIRE(one.is_ok());
+  for (size_t i = 0; i < cams.cameras.size(); ++i) {
+    CHECK(one->depth[i].median == pc->depth[i].median);
+    CHECK(one->depth[i].p10 == pc->depth[i].p10);
+    CHECK(one->depth[i].visible == pc->depth[i].visible);
+  }
+  CHECK(one->training == pc->training);
+  CHECK(one->candidate_counts.iou == pc->candidate_counts.iou);
 
   // Farthest-point sampling on its own: the 8 corners of the unit cube (indices 20..27, corner c
   // at (c & 1, c >> 1 & 1, c >> 2 & 1)) plus 20 points near its centre, drifting to +x, -y, -z so
