@@ -340,6 +340,19 @@ TEST_CASE("pairs: thresholds move pairs in and out, no-pair errors give the coun
                            "training)") == 0);
     CHECK(s.message().find("IoU >= 0.4 for 0") != std::string::npos);
   }
+  SECTION("a camera that sees no point is set aside, the rest unchanged") {
+    Rig blind = rig;
+    blind.cameras.cameras.push_back(rig_camera("z_blind", {0, 0, -3}, {0, 0, -1}));
+    auto pc = enhance::construct_pairs(blind.cameras, blind.points, p);
+    REQUIRE(pc.is_ok());
+    CHECK(pc->no_depth == std::vector<int>{10});
+    CHECK(pc->depth[10].visible == 0);
+    CHECK(pc->by_depth.size() == 10);
+    CHECK(pc->candidates.size() == 5);
+    CHECK(pc->eval_pairs.size() == 3);
+    const std::string json = enhance::split_json(blind.cameras, *pc, p, "blind", 2662);
+    CHECK(json.find("\"cameras_without_points\": 1") != std::string::npos);
+  }
   SECTION("a seeded start is deterministic") {
     p.seed = 7;
     auto a = enhance::construct_pairs(rig.cameras, rig.points, p);
@@ -532,6 +545,10 @@ TEST_CASE("pairs: points3D text and binary readers agree, bad files are named er
         std::string::npos);
   std::vector<uint8_t> cut(bin.begin(), bin.end() - 5);
   CHECK(bin_error(cut).find("point #1: file truncated") != std::string::npos);
+  for (size_t len = 0; len < bin.size(); ++len) {  // every truncation is an error, never a crash
+    REQUIRE(write_file_atomic(tmp.file("cut.bin"), bin.data(), len).is_ok());
+    CHECK_FALSE(gs::load_colmap_points_binary(tmp.file("cut.bin")).is_ok());
+  }
   std::vector<uint8_t> extra = bin;
   extra.push_back(0);
   CHECK(bin_error(extra) == tmp.file("bad.bin") + ": 1 unexpected bytes after 2 points");
