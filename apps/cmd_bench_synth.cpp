@@ -17,7 +17,8 @@ constexpr const char* kUsage =
     "                         [--no-gt-ply] [--quiet]\n"
     "  synth   SynthClose: synthetic close-up scenes with exact GT (DIR/synthclose_NN; the demo\n"
     "          size writes one scene folder into DIR). Photos from a dense GT splat (gt.ply),\n"
-    "          scene.ply the merged, blurrier reconstruction; full: 10 scenes, 50 pairs, 960x536.\n";
+    "          scene.ply the merged, blurrier reconstruction; full: 10 scenes, 50 pairs, "
+    "960x536.\n";
 
 int run_synth(Args& args) {
   enhance::SynthCloseOptions o;
@@ -39,8 +40,7 @@ int run_synth(Args& args) {
   auto summary = enhance::write_synthclose(out, o);
   if (progress) progress->finish();
   if (!summary) return fail("bench synth", summary.status());
-  const double secs =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf(
       "bench synth: %d scenes, %d close-up pairs, %zu GT / %zu reconstruction Gaussians, "
       "%.1f s -> %s\n",

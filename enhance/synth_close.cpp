@@ -21,14 +21,15 @@ using Eigen::Matrix3d;
 using Eigen::Vector3d;
 constexpr double kPi = 3.14159265358979323846;
 
-constexpr double kOpacity = 0.98;     // GT surface splats (as gs/synth)
-constexpr double kInPlaneSigma = 1.0; // x spacing (as gs/synth: opaque surfaces)
-constexpr double kThinSigma = 0.02;   // x spacing along the normal
-constexpr double kJitter = 0.05;      // x spacing
-constexpr double kBackgroundTile = 4; // x tile on the background plane
-constexpr double kMaxTileSide = 64;   // Gaussians along a tile side (bounds a tile's count)
+constexpr double kOpacity = 0.98;      // GT surface splats (as gs/synth)
+constexpr double kInPlaneSigma = 1.0;  // x spacing (as gs/synth: opaque surfaces)
+constexpr double kThinSigma = 0.02;    // x spacing along the normal
+constexpr double kJitter = 0.05;       // x spacing
+constexpr double kBackgroundTile = 4;  // x tile on the background plane
+constexpr double kMaxTileSide = 64;    // Gaussians along a tile side (bounds a tile's count)
 
-// ---- randomness (integer hashes and SplitMix64, as gs/synth) --------------------------------------
+// ---- randomness (integer hashes and SplitMix64, as gs/synth)
+// --------------------------------------
 struct Rng {
   uint64_t state;
   uint64_t next() {
@@ -64,10 +65,11 @@ double value_noise(double x, double y, uint32_t seed) {
   return (a * (1 - tx) + b * tx) * (1 - ty) + (c * (1 - tx) + d * tx) * ty;
 }
 
-// ---- fine texture ----------------------------------------------------------------------------------
-// Band limit: weight of a feature of size `period` on Gaussians `spacing` apart: 0 below 2.5
-// spacings, 1 above 5 (splats have sigma = spacing, which passes a sinusoid of period 4 sigma at
-// 29% and 5 sigma at 45% of its amplitude).
+// ---- fine texture
+// ---------------------------------------------------------------------------------- Band limit:
+// weight of a feature of size `period` on Gaussians `spacing` apart: 0 below 2.5 spacings, 1 above
+// 5 (splats have sigma = spacing, which passes a sinusoid of period 4 sigma at 29% and 5 sigma at
+// 45% of its amplitude).
 double band(double period, double spacing) {
   const double t = std::clamp((period / spacing - 2.5) / 2.5, 0.0, 1.0);
   return t * t * (3 - 2 * t);
@@ -77,8 +79,8 @@ double band(double period, double spacing) {
 // `px`, the training-pixel footprint on the surface (m), so the detail sits below what the training
 // photos resolve at every image size and shows from about 2x zoom (coarsest) to 6x (finest):
 //   grain      value noise at periods 1, 0.7, 0.5 px (+-14% brightness each)
-//   hatching   in 14 px regions (half of them), stripes of period 0.5-1 px at a random angle (+-25%)
-//   scratches  in 9 px regions (a third), one dark line 0.12-0.25 px wide at a random angle
+//   hatching   in 14 px regions (half of them), stripes of period 0.5-1 px at a random angle
+//   (+-25%) scratches  in 9 px regions (a third), one dark line 0.12-0.25 px wide at a random angle
 //   specks     one disc of radius 0.2-0.45 px per 1.6 px cell with probability 0.35, dark or accent
 // Each feature fades out (band) where the local spacing cannot carry it.
 Vector3d fine_color(const gs::SynthTexture& tex, double u, double v, double spacing, double px) {
@@ -120,15 +122,16 @@ Vector3d fine_color(const gs::SynthTexture& tex, double u, double v, double spac
     const double x = (cu + 0.5 + 0.2 * (hash01(cu, cv, seed + 53u) - 0.5)) * cell;
     const double y = (cv + 0.5 + 0.2 * (hash01(cu, cv, seed + 59u) - 0.5)) * cell;
     if (w > 0 && std::hypot(u - x, v - y) < r) {
-      const Vector3d dot = hash01(cu, cv, seed + 61u) < 0.6 ? Vector3d(0.06, 0.05, 0.05)
-                                                             : tex.accent;
+      const Vector3d dot =
+          hash01(cu, cv, seed + 61u) < 0.6 ? Vector3d(0.06, 0.05, 0.05) : tex.accent;
       rgb = rgb * (1 - w) + dot * w;
     }
   }
   return rgb.cwiseMax(0.0).cwiseMin(1.0);
 }
 
-// ---- Gaussians -------------------------------------------------------------------------------------
+// ---- Gaussians
+// -------------------------------------------------------------------------------------
 struct CloudWriter {
   gs::GaussianCloud& cloud;
   void put(const Vector3d& pos, const Matrix3d& rot, const Vector3d& sigma, double opacity,
@@ -165,7 +168,9 @@ bool is_closeup(const gs::SynthScene& s, const std::string& name) {
 
 // Cluster key: surface (8 bits) and three signed 18-bit cell indices.
 uint64_t cluster_key(uint64_t surface, double a, double b, double c) {
-  const auto cell = [](double x) { return uint64_t(std::clamp<int64_t>(int64_t(std::floor(x)) + (1 << 17), 0, (1 << 18) - 1)); };
+  const auto cell = [](double x) {
+    return uint64_t(std::clamp<int64_t>(int64_t(std::floor(x)) + (1 << 17), 0, (1 << 18) - 1));
+  };
   return surface << 54 | cell(a) << 36 | cell(b) << 18 | cell(c);
 }
 
@@ -312,8 +317,9 @@ Result<SynthCloseScene> make_synthclose_scene(const SynthCloseParams& p) {
     double train_fp = INFINITY;
     for (const gs::Camera* c : train) train_fp = std::min(train_fp, footprint(*c, pl.center, 1e9));
     if (!std::isfinite(train_fp)) train_fp = 0.25 * p.tile;  // seen by no training view
-    const double tile = std::max(pl.background ? kBackgroundTile * p.tile : p.tile,
-                                 4 * (pl.background ? p.background_spacing_px : p.train_spacing_px) * train_fp);
+    const double tile =
+        std::max(pl.background ? kBackgroundTile * p.tile : p.tile,
+                 4 * (pl.background ? p.background_spacing_px : p.train_spacing_px) * train_fp);
     const int tu = std::max(1, int(std::ceil(2 * pl.half_u / tile)));
     const int tv = std::max(1, int(std::ceil(2 * pl.half_v / tile)));
     const double su = 2 * pl.half_u / tu, sv = 2 * pl.half_v / tv;
@@ -360,11 +366,12 @@ Result<SynthCloseScene> make_synthclose_scene(const SynthCloseParams& p) {
                                  base.cloud.rotation[k * 4 + 2], base.cloud.rotation[k * 4 + 3]);
       const Vector3d x(base.cloud.position[k * 3], base.cloud.position[k * 3 + 1],
                        base.cloud.position[k * 3 + 2]);
-      writer.put(x, q.toRotationMatrix(),
-                 Vector3d(base.cloud.scale[k * 3], base.cloud.scale[k * 3 + 1],
-                          base.cloud.scale[k * 3 + 2]),
-                 base.cloud.opacity[k],
-                 Vector3d(base.cloud.sh[k * 3], base.cloud.sh[k * 3 + 1], base.cloud.sh[k * 3 + 2]));
+      writer.put(
+          x, q.toRotationMatrix(),
+          Vector3d(base.cloud.scale[k * 3], base.cloud.scale[k * 3 + 1],
+                   base.cloud.scale[k * 3 + 2]),
+          base.cloud.opacity[k],
+          Vector3d(base.cloud.sh[k * 3], base.cloud.sh[k * 3 + 1], base.cloud.sh[k * 3 + 2]));
       keys.push_back(cluster_key(surface, x.x() / cell, x.y() / cell, x.z() / cell));
     }
   };
@@ -440,10 +447,7 @@ Result<SynthCloseScene> make_synthclose_scene(const SynthCloseParams& p) {
 Result<SynthCloseSummary> write_synthclose(const std::string& dir, const SynthCloseOptions& o) {
   namespace fs = std::filesystem;
   const bool demo = o.size == SynthCloseSize::kDemo;
-  const int scenes = o.scenes > 0 ? o.scenes
-                     : demo       ? 1
-                     : o.size == SynthCloseSize::kTiny ? 2
-                                                       : 10;
+  const int scenes = o.scenes > 0 ? o.scenes : demo ? 1 : o.size == SynthCloseSize::kTiny ? 2 : 10;
   if (scenes < 1 || scenes > 1000)
     return Status::error("--scenes: expected 1..1000, found " + std::to_string(scenes));
   if (demo && scenes != 1) return Status::error("--scenes: the demo size is one scene");
@@ -506,8 +510,8 @@ Result<SynthCloseSummary> write_synthclose(const std::string& dir, const SynthCl
                                   {"recon_cell_m", scene->recon_cell[i]}});
     info["gt_ply"] = fo.photo_ply_name.empty() ? nlohmann::ordered_json() : "gt.ply";
     info["recon_ply"] = "scene.ply";
-    MACRO_TRY(write_file_atomic((fs::path(scene_dir) / "synthclose.json").string(),
-                                info.dump(1) + "\n"));
+    MACRO_TRY(
+        write_file_atomic((fs::path(scene_dir) / "synthclose.json").string(), info.dump(1) + "\n"));
     tick();
     summary.scenes += 1;
     summary.pairs += int(scene->layout.geometry.closeups.size());

@@ -4,13 +4,14 @@
 // and rods on even scenes, a training rig and close-ups zoomed 1.5x-6x onto the planes) with two
 // Gaussian clouds:
 //   - the ground truth (GT): the planes re-sampled densely, with a fine texture layer (grain,
-//     hatching, scratches, specks at 0.1-1 training pixel) on top of gs/synth's texture. The sampling spacing of each
-//     2 cm tile follows the finest view that sees it (train_spacing_px training pixels,
-//     closeup_spacing_px close-up pixels), and each fine feature is faded out where the spacing
-//     cannot carry it (band limit), so the detail exists wherever some view can resolve it and
-//     the cloud stays a few million Gaussians. The GT renders the photos: images/ (training
-//     views) and closeup_gt/, supersampled (s x s samples per pixel, box-averaged, as a sensor
-//     integrates), so detail below a training pixel averages out in images/ but is sharp up close.
+//     hatching, scratches, specks at 0.1-1 training pixel) on top of gs/synth's texture. The
+//     sampling spacing of each 2 cm tile follows the finest view that sees it (train_spacing_px
+//     training pixels, closeup_spacing_px close-up pixels), and each fine feature is faded out
+//     where the spacing cannot carry it (band limit), so the detail exists wherever some view can
+//     resolve it and the cloud stays a few million Gaussians. The GT renders the photos: images/
+//     (training views) and closeup_gt/, supersampled (s x s samples per pixel, box-averaged, as a
+//     sensor integrates), so detail below a training pixel averages out in images/ but is sharp up
+//     close.
 //   - the "reconstruction": the GT merged into fewer, larger Gaussians, as 3DGS trained on the far
 //     views would be: per surface, clusters of recon_cell_px training pixels (planes: square cells
 //     in the plane's (u, v); spheres and rods: cubic voxels), each moment-matched (merge_clusters).
@@ -52,25 +53,26 @@ struct SynthCloseParams {
   int width = 960, height = 536;  // every photo
   int training_views = 10;
   int closeup_views = 5;
-  int closeup_cycle_start = 0;     // gs::SynthParams::closeup_cycle_start
-  size_t base_gaussians = 600'000; // gs/synth budget: spheres and rods keep its sampling
-  int supersample = 2;             // photo samples per pixel side
-  double train_spacing_px = 0.7;   // GT spacing <= this many training pixels (where seen)
-  double closeup_spacing_px = 0.75; // ... and <= this many close-up pixels (where seen)
+  int closeup_cycle_start = 0;         // gs::SynthParams::closeup_cycle_start
+  size_t base_gaussians = 600'000;     // gs/synth budget: spheres and rods keep its sampling
+  int supersample = 2;                 // photo samples per pixel side
+  double train_spacing_px = 0.7;       // GT spacing <= this many training pixels (where seen)
+  double closeup_spacing_px = 0.75;    // ... and <= this many close-up pixels (where seen)
   double background_spacing_px = 1.5;  // the background plane: training pixels only (a backdrop)
-  double min_spacing = 0.0006;     // m, floor of the GT spacing
-  double tile = 0.02;              // m, sampling tile (background: 4x)
-  double recon_cell_px = 1.5;      // reconstruction cluster, training pixels at the surface
-  double recon_cover = 0.7;        // merged in-surface sigma >= this x the cluster size
+  double min_spacing = 0.0006;         // m, floor of the GT spacing
+  double tile = 0.02;                  // m, sampling tile (background: 4x)
+  double recon_cell_px = 1.5;          // reconstruction cluster, training pixels at the surface
+  double recon_cover = 0.7;            // merged in-surface sigma >= this x the cluster size
 };
 
 // Defaults of a size: full 960x536, 10 training views, 5 close-ups; demo 640x360, 6 + 3, no
-// background plane; tiny 160x96, 4 + 3. `scene_index` varies the kind, the close-up cycle and the seed.
+// background plane; tiny 160x96, 4 + 3. `scene_index` varies the kind, the close-up cycle and the
+// seed.
 SynthCloseParams synthclose_params(SynthCloseSize size, uint64_t seed, int scene_index);
 
 struct SynthCloseScene {
-  gs::SynthScene layout;   // geometry, cameras; layout.cloud = the reconstruction
-  gs::GaussianCloud gt;    // the ground truth
+  gs::SynthScene layout;  // geometry, cameras; layout.cloud = the reconstruction
+  gs::GaussianCloud gt;   // the ground truth
   // Per surface (planes, spheres, rods in geometry order):
   std::vector<std::string> surface_names;
   std::vector<double> recon_cell;  // cluster size (m)

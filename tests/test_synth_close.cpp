@@ -47,11 +47,26 @@ gs::Image render_8bit(const gs::GaussianCloud& cloud, const gs::Camera& cam) {
   return img;
 }
 
+// Sharpness: mean squared forward difference (right and down) of the luminance 0.299 R + 0.587 G
+// + 0.114 B over pixels that have both neighbours. Ratio render / GT < 1: blurrier.
+double gradient_energy_of(const gs::Image& img) {
+  const auto lum = [&](int i, int j) {
+    return 0.299 * img.at(i, j, 0) + 0.587 * img.at(i, j, 1) + 0.114 * img.at(i, j, 2);
+  };
+  double sum = 0;
+  for (int i = 0; i + 1 < img.height; ++i)
+    for (int j = 0; j + 1 < img.width; ++j) {
+      const double dx = lum(i, j + 1) - lum(i, j), dy = lum(i + 1, j) - lum(i, j);
+      sum += dx * dx + dy * dy;
+    }
+  return sum / double(size_t(img.height - 1) * size_t(img.width - 1));
+}
+
 struct FolderScores {
   double train_psnr = INFINITY;  // the worst training view
   double closeup_psnr = 0;       // the best close-up
   double closeup_psnr_mean = 0;
-  double closeup_grad_max = 0;   // the largest gradient-energy ratio render / GT
+  double closeup_grad_max = 0;  // the largest gradient-energy ratio render / GT
   double closeup_grad_mean = 0;
 };
 
@@ -81,13 +96,13 @@ FolderScores score_folder(const std::string& dir) {
     REQUIRE(gt.is_ok());
     const gs::Image pred = render_8bit(*cloud, in->closeup);
     auto p = psnr(pred, *gt);
-    auto g = gradient_energy_ratio(pred, *gt);
     REQUIRE(p.is_ok());
-    REQUIRE(g.is_ok());
+    REQUIRE(pred.width == gt->width);
+    const double g = gradient_energy_of(pred) / gradient_energy_of(*gt);
     s.closeup_psnr = std::max(s.closeup_psnr, *p);
     s.closeup_psnr_mean += *p / double(split->closeup_eval_pairs.size());
-    s.closeup_grad_max = std::max(s.closeup_grad_max, *g);
-    s.closeup_grad_mean += *g / double(split->closeup_eval_pairs.size());
+    s.closeup_grad_max = std::max(s.closeup_grad_max, g);
+    s.closeup_grad_mean += g / double(split->closeup_eval_pairs.size());
   }
   return s;
 }
@@ -115,10 +130,10 @@ TEST_CASE("synthclose: the same seed gives identical files, another seed differe
   REQUIRE(write_synthclose(c.path, o).is_ok());
   const auto fa = files_under(a.path), fb = files_under(b.path), fc = files_under(c.path);
   REQUIRE(fa.size() == fb.size());
-  for (const char* f : {"synthclose_00/split.json", "synthclose_00/scene.ply",
-                        "synthclose_00/gt.ply", "synthclose_00/geometry.json",
-                        "synthclose_00/synthclose.json", "synthclose_00/images/train_00.png",
-                        "synthclose_00/closeup_gt/closeup.png"})
+  for (const char* f :
+       {"synthclose_00/split.json", "synthclose_00/scene.ply", "synthclose_00/gt.ply",
+        "synthclose_00/geometry.json", "synthclose_00/synthclose.json",
+        "synthclose_00/images/train_00.png", "synthclose_00/closeup_gt/closeup.png"})
     REQUIRE(fa.count(f) == 1);
   for (const auto& [name, bytes] : fa) {
     INFO(name);
@@ -189,15 +204,15 @@ TEST_CASE("synthclose: the reconstruction matches the photos far away and is blu
     REQUIRE(recon.is_ok());
     CHECK(recon->size() * 4 < gt->size());
     const FolderScores s = score_folder(dir);
-    // Measured (tiny, seed 1): worst training view 27.7 dB (scenes 0 and 1); close-ups mean
-    // 22.8 / 18.4 dB, best 26.3 / 20.6 dB; gradient-energy ratio max 0.40 / 0.12, mean 0.15 / 0.09.
+    // Measured (tiny, seed 1, scenes 0 / 1): worst training view 27.1 / 27.1 dB; close-ups mean
+    // 19.6 / 18.1 dB, best 25.3 / 18.8 dB; gradient-energy ratio max 0.33 / 0.08, mean 0.12 / 0.05.
+    INFO(dir << ": train PSNR " << s.train_psnr << " close-up PSNR mean " << s.closeup_psnr_mean
+             << " best " << s.closeup_psnr << " grad ratio max " << s.closeup_grad_max << " mean "
+             << s.closeup_grad_mean);
     CHECK(s.train_psnr > 26.0);
     CHECK(s.closeup_psnr_mean < s.train_psnr - 3.0);
     CHECK(s.closeup_grad_max < 0.7);
     CHECK(s.closeup_grad_mean < 0.4);
-    WARN(dir << ": train PSNR " << s.train_psnr << " close-up PSNR mean " << s.closeup_psnr_mean
-             << " best " << s.closeup_psnr << " grad ratio max " << s.closeup_grad_max
-             << " mean " << s.closeup_grad_mean);
   }
   // The harness reads the folders: pairs with zoom as depth_ratio, scene.ply (not gt.ply).
   auto items = build_work_list(d.path, {"3dgs"}, {{}}, default_method_registry());
@@ -266,14 +281,15 @@ TEST_CASE("synthclose demo scene: loads, sharp far away, blurrier than its close
   REQUIRE(split.is_ok());
   CHECK(split->closeup_eval_pairs.size() == 3);
   const FolderScores s = score_folder(dir);
-  // Measured at commit: training views >= 30 dB; close-ups clearly worse and blurrier.
+  // Measured: worst training view 28.9 dB; close-ups mean 21.2 dB (best 27.4 at 1.5x), gradient-
+  // energy ratio max 0.41, mean 0.16.
+  INFO("demo: train PSNR " << s.train_psnr << " close-up PSNR mean " << s.closeup_psnr_mean
+                           << " best " << s.closeup_psnr << " grad ratio max " << s.closeup_grad_max
+                           << " mean " << s.closeup_grad_mean);
   CHECK(s.train_psnr > 28.0);
-  CHECK(s.closeup_grad_max < 0.9);
-  CHECK(s.closeup_grad_mean < 0.6);
+  CHECK(s.closeup_grad_max < 0.7);
+  CHECK(s.closeup_grad_mean < 0.4);
   CHECK(s.closeup_psnr_mean < s.train_psnr - 3.0);
-  WARN("demo: train PSNR " << s.train_psnr << " close-up PSNR mean " << s.closeup_psnr_mean
-                           << " best " << s.closeup_psnr << " grad ratio max "
-                           << s.closeup_grad_max << " mean " << s.closeup_grad_mean);
 }
 
 TEST_CASE("synthclose demo scene: the committed files are what the generator makes",
