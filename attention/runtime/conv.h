@@ -9,7 +9,7 @@
 // Legend: N batch, Cin/Cout channels, H x W input, OH x OW output, KH x KW kernel, s stride.
 // Covers the networks' convs: 1x1 and 3x3, stride 1 and 2, symmetric pad 1 (UNet, VAE decoder),
 // the VAE encoder downsampler's right/bottom-only pad (pad_bottom = pad_right = 1, others 0), bias,
-// and a fused residual add (ResnetBlock2D's `shortcut(x) + h`).
+// a fused residual add (ResnetBlock2D's `shortcut(x) + h`) and a fused ReLU after it (ConvAct).
 //
 // As a GEMM per image: Y[Cout, OH*OW] = Wt[Cout, Cin*KH*KW] . im2col(x)[Cin*KH*KW, OH*OW]. The
 // weights are packed once (ConvWeights, at load); the im2col panels are built tile by tile into

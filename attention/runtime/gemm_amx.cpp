@@ -9,6 +9,19 @@
 // B panel layout kBf16Pairs with NR = 32: [K/2][32][2] -> per 32-k step 16 rows of 128 B; the
 // left 16 columns are the first 64 B of each row, the right 16 the next 64 B.
 // The tile configuration is loaded on every call (other code on the thread may use other shapes).
+//
+// Review by reading (2026-11-22; it cannot run here): CPUID.(7,0):EDX bits 22 (AMX-BF16) and 24
+// (AMX-TILE), XCR0 bits 17-18 (XTILECFG, XTILEDATA) and arch_prctl(ARCH_REQ_XCOMP_PERM = 0x1023,
+// XFEATURE_XTILEDATA = 18), process-wide, are all checked in cpu.cpp before this table is filled;
+// refused permission or an older kernel (< 5.16, EINVAL) leaves cpu_features().amx false, and
+// MACRO_ISA=amx then prints "MACRO_ISA=amx is not supported by this CPU; using avx512bf16" and
+// runs that path (checked on this machine). Tile shapes: C 16 x 64 B fp32, A 16 rows x 32 bf16
+// (stride 64 B), B 16 k-pairs x 16 columns (stride 128 B, the pairs panel's half rows): consistent
+// with TDPBF16PS's (M x K) . (K/2 x 2N) -> M x N and with the kBf16Amx / kBf16Pairs packers; K is
+// padded to 32 (k_align) and every K block starts on a multiple of 32. Open points: no
+// TILERELEASE after the last call (the tile state stays live until the thread exits, which costs
+// an 8 KB XSAVE area per context switch), and LDTILECFG on every micro-tile call costs some
+// throughput; both want measuring on AMX hardware.
 // GCC 12's AVX-512 headers trip -W(maybe-)uninitialized on their own _mm512_undefined_*() idiom.
 #pragma GCC diagnostic ignored "-Wuninitialized"
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
