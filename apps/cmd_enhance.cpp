@@ -16,6 +16,7 @@ constexpr const char* kUsage =
     "         [--precision fp32|bf16] [--ctx CTX.safetensors] [--refs K] [--planes P|auto]\n"
     "         [--max-planes P] [--mask released|paper|none] [--crop full|tight]\n"
     "         [--occlusion] [--threads N] [--quiet]\n"
+    "         [--enhancer transfer|difix] [--side-by-side FILE.png]\n"
     "  DIR is a DL3DV-Closeup scene folder (see macro plan --help). DIFIX_DIR is the Difix-ref\n"
     "  pipeline in diffusers layout (Hugging Face nvidia/difix_ref: unet/, vae/, text_encoder/,\n"
     "  tokenizer/, scheduler/, model_index.json); every method but 3dgs needs it. Without\n"
@@ -26,7 +27,11 @@ constexpr const char* kUsage =
     "  crops). --crop tight: crops of only the region each plane occupies (padded onto the model\n"
     "  canvas, padding masked out). --occlusion: the paper's occlusion test (references that\n"
     "  cannot see the close-up are discarded; warp: occluded pixels are invalid).\n"
-    "  The output has the close-up render's size.\n";
+    "  The output has the close-up render's size.\n"
+    "  --enhancer: difix = the Difix-ref network (needs --weights); transfer = weight-free detail\n"
+    "  transfer from the references by masked attention (docs/transfer.md). Default: transfer\n"
+    "  without --weights, difix with it. --side-by-side writes render | enhanced | ground truth\n"
+    "  (DIR/closeup_gt/FRAME when present, else render | enhanced).\n";
 
 int run_enhance(std::vector<std::string> argv) {
   Args args(std::move(argv));
@@ -50,6 +55,8 @@ int run_enhance(std::vector<std::string> argv) {
   const std::string mask = args.value_or("--mask", "released");
   const std::string crop = args.value_or("--crop", "full");
   o.plan.occlusion = args.flag("--occlusion");
+  const std::string enhancer = args.value_or("--enhancer", o.weights.empty() ? "transfer" : "difix");
+  const std::string side_by_side = args.value_or("--side-by-side", "");
   if (Status s = args.finish(); !s)
     return fail("enhance", Status::error(s.message() + " (macro enhance --help for usage)"));
   auto m = enhance::parse_method(method);
@@ -75,8 +82,11 @@ int run_enhance(std::vector<std::string> argv) {
   auto cr = enhance::parse_crop_mode(crop);
   if (!cr) return fail("enhance", cr.status());
   o.plan.crops.crop = *cr;
+  auto en = enhance::parse_enhancer(enhancer);
+  if (!en) return fail("enhance", en.status());
+  o.enhancer = *en;
   // Missing weights fail before the scene is even loaded.
-  if (o.method != enhance::EnhanceMethod::k3dgs)
+  if (o.method != enhance::EnhanceMethod::k3dgs && o.enhancer == enhance::Enhancer::kDifix)
     if (Status s = enhance::check_difix_weights(o.weights); !s) return fail("enhance", s);
 
   auto inputs = enhance::load_scene_inputs(in);
@@ -84,6 +94,9 @@ int run_enhance(std::vector<std::string> argv) {
   for (const std::string& n : inputs->notes) log_info("enhance", n);
   auto r = enhance::enhance_to_file(*inputs, o, out);
   if (!r) return fail("enhance", r.status());
+  if (!side_by_side.empty())
+    if (Status s = enhance::write_side_by_side(side_by_side, in.scene_dir, in.closeup, *r); !s)
+      return fail("enhance", s);
   if (!quiet())
     std::printf("enhance: %s, method %s, %d views, model %dx%d, %.0f ms -> %s (%dx%d)\n",
                 in.closeup.c_str(), enhance::method_name(o.method), r->views, r->model.w,

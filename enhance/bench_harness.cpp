@@ -139,6 +139,24 @@ MethodFn enhance_method_fn(EnhanceMethod method, BenchMethodSettings settings) {
   };
 }
 
+// The transfer enhancer as a bench method (options K, P as macro) from crops or whole references.
+MethodFn transfer_method_fn(TransferSource source) {
+  return [source](const MethodContext& c) -> Result<MethodOutput> {
+    MACRO_ASSIGN_OR_RETURN(EnhanceOptions e,
+                           enhance_options(EnhanceMethod::kMacro, c.options, BenchMethodSettings{}));
+    e.enhancer = Enhancer::kTransfer;
+    e.transfer.source = source;
+    MACRO_ASSIGN_OR_RETURN(EnhanceResult r, enhance_closeup(c.inputs, e));
+    MethodOutput out;
+    out.image = std::move(r.image);
+    const EnhanceTimings& t = r.timings;
+    out.stages.push_back({"render", t.ms_render / 1000.0, true});
+    out.stages.push_back({"plan", t.ms_plan / 1000.0, true});
+    out.stages.push_back({"transfer", t.ms_transfer / 1000.0, true});
+    return out;
+  };
+}
+
 }  // namespace
 
 Status register_enhance_bench_methods(MethodRegistry& registry,
@@ -151,6 +169,16 @@ Status register_enhance_bench_methods(MethodRegistry& registry,
                           "MACRO: scale-matched crops, depth-masked attention",
                           {"K", "P", "mask", "precision"},
                           enhance_method_fn(EnhanceMethod::kMacro, settings)}));
+  MACRO_TRY(registry.add({"transfer",
+                          "weight-free detail transfer (transfer.h) from the plan's scale-matched "
+                          "crops under the plane mask",
+                          {"K", "P"},
+                          transfer_method_fn(TransferSource::kCrops)}));
+  MACRO_TRY(registry.add({"transfer-whole",
+                          "the same transfer from the K references whole (scale-mismatched, no "
+                          "crops, no planes): the ablation",
+                          {"K", "P"},
+                          transfer_method_fn(TransferSource::kWhole)}));
   MACRO_TRY(registry.add({"macro-unmasked",
                           "MACRO without the plane mask",
                           {"K", "P", "precision"},
@@ -570,6 +598,19 @@ BenchRecord run_work_item(const BenchWorkItem& item, const MethodRegistry& regis
   if (!metrics) return skip("metrics failed: " + metrics.status().message());
   r.seconds.push_back({"metrics", seconds_since(t0)});
   r.metrics = std::move(*metrics);
+  {
+    // Sharpness against the GT (metrics.h gradient_energy_ratio), on the prediction at GT size.
+    MetricValue g{"grad_ratio", false, 0.0, "", ""};
+    Result<gs::Image> sized = match_size(out->image, gt->width, gt->height);
+    Result<double> ratio = sized ? gradient_energy_ratio(*sized, *gt) : Result<double>(sized.status());
+    if (ratio) {
+      g.computed = true;
+      g.value = *ratio;
+    } else {
+      g.reason = ratio.status().message();
+    }
+    r.metrics.push_back(g);
+  }
   r.ok = true;
   return r;
 }

@@ -17,6 +17,7 @@ const std::vector<MetricColumn>& metric_columns() {
       {"psnr", "PSNR", true, false},         {"ssim", "SSIM", true, false},
       {"lpips_alex", "LPIPS", false, false}, {"dinov2", "DINOv2", false, true},
       {"dreamsim", "DreamSim", false, true},
+      {"grad_ratio", "GradE ratio", false, true, true},
   };
   return cols;
 }
@@ -122,7 +123,7 @@ std::string table_markdown(const std::vector<ConfigResult>& configs) {
   for (const MetricColumn& m : cols) {
     s += ' ';
     s += m.title;
-    s += m.higher_better ? " ↑ |" : " ↓ |";
+    s += m.target_one ? " →1 |" : m.higher_better ? " ↑ |" : " ↓ |";
     rule += "---:|";
   }
   s += " s / close-up | scenes | pairs ok | skipped |\n";
@@ -231,6 +232,7 @@ void axes(Chart& c, const Frame& f, const std::string& title, const std::string&
 }
 
 std::string metric_axis_label(const MetricColumn& m) {
+  if (m.target_one) return std::string(m.title) + " (1 is best)";
   return std::string(m.title) + (m.higher_better ? " (higher is better)" : " (lower is better)");
 }
 

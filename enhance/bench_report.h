@@ -36,6 +36,7 @@ struct MetricColumn {
   const char* title;  // "PSNR", ...
   bool higher_better;
   bool optional;  // a column only when computed somewhere (DINOv2, DreamSim)
+  bool target_one = false;  // best at 1 (grad_ratio: gradient energy / the GT's)
 };
 const std::vector<MetricColumn>& metric_columns();
 

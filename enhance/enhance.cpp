@@ -112,6 +112,67 @@ Status check_difix_weights(const std::string& folder) {
   return Status::ok();
 }
 
+const char* enhancer_name(Enhancer e) { return e == Enhancer::kTransfer ? "transfer" : "difix"; }
+
+Result<Enhancer> parse_enhancer(const std::string& text) {
+  if (text == "transfer") return Enhancer::kTransfer;
+  if (text == "difix") return Enhancer::kDifix;
+  return Status::error("--enhancer: expected transfer or difix, found '" + text + "'");
+}
+
+namespace {
+// The weight-free enhancer (transfer.h) after the plan: difix = K whole references, macro = the
+// crops under the plane mask, macro-unmasked = every crop visible to every plane.
+Result<EnhanceResult> enhance_by_transfer(const SceneInputs& in, const EnhanceOptions& o,
+                                          ThreadPool* pool, Clock::time_point t_all) {
+  if (o.method == EnhanceMethod::kWarp)
+    return Status::error("--method warp needs --enhancer difix (the transfer enhancer takes its "
+                         "detail from crops or whole references)");
+  EnhanceResult res;
+  PlanOptions po = o.plan;
+  po.pool = pool;
+  TransferParams tp = o.transfer;
+  if (o.method == EnhanceMethod::kDifix) {
+    po.refs = 1;
+    tp.source = TransferSource::kWhole;
+  }
+  auto t0 = Clock::now();
+  MACRO_ASSIGN_OR_RETURN(MacroPlan plan, build_plan(in, po));
+  res.timings.ms_render = plan.timings.ms_closeup;
+  res.timings.ms_plan = plan.timings.ms_total - plan.timings.ms_closeup;
+  res.render = render_image(plan.closeup_color, plan.closeup.width, plan.closeup.height);
+  res.model = plan.model;
+  note("render", res.timings.ms_render);
+  note("plan", res.timings.ms_plan,
+       std::to_string(plan.ref_candidates.size()) + " refs, " +
+           std::to_string(plan.planes.planes.size()) + " planes, " +
+           std::to_string(plan.crops.size()) + " crops");
+  t0 = Clock::now();
+  MACRO_ASSIGN_OR_RETURN(std::vector<TransferSourceImage> sources,
+                         plan_transfer_sources(plan, in, tp.source, *pool));
+  if (o.method == EnhanceMethod::kMacroUnmasked)
+    for (TransferSourceImage& s : sources) s.plane = -1;
+  MACRO_ASSIGN_OR_RETURN(TransferResult tr,
+                         transfer_detail(res.render, plan.planes.labels,
+                                         std::max(1, int(plan.planes.planes.size())), sources, tp,
+                                         *pool));
+  res.image = std::move(tr.image);
+  res.views = int(sources.size());
+  res.transfer_confidence = tr.mean_confidence;
+  res.timings.ms_transfer = ms_since(t0);
+  {
+    char buf[200];
+    std::snprintf(buf, sizeof buf,
+                  "%s, %d sources, %d keys, %d/%d tokens, mean confidence %.3f (attention %.0f ms)",
+                  transfer_source_name(tp.source), int(sources.size()), tr.keys, tr.transferred,
+                  tr.token_h * tr.token_w, tr.mean_confidence, tr.timings.ms_attention);
+    note("transfer", res.timings.ms_transfer, buf);
+  }
+  res.timings.ms_total = ms_since(t_all);
+  return res;
+}
+}  // namespace
+
 Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOptions& o) {
   ThreadPool* pool = o.pool ? o.pool : &ThreadPool::global();
   const auto t_all = Clock::now();
@@ -131,6 +192,7 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
     res.timings.ms_total = ms_since(t_all);
     return res;
   }
+  if (o.enhancer == Enhancer::kTransfer) return enhance_by_transfer(in, o, pool, t_all);
   // Everything the network needs is checked before any work.
   MACRO_TRY(check_difix_weights(o.weights));
   const bool text_encoder = nets::has_text_encoder(o.weights);
@@ -274,6 +336,33 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
   res.timings.ms_total = ms_since(t_all);
   note("resize", res.timings.ms_resize, std::to_string(W) + "x" + std::to_string(H));
   return res;
+}
+
+Status write_side_by_side(const std::string& path, const std::string& scene_dir,
+                          const std::string& closeup, const EnhanceResult& r) {
+  namespace fs = std::filesystem;
+  const int W = r.image.width, H = r.image.height;
+  std::vector<const gs::Image*> panels = {&r.render, &r.image};
+  gs::Image gt;
+  std::error_code ec;
+  const fs::path gt_path = fs::path(scene_dir) / "closeup_gt" / fs::path(closeup).filename();
+  if (!scene_dir.empty() && fs::exists(gt_path, ec)) {
+    MACRO_ASSIGN_OR_RETURN(gt, gs::read_image(gt_path.string()));
+    if (gt.width != W || gt.height != H) gt = resize_lanczos(gt, W, H);
+    panels.push_back(&gt);
+  }
+  gs::Image out(W * int(panels.size()), H, 3);
+  for (size_t k = 0; k < panels.size(); ++k) {
+    const gs::Image& p = *panels[k];
+    if (p.width != W || p.height != H || p.channels != 3)
+      return Status::error("side-by-side: panel " + std::to_string(k) + " is " +
+                           std::to_string(p.width) + "x" + std::to_string(p.height) +
+                           ", expected " + std::to_string(W) + "x" + std::to_string(H));
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x)
+        for (int c = 0; c < 3; ++c) out.at(y, int(k) * W + x, c) = p.at(y, x, c);
+  }
+  return gs::write_png(path, out).with_context("--side-by-side");
 }
 
 Result<EnhanceResult> enhance_to_file(const SceneInputs& in, const EnhanceOptions& o,

@@ -31,6 +31,7 @@
 #include "attention/runtime/thread_pool.h"
 #include "enhance/plan.h"
 #include "enhance/scene_input.h"
+#include "enhance/transfer.h"
 #include "gs/image_io.h"
 
 namespace macro::enhance {
@@ -38,6 +39,14 @@ namespace macro::enhance {
 enum class EnhanceMethod { k3dgs, kDifix, kMacro, kMacroUnmasked, kWarp };
 const char* method_name(EnhanceMethod method);  // "3dgs", "difix", "macro", ...
 Result<EnhanceMethod> parse_method(const std::string& text);
+
+// What turns the views into the enhanced close-up: the Difix-ref network (needs --weights), or
+// the weight-free detail transfer (enhance/transfer.h). With transfer, difix means K whole
+// references (TransferSource::kWhole, no planes), macro / macro-unmasked the plan's crops with
+// the plane mask / with every crop visible to every plane; 3dgs ignores it.
+enum class Enhancer { kDifix, kTransfer };
+const char* enhancer_name(Enhancer enhancer);  // "difix", "transfer"
+Result<Enhancer> parse_enhancer(const std::string& text);
 
 struct EnhanceOptions {
   EnhanceMethod method = EnhanceMethod::kMacro;
@@ -47,12 +56,15 @@ struct EnhanceOptions {
   nets::Precision precision = nets::Precision::kF32;
   std::string ctx_path;         // optional safetensors with `ctx` F32 [1, 77, Dc]
   int timestep = 199;           // Difix: one step at t = 199
+  Enhancer enhancer = Enhancer::kDifix;
+  TransferParams transfer;      // enhancer transfer (its source follows the method)
   ThreadPool* pool = nullptr;   // nullptr = ThreadPool::global()
 };
 
 struct EnhanceTimings {
   double ms_render = 0, ms_plan = 0, ms_views = 0, ms_load = 0, ms_ctx = 0, ms_encode = 0,
          ms_unet = 0, ms_decode = 0, ms_resize = 0, ms_total = 0;
+  double ms_transfer = 0;  // enhancer transfer: sources, blur, attention, compose
 };
 
 struct EnhanceResult {
@@ -63,6 +75,7 @@ struct EnhanceResult {
   Size2 model;          // model size (0 x 0 for 3dgs)
   int masked_levels = 0;
   std::string ctx_source;  // "text_encoder (cache hit|computed)", the --ctx file, or ""
+  double transfer_confidence = 0;  // enhancer transfer: mean token confidence
   EnhanceTimings timings;
 };
 
@@ -75,6 +88,12 @@ Status check_difix_weights(const std::string& folder);
 // times) go to stderr through log_info unless quiet. Fails before any network work when weights
 // or the text context are missing.
 Result<EnhanceResult> enhance_closeup(const SceneInputs& inputs, const EnhanceOptions& options);
+
+// render | enhanced | ground truth side by side (atomic PNG), each panel at the render size; the
+// GT is SCENE_DIR/closeup_gt/<closeup file name> when it exists (Lanczos-resized if its size
+// differs), otherwise the image has two panels.
+Status write_side_by_side(const std::string& path, const std::string& scene_dir,
+                          const std::string& closeup, const EnhanceResult& result);
 
 // enhance_closeup + write_png (atomic).
 Result<EnhanceResult> enhance_to_file(const SceneInputs& inputs, const EnhanceOptions& options,

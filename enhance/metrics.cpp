@@ -271,6 +271,31 @@ Result<gs::Image> match_size(const gs::Image& pred, int width, int height, Threa
   return r;
 }
 
+// ---- sharpness ---------------------------------------------------------------------------------
+
+double gradient_energy(const gs::Image& im) {
+  const int W = im.width, H = im.height, C = im.channels;
+  if (W < 2 || H < 2 || C < 1 || im.data.size() != im.pixels() * size_t(C)) return 0.0;
+  auto lum = [&](int y, int x) {
+    const float* p = &im.data[(size_t(y) * W + x) * C];
+    return C >= 3 ? 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2] : double(p[0]);
+  };
+  double sum = 0;
+  for (int y = 0; y + 1 < H; ++y)
+    for (int x = 0; x + 1 < W; ++x) {
+      const double v = lum(y, x), dx = lum(y, x + 1) - v, dy = lum(y + 1, x) - v;
+      sum += dx * dx + dy * dy;
+    }
+  return sum / (double(W - 1) * double(H - 1));
+}
+
+Result<double> gradient_energy_ratio(const gs::Image& pred, const gs::Image& gt) {
+  MACRO_TRY(check_pair(pred, gt));
+  const double g = gradient_energy(gt), p = gradient_energy(pred);
+  if (g <= 0) return p <= 0 ? 1.0 : std::numeric_limits<double>::infinity();
+  return p / g;
+}
+
 // ---- suite -------------------------------------------------------------------------------------
 
 Result<std::vector<MetricValue>> compute_metrics(const gs::Image& pred_in, const gs::Image& gt,

@@ -57,6 +57,13 @@ Result<double> ssim_reference(const gs::Image& pred, const gs::Image& gt,
 Result<gs::Image> match_size(const gs::Image& pred, int width, int height,
                              ThreadPool& pool = ThreadPool::global());
 
+// Sharpness: the mean squared forward-difference gradient of the luminance (0.299 R + 0.587 G +
+// 0.114 B; gray images as they are) over pixels with a right and a lower neighbour. The bench's
+// "grad_ratio" is gradient_energy(pred) / gradient_energy(gt) (1 = as sharp as the GT, < 1
+// blurrier); +inf when the GT is flat and the prediction is not, 1 when both are flat.
+double gradient_energy(const gs::Image& image);
+Result<double> gradient_energy_ratio(const gs::Image& pred, const gs::Image& gt);
+
 // ---- The suite ---------------------------------------------------------------------------------
 // One metric for one pair: a number, or "not computed" with the reason (never a made-up number).
 struct MetricValue {

@@ -203,7 +203,8 @@ TEST_CASE("enhance CLI: macro, difix, macro-unmasked, 3dgs = the render, missing
   CHECK(std::string(want->begin(), want->end()) == *got);
 
   // Missing weights: named download, the flag, exit 1, no output; for every network method.
-  for (const std::string& bad : {std::string(""), " --weights " + f.tmp.file("nope"),
+  // (Without --weights the default enhancer is the weight-free transfer: ask for difix.)
+  for (const std::string& bad : {std::string(" --enhancer difix"), " --weights " + f.tmp.file("nope"),
                                  " --weights " + f.scene_dir}) {
     const std::string out = f.tmp.file("missing.png");
     const int rc = test::run_command(f.cli("--method macro --out " + out + bad + " 2>" +
