@@ -306,7 +306,20 @@ TEST_CASE("synthclose demo scene: the committed files are what the generator mak
   for (const auto& [name, bytes] : made) {
     INFO(name << " (regenerate: macro bench synth --size demo --out data/scenes/synthclose)");
     REQUIRE(committed.count(name) == 1);
-    CHECK(committed.at(name) == bytes);
+    if (fs::path(name).extension() != ".png") {
+      CHECK(committed.at(name) == bytes);
+      continue;
+    }
+    // Photos: the rasteriser's blend paths (scalar, AVX2, AVX-512) agree up to float rounding, so
+    // a few 8-bit levels may flip by one.
+    auto a = gs::read_image(tmp.file(name));
+    auto b = gs::read_image(dir + "/" + name);
+    REQUIRE(a.is_ok());
+    REQUIRE(b.is_ok());
+    REQUIRE(a->data.size() == b->data.size());
+    const test::Diff diff = test::compare(a->data, b->data);
+    CHECK(diff.max_abs <= 2.5 / 255);
+    CHECK(diff.psnr > 60);
   }
 }
 
