@@ -2,14 +2,16 @@
 // stage, the enhancer and the benchmark harness run on data with analytic answers.
 //
 // DIR/
-//   images/<train>.png        the training cameras rendered from the scene ("ground truth")
+//   images/<train>.png        the training cameras rendered from the scene ("ground truth"; from
+//                             options.photo_cloud when given, e.g. SynthClose's dense GT)
 //   closeup_gt/<closeup>.png  each close-up rendered likewise (optional)
 //   sparse/0/                 COLMAP text model of the training cameras (gs save_colmap_text)
 //   split.json                scene, data_factor 1, intrinsics (first training camera),
 //   training_frames,
 //                             closeup_eval_pairs (training_frame = the camera the close-up zoomed
 //                             from, depth_ratio = zoom), closeup_poses (OpenGL c2w), counts
-//   scene.ply                 the splat (the "trained" model)
+//   scene.ply                 the splat (the "trained" model); options.photo_ply_name: the photo
+//                             cloud too (SynthClose: gt.ply)
 //   geometry.json             the analytic geometry (planes, spheres, rods, close-up targets)
 // Frame names are the camera names plus ".png". Every file is written atomically.
 #pragma once
