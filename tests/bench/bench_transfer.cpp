@@ -2,7 +2,7 @@
 // synthetic 960x536 close-up, K = P = 3: render + plan + transfer, wall and process CPU medians,
 // with the stage split of the last run. Baseline in the same run: the raw 3DGS render alone
 // (method 3dgs), so the ratio is what the enhancer costs on top of rendering.
-// Options: --reps N (default 3), --key-stride S (default 8), --source crops|whole.
+// Options: --reps N (default 3), --key-stride S (default: TransferParams, 4), --source crops|whole.
 #include <unistd.h>
 
 #include <cstdio>
@@ -18,7 +18,7 @@ namespace macro::bench {
 namespace {
 
 int run(int argc, char** argv) {
-  int reps = 3, key_stride = 8;
+  int reps = 3, key_stride = enhance::TransferParams{}.key_stride;
   std::string source = "crops";
   for (int i = 1; i + 1 < argc; ++i) {
     const std::string a = argv[i];
