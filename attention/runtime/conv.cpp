@@ -193,6 +193,10 @@ ConvWeights ConvWeights::pack(const float* w, const float* bias, int64_t c_out, 
 // bf16 channel-pair planes of one image: grown once per calling thread, reused by every call.
 thread_local std::vector<uint32_t> t_pair_planes;
 
+void conv2d_release_scratch() {
+  std::vector<uint32_t>().swap(t_pair_planes);
+}
+
 void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const float* residual,
             float* y, ThreadPool* pool) {
   conv2d(s, x, w, residual, y, ConvAct::kNone, pool);

@@ -79,6 +79,11 @@ enum class ConvAct { kNone, kRelu };
 void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const float* residual,
             float* y, ConvAct act, ThreadPool* pool = nullptr);
 
+// bf16 convs convert the input image once per call into channel-pair planes (Cin/2 x H x W 32-bit
+// words) held in a per-thread buffer that grows to the largest image seen and is then reused
+// (no allocation per call). This frees the calling thread's buffer (e.g. after a large decode).
+void conv2d_release_scratch();
+
 // Convenience for tests and one-off calls: packs the weights on each call.
 void conv2d(const Conv2dShape& s, const float* x, const float* weight, const float* bias,
             const float* residual, float* y, ThreadPool* pool = nullptr);
