@@ -480,6 +480,7 @@ Result<SynthCloseSummary> write_synthclose(const std::string& dir, const SynthCl
     fo.photo_cloud = &scene->gt;
     fo.photo_ply_name = o.write_gt_ply && !demo ? "gt.ply" : "";
     fo.supersample = sp.supersample;
+    fo.tent_filter = sp.tent_filter;
     fo.scene_name = demo ? "synthclose_demo" : name;
     fo.on_photo = tick;
     MACRO_TRY(write_closeup_scene_folder(scene->layout, scene_dir, fo));
@@ -494,6 +495,7 @@ Result<SynthCloseSummary> write_synthclose(const std::string& dir, const SynthCl
     info["width"] = sp.width;
     info["height"] = sp.height;
     info["supersample"] = sp.supersample;
+    info["photo_filter"] = sp.tent_filter ? "tent" : "box";
     info["train_spacing_px"] = sp.train_spacing_px;
     info["closeup_spacing_px"] = sp.closeup_spacing_px;
     info["background_spacing_px"] = sp.background_spacing_px;

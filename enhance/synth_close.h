@@ -53,10 +53,11 @@ struct SynthCloseParams {
   int width = 960, height = 536;  // every photo
   int training_views = 10;
   int closeup_views = 5;
-  int closeup_cycle_start = 0;         // gs::SynthParams::closeup_cycle_start
-  size_t base_gaussians = 600'000;     // gs/synth budget: spheres and rods keep its sampling
-  int supersample = 2;                 // photo samples per pixel side
-  double train_spacing_px = 0.7;       // GT spacing <= this many training pixels (where seen)
+  int closeup_cycle_start = 0;      // gs::SynthParams::closeup_cycle_start
+  size_t base_gaussians = 600'000;  // gs/synth budget: spheres and rods keep its sampling
+  int supersample = 2;              // photo samples per pixel side
+  bool tent_filter = true;          // photo pixels: tent of radius 1 px over the samples (else box)
+  double train_spacing_px = 0.7;    // GT spacing <= this many training pixels (where seen)
   double closeup_spacing_px = 0.75;    // ... and <= this many close-up pixels (where seen)
   double background_spacing_px = 1.5;  // the background plane: training pixels only (a backdrop)
   double min_spacing = 0.0006;         // m, floor of the GT spacing

@@ -2,6 +2,8 @@
 #include "enhance/synth_scene_folder.h"
 
 #include <algorithm>
+#include <cmath>
+#include <vector>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
@@ -16,8 +18,12 @@ using nlohmann::json;
 
 namespace {
 
+// Photo pixel (i, j) from the s x supersampled render: the mean of its s x s samples (box), or
+// with `tent` a separable tent of radius one output pixel over the 2s x 2s samples around its
+// centre (weights renormalised at the border), a sensor's blur that keeps detail finer than a
+// pixel from aliasing into the photo.
 Status render_png(const gs::GaussianCloud& cloud, const gs::Camera& cam, int supersample,
-                  const std::string& path, gs::Rasterizer& raster) {
+                  bool tent, const std::string& path, gs::Rasterizer& raster) {
   const int s = std::max(1, supersample);
   gs::RenderResult r;
   MACRO_TRY(raster.render_into(cloud, s == 1 ? cam : cam.resized(cam.width * s, cam.height * s),
@@ -25,18 +31,41 @@ Status render_png(const gs::GaussianCloud& cloud, const gs::Camera& cam, int sup
   gs::Image img(cam.width, cam.height, 3);
   if (s == 1) {
     img.data = r.color;
-  } else {
-    const float norm = 1.f / float(s * s);
-    for (int i = 0; i < cam.height; ++i)
-      for (int j = 0; j < cam.width; ++j)
-        for (int c = 0; c < 3; ++c) {
-          float sum = 0.f;
-          for (int a = 0; a < s; ++a)
-            for (int b = 0; b < s; ++b)
-              sum += r.color[(size_t(i * s + a) * size_t(r.width) + size_t(j * s + b)) * 3 + c];
-          img.at(i, j, c) = sum * norm;
-        }
+    return gs::write_png(path, img);
   }
+  // Taps along one axis: high-res offsets k - s/2 ... relative to the pixel's first sample.
+  std::vector<int> offset;
+  std::vector<float> weight;
+  if (!tent) {
+    for (int k = 0; k < s; ++k) {
+      offset.push_back(k);
+      weight.push_back(1.f / float(s));
+    }
+  } else {
+    for (int k = -s / 2; k < s + (s + 1) / 2; ++k) {
+      const double d = std::abs(k + 0.5 - 0.5 * s) / double(s);  // output pixels from the centre
+      if (d >= 1) continue;
+      offset.push_back(k);
+      weight.push_back(float(1 - d));
+    }
+  }
+  for (int i = 0; i < cam.height; ++i)
+    for (int j = 0; j < cam.width; ++j) {
+      float sum[3] = {0.f, 0.f, 0.f}, wsum = 0.f;
+      for (size_t a = 0; a < offset.size(); ++a) {
+        const int y = i * s + offset[a];
+        if (y < 0 || y >= r.height) continue;
+        for (size_t b = 0; b < offset.size(); ++b) {
+          const int x = j * s + offset[b];
+          if (x < 0 || x >= r.width) continue;
+          const float w = weight[a] * weight[b];
+          const float* px = &r.color[(size_t(y) * size_t(r.width) + size_t(x)) * 3];
+          for (int c = 0; c < 3; ++c) sum[c] += w * px[c];
+          wsum += w;
+        }
+      }
+      for (int c = 0; c < 3; ++c) img.at(i, j, c) = sum[c] / wsum;
+    }
   return gs::write_png(path, img);
 }
 
@@ -62,7 +91,7 @@ Status write_closeup_scene_folder(const gs::SynthScene& scene, const std::string
   gs::Rasterizer raster;
   const gs::GaussianCloud& photos = o.photo_cloud ? *o.photo_cloud : scene.cloud;
   const auto photo = [&](const gs::Camera& c, const char* sub) -> Status {
-    MACRO_TRY(render_png(photos, c, o.supersample, (root / sub / frame(c.name)).string(), raster));
+    MACRO_TRY(render_png(photos, c, o.supersample, o.tent_filter, (root / sub / frame(c.name)).string(), raster));
     if (o.on_photo) o.on_photo();
     return Status::ok();
   };

@@ -33,6 +33,7 @@ struct SynthFolderOptions {
   const gs::GaussianCloud* photo_cloud = nullptr;
   std::string photo_ply_name;  // also save photo_cloud under this name ("" = not saved)
   int supersample = 1;         // photos rendered at s x the size, each pixel the mean of s x s
+  bool tent_filter = false;    // ... or a tent of radius one pixel over 2s x 2s samples
   std::string scene_name;      // split.json "scene" ("" = synthetic-seed-<seed>)
   std::function<void()> on_photo;  // called after each photo is written (progress)
 };
