@@ -9,9 +9,9 @@
 //     training pixels, closeup_spacing_px close-up pixels), and each fine feature is faded out
 //     where the spacing cannot carry it (band limit), so the detail exists wherever some view can
 //     resolve it and the cloud stays a few million Gaussians. The GT renders the photos: images/
-//     (training views) and closeup_gt/, supersampled (s x s samples per pixel, box-averaged, as a
-//     sensor integrates), so detail below a training pixel averages out in images/ but is sharp up
-//     close.
+//     (training views) and closeup_gt/, supersampled (s x s samples per pixel, filtered by a tent
+//     of radius one pixel, as a sensor with a little optical blur integrates), so detail below a
+//     training pixel averages out in images/ but is sharp up close.
 //   - the "reconstruction": the GT merged into fewer, larger Gaussians, as 3DGS trained on the far
 //     views would be: per surface, clusters of recon_cell_px training pixels (planes: square cells
 //     in the plane's (u, v); spheres and rods: cubic voxels), each moment-matched (merge_clusters).
