@@ -239,8 +239,8 @@ Status WeightStore::prepare(const WeightStoreOptions& options) {
     const auto& W = m.entry->shape;
     const auto& A = m.lora_a->shape;
     const auto& B = m.lora_b->shape;
-    // A: [r, in, kh, kw] or [r, in]; B: [out, r, 1, 1] or [out, r]; W: [out, in, kh, kw] or [out,
-    // in].
+    // A: [r, in, kh, kw] or [r, in]; B: [out, r, 1, 1] or [out, r]; W: [out, in, kh, kw] or
+    // [out, in].
     bool ok = A.size() == W.size() && B.size() == W.size() && A.size() >= 2 && B[0] == W[0] &&
               A[0] == B[1] && A[1] == W[1];
     for (size_t i = 2; ok && i < W.size(); ++i) ok = A[i] == W[i] && B[i] == 1;

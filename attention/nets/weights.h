@@ -3,13 +3,15 @@
 // Modules (attention/nets/*) mirror the diffusers tensor names and expose
 //   void visit(const std::string& prefix, ParamVisitor& v)
 // which calls v.param("<prefix>.<name>", param, {expected shape}) for each of their tensors.
-// Loading is a walk: WeightStore::bind() fills each Param and finish() reports, by name, every
-// tensor that was missing, mis-shaped, or present in the file but never used.
+// Loading is a walk: WeightStore::param() binds each Param and finish() reports, by name, every
+// tensor that was missing, mis-shaped, or present in the file but never used. The networks bind
+// lazily (WeightStoreOptions::lazy): nothing is converted until a module packs its tensors, one
+// module at a time, so a load holds the mapped file, the packed weights built so far and one
+// module's transient fp32 copies, never a second full copy of the checkpoint.
 //
 // Name conversions (one table, here):
-//  * PEFT LoRA left unmerged (Difix VAE): `M.base_layer.{weight,bias}` +
-//  `M.lora_A.<adapter>.weight`
-//    [r, in(, kh, kw)] + `M.lora_B.<adapter>.weight` [out, r(, 1, 1)] are presented as `M.weight` =
+//  * PEFT LoRA left unmerged (Difix VAE): `M.base_layer.{weight,bias}` + `M.lora_A.<ad>.weight`
+//    [r, in(, kh, kw)] + `M.lora_B.<ad>.weight` [out, r(, 1, 1)] are presented as `M.weight` =
 //    base + scale * B @ A and `M.bias`. The scale comes from the caller (VaeConfig::lora_scale).
 //  * Older VAE attention names: `query/key/value/proj_attn` -> `to_q/to_k/to_v/to_out.0`, their
 //    1x1-conv shape [C, C, 1, 1] accepted for a Linear [C, C].
@@ -28,17 +30,14 @@
 
 namespace macro::nets {
 
-class WeightStore;
 struct WeightSource;
 
 // One parameter tensor, row-major, as bound by a ParamVisitor. Two forms:
 //  * `data`: fp32 values the module may read directly. Set by visitors that own fp32 values
-//  (tests),
-//    by a WeightStore for F32 file entries (zero copy into the mapping), and for every entry when
-//    the store materialises (WeightStoreOptions::lazy == false: converted copies owned by the
-//    store).
-//  * `source`: the checkpoint entry behind the parameter (lazy stores). Modules then read it once,
-//    in the form they pack (param_bf16 / read_param_f32 below), and release its file pages.
+//    (tests), by a WeightStore for aligned F32 entries (zero copy into the mapping), and for
+//    every entry by a materialising store (lazy == false: converted copies owned by the store).
+//  * `source`: the checkpoint entry behind the parameter (lazy stores). Modules read it once, in
+//    the form they pack (param_bf16 / read_param_f32 / ParamF32 below), then release_param().
 // Either form requires the store to outlive the module's pack().
 struct Param {
   const float* data = nullptr;
