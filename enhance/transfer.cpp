@@ -20,15 +20,17 @@ double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
-constexpr int kFeatures = 19;        // 16 block means + 3 mean colours
-constexpr int kSlotValues = 5;       // per source slot: [1, x, y, x^2, y^2]
-constexpr int kSigmaRowStep = 8;     // step 1 samples every 8th row pair
-constexpr double kResidualEps = 0.01;
-constexpr double kStructureEps = 0.002;  // luminance rms per block below which structure fades  // luminance floor of the refinement's normalisation
+constexpr int kFeatures = 19;            // 16 block means + 3 mean colours
+constexpr int kSlotValues = 5;           // per source slot: [1, x, y, x^2, y^2]
+constexpr int kSigmaRowStep = 8;         // step 1 samples every 8th row pair
+constexpr double kResidualEps = 0.01;    // luminance floor of the refinement's normalisation
+constexpr double kStructureEps = 0.002;  // luminance rms per block below which structure fades
 // Step 1's blur grid (pixels); values above max_sigma are dropped.
 constexpr double kSigmaGrid[] = {0, 0.25, 0.5, 0.75, 1, 1.25, 1.5, 2, 2.5, 3, 3.5, 4, 5, 6, 8};
 
-float luma(const float* rgb) { return 0.299f * rgb[0] + 0.587f * rgb[1] + 0.114f * rgb[2]; }
+float luma(const float* rgb) {
+  return 0.299f * rgb[0] + 0.587f * rgb[1] + 0.114f * rgb[2];
+}
 
 std::vector<float> luminance(const gs::Image& im, ThreadPool& pool) {
   std::vector<float> y(im.pixels());
@@ -94,9 +96,8 @@ std::vector<float> blur(const std::vector<float>& src, int W, int H, int C,
   return dst;
 }
 
-// Mean squared forward-difference gradient of y over sampled row pairs (y, y+1), y % 8 == 0,
-// where the pixel and its right and lower neighbours are all in `mask`. y: [rows, W], already the
-// (possibly blurred) rows (2 per sample) when `paired`; otherwise the full image.
+// Sum of squared forward differences over one row pair (y0 above y1, W pixels each) at pixels
+// whose right and lower neighbours are in the masks too; adds the pixels used to *count.
 double masked_grad_energy(const float* y0, const float* y1, const uint8_t* m0, const uint8_t* m1,
                           int W, double* count) {
   double sum = 0;
@@ -200,8 +201,10 @@ bool window_features(const DescriptorSource& s, int cy, int cx, double match_sig
   double st[16], n2 = 0;
   for (int bi = 0; bi < 4; ++bi)
     for (int bj = 0; bj < 4; ++bj) {
-      const int y0 = std::clamp(cy - h + bi * b, 0, s.H), y1 = std::clamp(cy - h + bi * b + b, 0, s.H);
-      const int x0 = std::clamp(cx - h + bj * b, 0, s.W), x1 = std::clamp(cx - h + bj * b + b, 0, s.W);
+      const int y0 = std::clamp(cy - h + bi * b, 0, s.H),
+                y1 = std::clamp(cy - h + bi * b + b, 0, s.H);
+      const int x0 = std::clamp(cx - h + bj * b, 0, s.W),
+                x1 = std::clamp(cx - h + bj * b + b, 0, s.W);
       const double cnt = double(y1 - y0) * (x1 - x0);
       const double d = cnt > 0 ? box_sum(s.iy, s.W, y0, x0, y1, x1) / cnt - mean : 0.0;
       st[bi * 4 + bj] = d;
@@ -224,10 +227,10 @@ float tent(int u) {
 }
 
 struct PerSource {
-  std::vector<float> y_deg;   // [H, W] degraded luminance
-  std::vector<float> rgb_deg; // [H, W, 3] degraded colour
-  std::vector<int32_t> bad;   // integral of "not usable" pixels (invalid or within the margin)
-  std::vector<uint8_t> ok;    // [H, W]
+  std::vector<float> y_deg;    // [H, W] degraded luminance
+  std::vector<float> rgb_deg;  // [H, W, 3] degraded colour
+  std::vector<int32_t> bad;    // integral of "not usable" pixels (invalid or within the margin)
+  std::vector<uint8_t> ok;     // [H, W]
   int slot = 0;
 };
 
@@ -258,11 +261,12 @@ Result<TransferResult> transfer_detail(const gs::Image& render, const std::vecto
                          " values (W*H), found " + std::to_string(labels.size()));
   if (planes < 1 || planes > 64)
     return Status::error("transfer: planes: expected 1..64, found " + std::to_string(planes));
-  if (prm.key_stride < 1 || prm.key_stride > 64 || !(prm.match_sigma > 0) || !(prm.colour_sigma > 0) ||
-      prm.search_radius < 0 || prm.search_radius > 64 || !(prm.spread_scale > 0) ||
-      !(prm.max_residual > 0) || !(prm.max_sigma >= 0))
-    return Status::error("transfer: parameters out of range (key_stride 1..64, match_sigma > 0, "
-                         "search_radius 0..64, spread_scale > 0, max_residual > 0)");
+  if (prm.key_stride < 1 || prm.key_stride > 64 || !(prm.match_sigma > 0) ||
+      !(prm.colour_sigma > 0) || prm.search_radius < 0 || prm.search_radius > 64 ||
+      !(prm.spread_scale > 0) || !(prm.max_residual > 0) || !(prm.max_sigma >= 0))
+    return Status::error(
+        "transfer: parameters out of range (key_stride 1..64, match_sigma > 0, "
+        "search_radius 0..64, spread_scale > 0, max_residual > 0)");
   for (int32_t l : labels)
     if (l < -1 || l >= planes)
       return Status::error("transfer: labels: expected -1.." + std::to_string(planes - 1) +
@@ -368,12 +372,15 @@ Result<TransferResult> transfer_detail(const gs::Image& render, const std::vecto
     target[size_t(p)] = sampled_energy(Yr, m, W, H, {1.f});
   }
   std::vector<double> energy(size_t(n) * grid.size());
-  pool.parallel_for(energy.size(), [&](size_t b, size_t e, int) {
-    for (size_t i = b; i < e; ++i) {
-      const size_t s = i / grid.size(), g = i % grid.size();
-      energy[i] = sampled_energy(Ys[s], ps[s].ok, W, H, grid_taps[g]);
-    }
-  }, 1);
+  pool.parallel_for(
+      energy.size(),
+      [&](size_t b, size_t e, int) {
+        for (size_t i = b; i < e; ++i) {
+          const size_t s = i / grid.size(), g = i % grid.size();
+          energy[i] = sampled_energy(Ys[s], ps[s].ok, W, H, grid_taps[g]);
+        }
+      },
+      1);
   for (int s = 0; s < n; ++s) {
     const int p = sources[size_t(s)].plane;
     const double goal = target[size_t(p < 0 ? planes : p)];
@@ -396,8 +403,8 @@ Result<TransferResult> transfer_detail(const gs::Image& render, const std::vecto
   // Degraded colour and luminance of every source.
   for (int s = 0; s < n; ++s) {
     PerSource& d = ps[size_t(s)];
-    d.rgb_deg = blur(sources[size_t(s)].image.data, W, H, 3, gaussian_taps(res.sigma[size_t(s)]),
-                     pool);
+    d.rgb_deg =
+        blur(sources[size_t(s)].image.data, W, H, 3, gaussian_taps(res.sigma[size_t(s)]), pool);
     d.y_deg.resize(render.pixels());
     for (size_t p = 0; p < render.pixels(); ++p) d.y_deg[p] = luma(&d.rgb_deg[p * 3]);
     Ys[size_t(s)] = {};
@@ -430,7 +437,8 @@ Result<TransferResult> transfer_detail(const gs::Image& render, const std::vecto
         float* row = &q[t * D];
         const int cy = i * kTransferToken + kTransferToken / 2,
                   cx = j * kTransferToken + kTransferToken / 2;
-        if (best >= 0 && !window_features(rs, cy, cx, prm.match_sigma, prm.colour_sigma, row)) best = -1;
+        if (best >= 0 && !window_features(rs, cy, cx, prm.match_sigma, prm.colour_sigma, row))
+          best = -1;
         row[kFeatures] = 1.f;
         qgroup[t] = best < 0 ? planes : best;
       }
@@ -447,8 +455,7 @@ Result<TransferResult> transfer_detail(const gs::Image& render, const std::vecto
         const int cy = a * ks + ks / 2, cx = c * ks + ks / 2;
         const int y0 = cy - kTransferWindow / 2, x0 = cx - kTransferWindow / 2;
         const size_t kt = size_t(s) * nk_per + t;
-        bool valid = y0 >= 0 && x0 >= 0 && y0 + kTransferWindow <= H &&
-                     x0 + kTransferWindow <= W &&
+        bool valid = y0 >= 0 && x0 >= 0 && y0 + kTransferWindow <= H && x0 + kTransferWindow <= W &&
                      box_sum(d.bad, W, y0, x0, y0 + kTransferWindow, x0 + kTransferWindow) == 0;
         float* row = &k[kt * D];
         if (valid) valid = window_features(ds, cy, cx, prm.match_sigma, prm.colour_sigma, row);
@@ -466,7 +473,8 @@ Result<TransferResult> transfer_detail(const gs::Image& render, const std::vecto
         kgroup[kt] = valid ? group : planes + 1;
       }
     });
-    for (int t = 0; t < nk_per; ++t) key_valid_count[size_t(s)] += kgroup[size_t(s) * nk_per + t] <= planes;
+    for (int t = 0; t < nk_per; ++t)
+      key_valid_count[size_t(s)] += kgroup[size_t(s) * nk_per + t] <= planes;
     res.keys += key_valid_count[size_t(s)];
   }
   res.timings.ms_descriptors = ms_since(t0);
@@ -635,8 +643,9 @@ Result<std::vector<TransferSourceImage>> plan_transfer_sources(const MacroPlan& 
     return out;
   }
   if (plan.options.crops.crop == CropMode::kTight)
-    return Status::error("transfer: --crop tight is not supported (the transfer resamples each "
-                         "crop to the whole close-up frame; use --crop full)");
+    return Status::error(
+        "transfer: --crop tight is not supported (the transfer resamples each "
+        "crop to the whole close-up frame; use --crop full)");
   for (const Crop& crop : plan.crops) {
     if (crop.ref < 0 || size_t(crop.ref) >= plan.ref_candidates.size())
       return Status::error("transfer: crop of plane " + std::to_string(crop.plane) +
@@ -649,7 +658,8 @@ Result<std::vector<TransferSourceImage>> plan_transfer_sources(const MacroPlan& 
     at_render.view = {W, H};
     s.valid = crop_view_validity(at_render, ref->width, ref->height);
     for (size_t p = 0; p < s.valid.size(); ++p)
-      if (!s.valid[p]) s.image.data[p * 3] = s.image.data[p * 3 + 1] = s.image.data[p * 3 + 2] = 0.f;
+      if (!s.valid[p])
+        s.image.data[p * 3] = s.image.data[p * 3 + 1] = s.image.data[p * 3 + 2] = 0.f;
     s.plane = crop.plane;
     // Lanczos (a = 3) rings over 3 input pixels, i.e. 3 * scale output pixels when upsampling.
     const double up = double(W) / std::max(1, crop.box.width());
@@ -667,10 +677,10 @@ Result<TransferResult> transfer_enhance(const MacroPlan& plan, const SceneInputs
   const double ms_sources = ms_since(t0);
   gs::Image render(plan.closeup.width, plan.closeup.height, 3);
   render.data = plan.closeup_color;
-  MACRO_ASSIGN_OR_RETURN(TransferResult r,
-                         transfer_detail(render, plan.planes.labels,
-                                         std::max(1, int(plan.planes.planes.size())), sources,
-                                         params, pool));
+  MACRO_ASSIGN_OR_RETURN(
+      TransferResult r,
+      transfer_detail(render, plan.planes.labels, std::max(1, int(plan.planes.planes.size())),
+                      sources, params, pool));
   r.timings.ms_sources += ms_sources;
   r.timings.ms_total += ms_sources;
   return r;

@@ -16,19 +16,21 @@
 //     grid 0..max_sigma, linearly interpolated; a source already blurrier than the render gets 0
 //     (and so gives no detail). No alignment is needed: only frequency content is compared.
 //  2. Descriptors on the degraded images: a token's 16 x 16 luminance window as 4 x 4 block means
-//     minus the window mean (16 values) plus the window's mean colour times colour_weight. Queries
-//     on the render, keys on every degraded source; a key is valid when its window (grown by the
+//     minus the window mean, scaled to unit length (contrast-invariant) and divided by
+//     match_sigma, plus the window's mean colour divided by colour_sigma. Queries on the render,
+//     keys (stride ks) on every degraded source; a key is valid when its window (grown by the
 //     Lanczos ringing margin) lies on valid source pixels.
 //  3. Masked attention (attention/runtime/attention.h) with the MACRO close-up rule: a token of
 //     plane p attends only to the valid key tokens of the crops of plane p (mask_from_groups; a
 //     whole reference is visible to every plane; a token without a plane sees nothing). Scores
-//     are -|q - k|^2 / (2 match_sigma^2) (the descriptors carry one extra column each, 1 and
-//     -|k|^2 / 2, so the dot-product kernel computes a Gaussian kernel of the distance). The values
+//     are -|q - k|^2 / 2 (the descriptors carry one extra column each, 1 and -|k|^2 / 2, so the
+//     dot-product kernel computes a Gaussian kernel of the distance). The values
 //     are, per source slot s, [1, x, y, x^2, y^2] of the key position: the output gives each
 //     source's attention mass and the mean and spread of the attended position.
 //  4. The source with the largest mass is taken; its attended mean position is refined by an
 //     exhaustive search within +-search_radius pixels (sum of squared differences of mean-removed
-//     luminance, degraded source vs render, on every second pixel of the window).
+//     luminance, degraded source vs render, on every second pixel of the window, plus the squared
+//     difference of the window means per sample: another brightness is no match).
 //  5. Confidence = mass * exp(-spatial variance / spread_scale) (peakedness of the attention)
 //     * clamp(1 - residual / max_residual, 0, 1) (residual = the refined SSD over the render
 //     window's own variance); below min_confidence it is 0, and such tokens change nothing.
@@ -62,15 +64,15 @@ Result<TransferSource> parse_transfer_source(const std::string& text);
 
 struct TransferParams {
   TransferSource source = TransferSource::kCrops;
-  int key_stride = 4;           // ks, pixels (8 = a quarter of the keys, coarser matches)
-  double match_sigma = 0.05;    // distance scale of the unit-norm structure part
-  double colour_sigma = 0.03;   // distance scale of the window's mean colour
-  double max_sigma = 6.0;       // largest blur tried in step 1 (pixels)
-  int search_radius = 6;        // step 4, pixels
-  double spread_scale = 2.0;    // step 5, key-grid units^2
-  double max_residual = 0.5;    // step 5
+  int key_stride = 4;          // ks, pixels (8 = a quarter of the keys, coarser matches)
+  double match_sigma = 0.05;   // distance scale of the unit-norm structure part
+  double colour_sigma = 0.03;  // distance scale of the window's mean colour
+  double max_sigma = 6.0;      // largest blur tried in step 1 (pixels)
+  int search_radius = 6;       // step 4, pixels
+  double spread_scale = 2.0;   // step 5, key-grid units^2
+  double max_residual = 0.5;   // step 5
   double min_confidence = 0.05;
-  double gain = 1.0;            // detail multiplier
+  double gain = 1.0;  // detail multiplier
 };
 
 // One source at the render size.
@@ -91,10 +93,10 @@ struct TransferResult {
   std::vector<float> confidence;  // [th * tw]
   std::vector<int32_t> chosen;    // [th * tw] source index per token (-1 = none)
   int token_h = 0, token_w = 0;
-  std::vector<double> sigma;      // [n] blur estimate per source (pixels)
-  double mean_confidence = 0;     // over tokens
-  int transferred = 0;            // tokens with confidence > 0
-  int keys = 0;                   // valid key tokens over all sources
+  std::vector<double> sigma;   // [n] blur estimate per source (pixels)
+  double mean_confidence = 0;  // over tokens
+  int transferred = 0;         // tokens with confidence > 0
+  int keys = 0;                // valid key tokens over all sources
   TransferTimings timings;
 };
 

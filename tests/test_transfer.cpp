@@ -259,7 +259,7 @@ TEST_CASE("transfer: macro enhance --enhancer transfer writes a PNG and a side-b
                             " --closeup closeup.png --out " + tmp.file("default.png")) == 0);
   CHECK(fs::exists(tmp.file("default.png")));
   CHECK(test::run_command(test::macro_exe() + " enhance --quiet --scene-dir " + dir +
-                          " --closeup closeup.png --enhancer difix --out " +
-                          tmp.file("difix.png") + " 2>/dev/null") != 0);
+                          " --closeup closeup.png --enhancer difix --out " + tmp.file("difix.png") +
+                          " 2>/dev/null") != 0);
   CHECK_FALSE(fs::exists(tmp.file("difix.png")));
 }

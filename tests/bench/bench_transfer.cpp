@@ -69,12 +69,13 @@ int run(int argc, char** argv) {
   std::printf("%-28s %10s %10s %8s\n", "case", "wall ms", "cpu ms", "ratio");
   std::printf("%-28s %10.1f %10.1f %8s\n", "3dgs render (baseline)", 1e3 * t_base.wall,
               1e3 * t_base.cpu, "1.00");
-  std::printf("%-28s %10.1f %10.1f %8.2f\n", "render + plan + transfer", 1e3 * t.wall,
-              1e3 * t.cpu, t.wall / std::max(t_base.wall, 1e-9));
+  std::printf("%-28s %10.1f %10.1f %8.2f\n", "render + plan + transfer", 1e3 * t.wall, 1e3 * t.cpu,
+              t.wall / std::max(t_base.wall, 1e-9));
   const auto& tm = r->timings;
-  std::printf("last run: render %.0f ms, plan %.0f ms, transfer %.0f ms (%d sources, mean "
-              "confidence %.3f)\n",
-              tm.ms_render, tm.ms_plan, tm.ms_transfer, r->views, r->transfer_confidence);
+  std::printf(
+      "last run: render %.0f ms, plan %.0f ms, transfer %.0f ms (%d sources, mean "
+      "confidence %.3f)\n",
+      tm.ms_render, tm.ms_plan, tm.ms_transfer, r->views, r->transfer_confidence);
   std::filesystem::remove_all(dir);
   return 0;
 }
