@@ -1,23 +1,41 @@
 #!/usr/bin/env bash
-# Fresh machine -> dependencies, Release build, then a CPU render of the embedded default scene's
-# close-up into out/: colour PNG, EXR (R,G,B,A,depth,invdepth floats) and colour-mapped inverse depth.
-# Usage: ./demo.sh [camera]   (default: closeup; cameras are listed in data/scenes/default/README.md)
+# Fresh machine -> dependencies, Release build, then the main job on the embedded SynthClose demo
+# scene (data/scenes/synthclose: a coarse 3DGS "reconstruction", its training photos and the
+# close-up ground truth):
+#   1. render the close-up on the CPU: colour PNG, EXR (R,G,B,A,depth,invdepth), inverse depth PNG;
+#   2. plan MACRO (reference selection, depth planes, scale-matched crops, attention masks);
+#   3. enhance it with the weight-free transfer enhancer (no downloaded weights needed), and write
+#      a side-by-side image: render | enhanced | ground truth, plus PSNR/SSIM against the GT.
+# Usage: ./demo.sh [close-up]   (closeup.png 1.5x, closeup_01.png 4.5x (default), closeup_02.png 6x)
 # Environment: BUILD_DIR (default build), OUT_DIR (default out).
 set -euo pipefail
 cd "$(dirname "$0")"
 bash .ci/install-deps.sh
 BUILD=${BUILD_DIR:-build}
 OUT=${OUT_DIR:-out}
-CAMERA=${1:-closeup}
-SCENE=data/scenes/default
+FRAME=${1:-closeup_01.png}
+NAME=${FRAME%.png}
+SCENE=data/scenes/synthclose
 cmake -S . -B "$BUILD" -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build "$BUILD" -j"$(nproc)" --target macro
 mkdir -p "$OUT"
-"$BUILD/macro" render --scene "$SCENE/scene.ply" --cameras "$SCENE/cameras.json" --camera "$CAMERA" \
-  --out-png "$OUT/$CAMERA.png" --out-exr "$OUT/$CAMERA.exr" \
-  --out-depth-png "$OUT/$CAMERA-invdepth.png"
+M="$BUILD/macro"
+"$M" render --scene "$SCENE/scene.ply" --cameras "$SCENE/split.json" --camera "$FRAME" \
+  --out-png "$OUT/$NAME-render.png" --out-exr "$OUT/$NAME-render.exr" \
+  --out-depth-png "$OUT/$NAME-invdepth.png"
+"$M" plan --scene-dir "$SCENE" --closeup "$FRAME" --out "$OUT/$NAME-plan.json"
+"$M" enhance --scene-dir "$SCENE" --closeup "$FRAME" --enhancer transfer \
+  --out "$OUT/$NAME-enhanced.png" --side-by-side "$OUT/$NAME-side-by-side.png"
 echo
-echo "scene:   $SCENE (synthetic, see $SCENE/README.md)"
-echo "colour:  $OUT/$CAMERA.png"
-echo "floats:  $OUT/$CAMERA.exr  (channels R,G,B colour; A alpha; depth = depth_sum/alpha; invdepth = sum w/z)"
-echo "depth:   $OUT/$CAMERA-invdepth.png  (inverse depth, bright = near)"
+echo "against the ground truth ($SCENE/closeup_gt/$FRAME):"
+for f in render enhanced; do
+  # PSNR and SSIM only: LPIPS, DINOv2 and DreamSim need weights that are not shipped.
+  printf "  %-9s %s\n" "$f:" "$("$M" metrics --pred "$OUT/$NAME-$f.png" --gt "$SCENE/closeup_gt/$FRAME" \
+    --quiet | grep -E '^(psnr|ssim):' | tr '\n' ' ')"
+done
+echo
+echo "scene:        $SCENE (synthetic SynthClose scene, see $SCENE/README.md)"
+echo "render:       $OUT/$NAME-render.png, $OUT/$NAME-render.exr, $OUT/$NAME-invdepth.png"
+echo "plan:         $OUT/$NAME-plan.json"
+echo "enhanced:     $OUT/$NAME-enhanced.png"
+echo "side by side: $OUT/$NAME-side-by-side.png  (render | enhanced | ground truth)"

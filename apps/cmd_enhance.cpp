@@ -19,7 +19,7 @@ constexpr const char* kUsage =
     "         [--enhancer transfer|difix] [--side-by-side FILE.png]\n"
     "  DIR is a DL3DV-Closeup scene folder (see macro plan --help). DIFIX_DIR is the Difix-ref\n"
     "  pipeline in diffusers layout (Hugging Face nvidia/difix_ref: unet/, vae/, text_encoder/,\n"
-    "  tokenizer/, scheduler/, model_index.json); every method but 3dgs needs it. Without\n"
+    "  tokenizer/, scheduler/, model_index.json), needed by --enhancer difix. Without\n"
     "  text_encoder/ + tokenizer/, --ctx gives the prompt embedding (tensor 'ctx' [1, 77, D]).\n"
     "  Methods: 3dgs = the raw render; difix = one reference, whole image, no mask; macro = the\n"
     "  full method (K=3, P=3, masks 'released'); macro-unmasked = mask 'none'; warp = the\n"
