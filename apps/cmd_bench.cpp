@@ -26,6 +26,7 @@ namespace {
 constexpr const char* kUsage =
     "usage: macro bench run --root DIR --results FILE.jsonl [--methods 3dgs,...]\n"
     "                       [--K 1,3] [--P 4] [--mask on,off] [--precision bf16,f32]\n"
+    "                       [--crop full,tight] [--upsampler lanczos,pft-sr]\n"
     "                       [--shard i/N] [--limit N] [--weights DIFIX_DIR] [--ctx "
     "CTX.safetensors]\n"
     "                       [--lpips-backbone F] [--lpips-heads F]\n"
@@ -55,7 +56,7 @@ int run_run(Args& args) {
   o.results = args.required("--results");
   o.methods = split_list(args.value_or("--methods", "3dgs"));
   std::map<std::string, std::vector<std::string>> grid;
-  for (const char* key : {"K", "P", "mask", "precision"})
+  for (const char* key : {"K", "P", "mask", "precision", "crop", "upsampler"})
     if (auto v = args.value(std::string("--") + key)) grid[key] = split_list(*v);
   o.option_sets = enhance::expand_option_grid(grid);
   const std::string shard = args.value_or("--shard", "0/1");

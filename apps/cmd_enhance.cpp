@@ -17,6 +17,7 @@ constexpr const char* kUsage =
     "         [--max-planes P] [--mask released|paper|none] [--crop full|tight]\n"
     "         [--occlusion] [--threads N] [--quiet]\n"
     "         [--enhancer transfer|difix] [--side-by-side FILE.png]\n"
+    "         [--upsampler lanczos|pft-sr] [--upsampler-weights DIR]\n"
     "  DIR is a DL3DV-Closeup scene folder (see macro plan --help). DIFIX_DIR is the Difix-ref\n"
     "  pipeline in diffusers layout (Hugging Face nvidia/difix_ref: unet/, vae/, text_encoder/,\n"
     "  tokenizer/, scheduler/, model_index.json), needed by --enhancer difix. Without\n"
@@ -31,7 +32,10 @@ constexpr const char* kUsage =
     "  --enhancer: difix = the Difix-ref network (needs --weights); transfer = weight-free detail\n"
     "  transfer from the references by masked attention (docs/transfer.md). Default: transfer\n"
     "  without --weights, difix with it. --side-by-side writes render | enhanced | ground truth\n"
-    "  (DIR/closeup_gt/FRAME when present, else render | enhanced).\n";
+    "  (DIR/closeup_gt/FRAME when present, else render | enhanced).\n"
+    "  --upsampler: how crops reach the model size: lanczos (Pillow-exact, the default) or pft-sr\n"
+    "  (the released super-resolution network; not available in this build, so it fails naming\n"
+    "  the weight files).\n";
 
 int run_enhance(std::vector<std::string> argv) {
   Args args(std::move(argv));
@@ -57,6 +61,8 @@ int run_enhance(std::vector<std::string> argv) {
   o.plan.occlusion = args.flag("--occlusion");
   const std::string enhancer = args.value_or("--enhancer", o.weights.empty() ? "transfer" : "difix");
   const std::string side_by_side = args.value_or("--side-by-side", "");
+  o.upsampler = args.value_or("--upsampler", "lanczos");
+  o.upsampler_weights = args.value_or("--upsampler-weights", "");
   if (Status s = args.finish(); !s)
     return fail("enhance", Status::error(s.message() + " (macro enhance --help for usage)"));
   auto m = enhance::parse_method(method);

@@ -119,6 +119,13 @@ Result<EnhanceOptions> enhance_options(EnhanceMethod method, const BenchOptions&
   if (auto it = o.find("precision"); it != o.end()) {
     MACRO_ASSIGN_OR_RETURN(e.precision, nets::parse_precision(it->second));
   }
+  if (auto it = o.find("crop"); it != o.end()) {
+    MACRO_ASSIGN_OR_RETURN(e.plan.crops.crop, parse_crop_mode(it->second));
+  }
+  if (auto it = o.find("upsampler"); it != o.end()) {
+    MACRO_TRY(make_upsampler(it->second).status());
+    e.upsampler = it->second;
+  }
   return e;
 }
 
@@ -167,7 +174,7 @@ Status register_enhance_bench_methods(MethodRegistry& registry,
                           enhance_method_fn(EnhanceMethod::kDifix, settings)}));
   MACRO_TRY(registry.add({"macro",
                           "MACRO: scale-matched crops, depth-masked attention",
-                          {"K", "P", "mask", "precision"},
+                          {"K", "P", "mask", "precision", "crop", "upsampler"},
                           enhance_method_fn(EnhanceMethod::kMacro, settings)}));
   MACRO_TRY(registry.add({"transfer",
                           "weight-free detail transfer (transfer.h) from the plan's scale-matched "
@@ -181,7 +188,7 @@ Status register_enhance_bench_methods(MethodRegistry& registry,
                           transfer_method_fn(TransferSource::kWhole)}));
   MACRO_TRY(registry.add({"macro-unmasked",
                           "MACRO without the plane mask",
-                          {"K", "P", "precision"},
+                          {"K", "P", "precision", "crop", "upsampler"},
                           enhance_method_fn(EnhanceMethod::kMacroUnmasked, settings)}));
   return Status::ok();
 }

@@ -178,6 +178,9 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
   const auto t_all = Clock::now();
   EnhanceResult res;
   const int W = in.closeup.width, H = in.closeup.height;
+  MACRO_ASSIGN_OR_RETURN(std::unique_ptr<Upsampler> upsampler,
+                         make_upsampler(o.upsampler, o.upsampler_weights));
+  if (o.method != EnhanceMethod::k3dgs) MACRO_TRY(upsampler->ready());
 
   if (o.method == EnhanceMethod::k3dgs) {
     auto t0 = Clock::now();
@@ -238,7 +241,6 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
   t0 = Clock::now();
   std::vector<gs::Image> views;
   nets::UNetMasks masks;
-  LanczosUpsampler lanczos;
   WarpViews warp;  // --method warp: its views and masks (the masks must outlive the U-Net)
   if (o.method == EnhanceMethod::kWarp) {
     WarpOptions wo;
@@ -254,7 +256,7 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
     MACRO_ASSIGN_OR_RETURN(gs::Image ref, load_candidate_image(in, plan.ref_candidates[0]));
     views.push_back(resize_lanczos(ref, plan.model.w, plan.model.h, *pool));
   } else {
-    MACRO_ASSIGN_OR_RETURN(PlanViews pv, build_views(plan, in, lanczos));
+    MACRO_ASSIGN_OR_RETURN(PlanViews pv, build_views(plan, in, *upsampler));
     views = std::move(pv.images);
     if (!plan.masks_built)
       return Status::error("the plan's views differ in size, so it has no attention masks");

@@ -58,6 +58,8 @@ struct EnhanceOptions {
   int timestep = 199;           // Difix: one step at t = 199
   Enhancer enhancer = Enhancer::kDifix;
   TransferParams transfer;      // enhancer transfer (its source follows the method)
+  std::string upsampler = "lanczos";  // crops -> model size: lanczos or pft-sr (resample.h)
+  std::string upsampler_weights;      // pft-sr weights folder ("" = data/weights/pft-sr)
   ThreadPool* pool = nullptr;   // nullptr = ThreadPool::global()
 };
 

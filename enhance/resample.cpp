@@ -194,6 +194,11 @@ Result<gs::Image> LanczosUpsampler::resize(const gs::Image& src, int out_w, int 
 }
 
 Result<gs::Image> PftSrUpsampler::resize(const gs::Image&, int, int) const {
+  MACRO_TRY(ready());
+  return Status::error("upsampler pft-sr: unreachable");
+}
+
+Status PftSrUpsampler::ready() const {
   return Status::error(
       "upsampler pft-sr: the PFT-SR network is not available in this build and its weights "
       "are not supplied (expected 103_PFT_light_SRx4_finetune.pth and "

@@ -71,6 +71,8 @@ class Upsampler {
   virtual const char* name() const = 0;
   // src [H,W,3] float in [0,1] -> [out_h, out_w, 3].
   virtual Result<gs::Image> resize(const gs::Image& src, int out_w, int out_h) const = 0;
+  // OK when resize() can run (its weights are there); checked before any rendering.
+  virtual Status ready() const { return Status::ok(); }
 };
 
 // Float Lanczos (above). The default.
@@ -87,6 +89,7 @@ class PftSrUpsampler final : public Upsampler {
   explicit PftSrUpsampler(std::string weights_dir) : weights_dir_(std::move(weights_dir)) {}
   const char* name() const override { return "pft-sr"; }
   Result<gs::Image> resize(const gs::Image& src, int out_w, int out_h) const override;
+  Status ready() const override;
   const std::string& weights_dir() const { return weights_dir_; }
 
  private:

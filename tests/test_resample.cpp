@@ -3,6 +3,8 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
 
 #include "attention/runtime/safetensors.h"
 #include "enhance/resample.h"
@@ -91,4 +93,32 @@ TEST_CASE("upsampler choice: lanczos works, pft-sr fails clearly", "[macro][resa
   CHECK(pr.status().message().find("/nowhere/pft") != std::string::npos);
   CHECK(pr.status().message().find("PFT_light_SRx4") != std::string::npos);
   CHECK_FALSE(make_upsampler("bicubic").is_ok());
+}
+
+TEST_CASE("macro enhance --upsampler: pft-sr fails before rendering, names the weights, no output",
+          "[macro][resample]") {
+  test::TempDir tmp("upsampler-cli");
+  const std::string scene = test::source_dir() + "/data/scenes/synthclose";
+  const std::string out = tmp.file("enhanced.png"), log = tmp.file("log.txt");
+  const std::string base = test::macro_exe() + " enhance --scene-dir " + scene +
+                           " --closeup closeup.png --quiet --out " + out;
+  CHECK(test::run_command(base + " --upsampler pft-sr --upsampler-weights /nowhere/pft 2> " +
+                          log) == 1);
+  std::string msg;
+  {
+    std::FILE* f = std::fopen(log.c_str(), "rb");
+    REQUIRE(f);
+    char buf[4096];
+    msg.assign(buf, std::fread(buf, 1, sizeof buf, f));
+    std::fclose(f);
+  }
+  CHECK(msg.find("pft-sr") != std::string::npos);
+  CHECK(msg.find("/nowhere/pft") != std::string::npos);
+  CHECK(msg.find("PFT_light_SRx4") != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(out));
+  CHECK(test::run_command(base + " --upsampler bicubic 2> " + log) == 1);
+  CHECK_FALSE(std::filesystem::exists(out));
+  // lanczos (the default, spelled out) works.
+  CHECK(test::run_command(base + " --upsampler lanczos 2> " + log) == 0);
+  CHECK(std::filesystem::exists(out));
 }
