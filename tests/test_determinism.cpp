@@ -13,8 +13,7 @@
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/safetensors.h"
-#include "enhance/synth_scene_folder.h"
-#include "gs/synth.h"
+#include "enhance_fixture.h"
 #include "test_support.h"
 
 using namespace macro;
@@ -67,23 +66,6 @@ void check_identical(const Runs& r, const std::vector<std::string>& outputs) {
     CHECK(r.bytes[0][o] == r.bytes[1][o]);  // --threads 1 vs 2
     CHECK(r.bytes[1][o] == r.bytes[2][o]);  // repeated run
   }
-}
-
-// DIR/pipe: model_index.json, unet/ and vae/ (symlinks to the goldens); DIR/ctx.safetensors.
-std::string make_pipeline(const test::TempDir& dir) {
-  const std::string root = dir.file("pipe");
-  fs::create_directories(root);
-  fs::create_directory_symlink(test::golden_dir() + "/unet-tiny", root + "/unet");
-  fs::create_directory_symlink(test::golden_dir() + "/vae-tiny", root + "/vae");
-  REQUIRE(write_file_atomic(root + "/model_index.json",
-                            std::string(R"({"_class_name": "DifixPipeline"})"))
-              .is_ok());
-  std::vector<float> ctx(77 * 48);
-  for (size_t i = 0; i < ctx.size(); ++i) ctx[i] = 0.5f * std::sin(0.37f * float(i));
-  REQUIRE(write_safetensors(dir.file("ctx.safetensors"),
-                            {{"ctx", DType::kF32, {1, 77, 48}, ctx.data()}})
-              .is_ok());
-  return root;
 }
 
 std::vector<float> wave(size_t n, float scale, float offset) {
@@ -159,7 +141,7 @@ TEST_CASE("determinism: macro nn-run tiny U-Net, VAE and Difix pipeline for 1 an
                                  {"o.safetensors"});
   check_identical(v, {"o.safetensors"});
 
-  const std::string pipe = make_pipeline(tmp);
+  const std::string pipe = test::make_tiny_pipeline(tmp);
   const std::vector<float> views = wave(size_t(2) * 3 * 32 * 48, 0.9f, 0.0f);
   const std::string pipe_in = tmp.file("pipe.safetensors");
   REQUIRE(write_safetensors(pipe_in, {{"input.images", DType::kF32, {2, 3, 32, 48}, views.data()},
@@ -175,19 +157,8 @@ TEST_CASE("determinism: macro nn-run tiny U-Net, VAE and Difix pipeline for 1 an
 TEST_CASE("determinism: macro enhance 3dgs and macro write identical images for 1 and 2 threads",
           "[reliability][determinism]") {
   test::TempDir tmp("det-enhance");
-  gs::SynthParams sp;
-  sp.seed = 5;
-  sp.kind = gs::SynthKind::kMixed;
-  sp.gaussians = 20'000;
-  sp.width = 128;
-  sp.height = 72;
-  sp.training_views = 5;
-  sp.closeup_views = 1;
-  auto scene = gs::generate_synthetic_scene(sp);
-  REQUIRE(scene.is_ok());
-  const std::string scene_dir = tmp.file("scene");
-  REQUIRE(enhance::write_closeup_scene_folder(*scene, scene_dir).is_ok());
-  const std::string pipe = make_pipeline(tmp);
+  const std::string scene_dir = test::write_synth_scene(tmp, test::tiny_scene_params());
+  const std::string pipe = test::make_tiny_pipeline(tmp);
   const std::string base =
       "enhance --scene-dir " + scene_dir + " --closeup closeup.png --out {out}/e.png ";
   const Runs g = run_three_times(tmp, base + "--method 3dgs", {"e.png"});

@@ -9,9 +9,8 @@
 #include <filesystem>
 
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
 #include "enhance/enhance.h"
-#include "enhance/synth_scene_folder.h"
+#include "enhance_fixture.h"
 #include "gs/rasterizer.h"
 #include "test_support.h"
 
@@ -21,56 +20,10 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr int kW = 128, kH = 72;  // close-up and training image size (model size 128 x 72)
+constexpr int kW = test::kTinyW, kH = test::kTinyH;  // model size 128 x 72
 
-gs::SynthScene tiny_scene() {
-  gs::SynthParams p;
-  p.seed = 5;
-  p.kind = gs::SynthKind::kMixed;
-  p.gaussians = 20'000;
-  p.width = kW;
-  p.height = kH;
-  p.training_views = 5;
-  p.closeup_views = 1;
-  auto s = gs::generate_synthetic_scene(p);
-  MACRO_CHECK(s.is_ok());
-  return std::move(s).value();
-}
-
-// DIR/pipe: model_index.json, unet/ and vae/ (symlinks to the goldens); DIR/ctx.safetensors.
-std::string make_pipeline(const test::TempDir& dir) {
-  const std::string root = dir.file("pipe");
-  fs::create_directories(root);
-  fs::create_directory_symlink(test::golden_dir() + "/unet-tiny", root + "/unet");
-  fs::create_directory_symlink(test::golden_dir() + "/vae-tiny", root + "/vae");
-  REQUIRE(write_file_atomic(root + "/model_index.json",
-                            std::string(R"({"_class_name": "DifixPipeline"})"))
-              .is_ok());
-  std::vector<float> ctx(77 * 48);
-  for (size_t i = 0; i < ctx.size(); ++i) ctx[i] = 0.5f * std::sin(0.37f * float(i));
-  REQUIRE(write_safetensors(dir.file("ctx.safetensors"),
-                            {{"ctx", DType::kF32, {1, 77, 48}, ctx.data()}})
-              .is_ok());
-  return root;
-}
-
-struct Fixture {
-  test::TempDir tmp{"macro-enhance"};
-  std::string scene_dir, pipe, ctx;
-  Fixture() {
-    scene_dir = tmp.file("scene");
-    REQUIRE(write_closeup_scene_folder(tiny_scene(), scene_dir).is_ok());
-    pipe = make_pipeline(tmp);
-    ctx = tmp.file("ctx.safetensors");
-  }
-  SceneInputs inputs() const {
-    SceneInputOptions o;
-    o.scene_dir = scene_dir;
-    o.closeup = "closeup.png";
-    auto in = load_scene_inputs(o);
-    REQUIRE(in.is_ok());
-    return std::move(in).value();
-  }
+struct Fixture : test::TinyEnhanceFolder {
+  Fixture() : TinyEnhanceFolder("macro-enhance") {}
   std::string cli(const std::string& args) const {
     return test::macro_exe() + " enhance --quiet --scene-dir " + scene_dir +
            " --closeup closeup.png " + args;

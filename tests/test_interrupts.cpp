@@ -19,8 +19,7 @@
 #include <thread>
 
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
-#include "enhance/synth_scene_folder.h"
+#include "enhance_fixture.h"
 #include "gs/synth.h"
 #include "test_support.h"
 
@@ -98,37 +97,16 @@ std::vector<std::string> lines_of(const std::string& text) {
   return lines;
 }
 
-// DIR/pipe (model_index.json, unet/ and vae/ linked to the tiny goldens) and DIR/ctx.safetensors.
-std::string make_pipeline(const test::TempDir& dir) {
-  const std::string root = dir.file("pipe");
-  fs::create_directories(root);
-  fs::create_directory_symlink(test::golden_dir() + "/unet-tiny", root + "/unet");
-  fs::create_directory_symlink(test::golden_dir() + "/vae-tiny", root + "/vae");
-  REQUIRE(write_file_atomic(root + "/model_index.json",
-                            std::string(R"({"_class_name": "DifixPipeline"})"))
-              .is_ok());
-  std::vector<float> ctx(77 * 48);
-  for (size_t i = 0; i < ctx.size(); ++i) ctx[i] = 0.5f * std::sin(0.37f * float(i));
-  REQUIRE(write_safetensors(dir.file("ctx.safetensors"),
-                            {{"ctx", DType::kF32, {1, 77, 48}, ctx.data()}})
-              .is_ok());
-  return root;
-}
-
+// The tiny scene's kind and views with seed 11, 40k Gaussians, w x h and `closeups` close-ups, at
+// DIR/root/scene_a.
 std::string make_scene(const test::TempDir& dir, int w, int h, int closeups) {
-  gs::SynthParams sp;
+  gs::SynthParams sp = test::tiny_scene_params();
   sp.seed = 11;
-  sp.kind = gs::SynthKind::kMixed;
   sp.gaussians = 40'000;
   sp.width = w;
   sp.height = h;
-  sp.training_views = 5;
   sp.closeup_views = closeups;
-  auto scene = gs::generate_synthetic_scene(sp);
-  REQUIRE(scene.is_ok());
-  const std::string scene_dir = dir.file("root/scene_a");
-  REQUIRE(enhance::write_closeup_scene_folder(*scene, scene_dir).is_ok());
-  return scene_dir;
+  return test::write_synth_scene(dir, sp, "root/scene_a");
 }
 
 bool exited_by_interrupt(int status) {
@@ -142,7 +120,7 @@ TEST_CASE("interrupts: SIGINT during macro enhance leaves no output, no temporar
           "[reliability][interrupts]") {
   test::TempDir tmp("int-enhance");
   const std::string scene_dir = make_scene(tmp, 320, 180, 1);
-  const std::string pipe = make_pipeline(tmp);
+  const std::string pipe = test::make_tiny_pipeline(tmp);
   const std::string out_dir = tmp.file("out");
   fs::create_directories(out_dir);
   const std::string out = out_dir + "/e.png";
@@ -170,7 +148,7 @@ TEST_CASE("interrupts: SIGINT during macro bench run keeps whole records only, a
           "[reliability][interrupts]") {
   test::TempDir tmp("int-bench");
   make_scene(tmp, 160, 90, 4);  // 4 close-ups x 2 methods = 8 records
-  const std::string pipe = make_pipeline(tmp);
+  const std::string pipe = test::make_tiny_pipeline(tmp);
   const std::string res_dir = tmp.file("results");
   fs::create_directories(res_dir);
   const std::string results = res_dir + "/r.jsonl";

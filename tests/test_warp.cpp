@@ -14,10 +14,9 @@
 #include <filesystem>
 
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
 #include "enhance/enhance.h"
-#include "enhance/synth_scene_folder.h"
 #include "enhance/warp.h"
+#include "enhance_fixture.h"
 #include "test_support.h"
 
 using namespace macro;
@@ -224,44 +223,10 @@ TEST_CASE("warp geometry: analytic plane scene, visible = GT, out of view and no
 // ---- the method on the tiny pipeline -----------------------------------------------------------
 namespace {
 
-constexpr int kW = 128, kH = 72;
+constexpr int kW = test::kTinyW, kH = test::kTinyH;
 
-struct TinyFolder {
-  test::TempDir tmp{"macro-warp"};
-  std::string scene_dir, pipe, ctx;
-  TinyFolder() {
-    gs::SynthParams p;
-    p.seed = 5;
-    p.kind = gs::SynthKind::kMixed;
-    p.gaussians = 20'000;
-    p.width = kW;
-    p.height = kH;
-    p.training_views = 5;
-    p.closeup_views = 1;
-    auto s = gs::generate_synthetic_scene(p);
-    REQUIRE(s.is_ok());
-    scene_dir = tmp.file("scene");
-    REQUIRE(write_closeup_scene_folder(*s, scene_dir).is_ok());
-    pipe = tmp.file("pipe");
-    fs::create_directories(pipe);
-    fs::create_directory_symlink(test::golden_dir() + "/unet-tiny", pipe + "/unet");
-    fs::create_directory_symlink(test::golden_dir() + "/vae-tiny", pipe + "/vae");
-    REQUIRE(write_file_atomic(pipe + "/model_index.json",
-                              std::string(R"({"_class_name": "DifixPipeline"})"))
-                .is_ok());
-    std::vector<float> c(77 * 48);
-    for (size_t i = 0; i < c.size(); ++i) c[i] = 0.5f * std::sin(0.37f * float(i));
-    ctx = tmp.file("ctx.safetensors");
-    REQUIRE(write_safetensors(ctx, {{"ctx", DType::kF32, {1, 77, 48}, c.data()}}).is_ok());
-  }
-  SceneInputs inputs() const {
-    SceneInputOptions o;
-    o.scene_dir = scene_dir;
-    o.closeup = "closeup.png";
-    auto in = load_scene_inputs(o);
-    REQUIRE(in.is_ok());
-    return std::move(in).value();
-  }
+struct TinyFolder : test::TinyEnhanceFolder {
+  TinyFolder() : TinyEnhanceFolder("macro-warp") {}
 };
 
 }  // namespace
