@@ -45,6 +45,8 @@ std::string clip(std::string_view s) {
 
 // Unique ids and finite positions, shared by both readers and the writer.
 Status check_points(const ColmapPoints& p, const std::string& path) {
+  // As for an empty images file: a model without points cannot be used, so say so here.
+  if (p.size() == 0) return Status::error(path + ": no 3D points (expected at least one)");
   for (size_t i = 0; i < p.size(); ++i) {
     if (!std::isfinite(p.xyz[i].x()) || !std::isfinite(p.xyz[i].y()) ||
         !std::isfinite(p.xyz[i].z()))

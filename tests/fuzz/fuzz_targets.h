@@ -28,6 +28,7 @@
 #include "attention/runtime/safetensors.h"
 #include "attention/runtime/status.h"
 #include "gs/camera.h"
+#include "gs/colmap_points.h"
 #include "gs/image_io.h"
 #include "gs/scene_io.h"
 
@@ -149,6 +150,16 @@ inline Status closeup_split(const uint8_t* data, size_t size) {
 }
 
 // split_two: cameras.txt, images.txt.
+inline Status colmap_points_text(const uint8_t* data, size_t size) {
+  auto r = gs::load_colmap_points_text(write_scratch("colmap_points/points3D.txt", data, size));
+  return r.is_ok() ? Status::ok() : r.status();
+}
+
+inline Status colmap_points_binary(const uint8_t* data, size_t size) {
+  auto r = gs::load_colmap_points_binary(write_scratch("colmap_points/points3D.bin", data, size));
+  return r.is_ok() ? Status::ok() : r.status();
+}
+
 inline Status colmap_text(const uint8_t* data, size_t size) {
   auto [cams, imgs] = split_two(data, size);
   auto r = gs::load_colmap_text(write_scratch("colmap_text/cameras.txt", cams),
@@ -235,6 +246,8 @@ inline const std::vector<Entry>& entries() {
       {"closeup_split", closeup_split},
       {"colmap_text", colmap_text},
       {"colmap_binary", colmap_binary},
+      {"colmap_points_text", colmap_points_text},
+      {"colmap_points_binary", colmap_points_binary},
       {"clip_tokenizer", clip_tokenizer},
       {"clip_tokenizer_text", clip_tokenizer_text},
       {"image", image},

@@ -104,6 +104,15 @@ make_seeds() {
   perl -e 'binmode STDOUT; print pack("Q< L< d<7 L< Z* Q< d<2 q<", 1, 7, 1, 0, 0, 0, 0.5, 0, 4, 1,
            "front.png", 1, 10, 20, -1)' >"$tmp/images.bin"
   pack2 "$tmp/cameras.bin" "$tmp/images.bin" >"$seeds/colmap_binary/rig"
+  # points3D: text (id x y z r g b error (image_id point2d_idx)*) and binary (u64 n; u64 id,
+  # f64 xyz[3], u8 rgb[3], f64 error, u64 track length, (i32 image_id, i32 point2d_idx)*).
+  printf '# 3D point list\n1 0.5 0.25 3 255 0 0 0.1 7 0 8 1\n2 -1 0 4.5 0 255 9 0.2 7 1\n' \
+    >"$tmp/points3D.txt"
+  add colmap_points_text "$tmp/points3D.txt"
+  perl -e 'binmode STDOUT; print pack("Q< Q< d<3 C3 d< Q< l<4 Q< d<3 C3 d< Q< l<2", 2,
+           1, 0.5, 0.25, 3, 255, 0, 0, 0.1, 2, 7, 0, 8, 1,
+           2, -1, 0, 4.5, 0, 255, 9, 0.2, 1, 7, 1)' >"$tmp/points3D.bin"
+  add colmap_points_binary "$tmp/points3D.bin"
   # Tokenizer: a tiny valid vocab/merges pair, and the real files truncated (64 KiB each).
   printf '{"a": 0, "b": 1, "c": 2, "a</w>": 3, "b</w>": 4, "c</w>": 5, "ab": 6, "ab</w>": 7, "!": 8, "<|startoftext|>": 9, "<|endoftext|>": 10}' \
     >"$tmp/vocab.json"
