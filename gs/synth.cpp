@@ -12,6 +12,7 @@
 
 #include "attention/runtime/file_io.h"
 #include "gs/scene_io.h"
+#include "gs/synth_random.h"
 
 namespace macro::gs {
 namespace {
@@ -20,43 +21,11 @@ using Eigen::Matrix3d;
 using Eigen::Vector3d;
 constexpr double kPi = 3.14159265358979323846;
 
-// ---- randomness ----------------------------------------------------------------------------------
+// ---- randomness and procedural texture ----------------------------------------------------------
 
-struct Rng {
-  uint64_t state;
-  uint64_t next() {
-    uint64_t z = (state += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-  }
-  double uniform() { return double(next() >> 11) * 0x1.0p-53; }  // [0, 1)
-  double range(double lo, double hi) { return lo + (hi - lo) * uniform(); }
-};
-
-uint32_t hash3(int32_t x, int32_t y, uint32_t seed) {
-  uint32_t h = seed * 0x9E3779B1u ^ uint32_t(x) * 0x85EBCA77u ^ uint32_t(y) * 0xC2B2AE3Du;
-  h ^= h >> 15;
-  h *= 0x2C1B3C6Du;
-  h ^= h >> 12;
-  h *= 0x297A2D39u;
-  h ^= h >> 15;
-  return h;
-}
-double hash01(int32_t x, int32_t y, uint32_t seed) { return double(hash3(x, y, seed) >> 8) * 0x1.0p-24; }
-
-// ---- procedural texture --------------------------------------------------------------------------
-
-double smooth(double t) { return t * t * (3.0 - 2.0 * t); }
-
-double value_noise(double x, double y, uint32_t seed) {
-  const double fx = std::floor(x), fy = std::floor(y);
-  const int32_t ix = int32_t(fx), iy = int32_t(fy);
-  const double tx = smooth(x - fx), ty = smooth(y - fy);
-  const double a = hash01(ix, iy, seed), b = hash01(ix + 1, iy, seed);
-  const double c = hash01(ix, iy + 1, seed), d = hash01(ix + 1, iy + 1, seed);
-  return (a * (1 - tx) + b * tx) * (1 - ty) + (c * (1 - tx) + d * tx) * ty;
-}
+using synth_random::hash01;
+using synth_random::Rng;
+using synth_random::value_noise;
 
 double fbm(double x, double y, uint32_t seed) {
   double sum = 0, amp = 0.5, norm = 0;
