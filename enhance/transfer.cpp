@@ -9,6 +9,7 @@
 
 #include "attention/runtime/attention.h"
 #include "attention/runtime/attention_mask.h"
+#include "attention/runtime/progress.h"
 #include "enhance/crops.h"
 #include "enhance/resample.h"
 
@@ -16,9 +17,6 @@ namespace macro::enhance {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 constexpr int kFeatures = 19;            // 16 block means + 3 mean colours
 constexpr int kSlotValues = 5;           // per source slot: [1, x, y, x^2, y^2]

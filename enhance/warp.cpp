@@ -6,13 +6,12 @@
 #include <chrono>
 #include <cmath>
 
+#include "attention/runtime/progress.h"
+
 namespace macro::enhance {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 }  // namespace
 

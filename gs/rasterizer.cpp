@@ -7,6 +7,7 @@
 #include <cmath>
 #include <string>
 
+#include "attention/runtime/progress.h"
 #include "gs/raster_stages.h"
 
 namespace macro::gs {
@@ -24,10 +25,6 @@ Rasterizer::Rasterizer(Rasterizer&&) noexcept = default;
 Rasterizer& Rasterizer::operator=(Rasterizer&&) noexcept = default;
 
 namespace {
-
-double ms_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
 
 Status check_inputs(const GaussianCloud& cloud, const Camera& camera, const RenderOptions& o) {
   MACRO_TRY(camera.validate().with_context("render: camera '" + camera.name + "'"));

@@ -10,15 +10,12 @@
 #include <filesystem>
 
 #include "attention/runtime/file_io.h"
+#include "attention/runtime/progress.h"
 #include "attention/runtime/safetensors.h"
 #include "gs/image_io.h"
 
 namespace macro::gs {
 namespace {
-
-double ms_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
 
 Status check_output(const char* kind, const std::string& path) {
   if (path.empty()) return Status::ok();

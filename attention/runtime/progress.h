@@ -34,4 +34,9 @@ class Progress {
 // A one-line note on stderr unless quiet ("stage: message").
 void log_info(const std::string& stage, const std::string& message);
 
+// Wall-clock milliseconds since t0 (steady clock): the per-stage timings of long jobs.
+inline double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
 }  // namespace macro
