@@ -36,18 +36,8 @@ using attention_detail::AttentionKernels;
 // (all threads); rates per CPU-second show the kernel's efficiency on the cores it actually got.
 // GFLOP/s of the FMA loop: {per wall second with all threads, per CPU-second (one core)}.
 Timing fma_peak_gflops(const AttentionKernels& k, ThreadPool& pool) {
-  const int64_t iters = 20'000'000;
-  const int threads = pool.size();
-  const Timing t = median_timing(3, [&] {
-    pool.parallel_for(
-        size_t(threads),
-        [&](size_t b, size_t e, int) {
-          for (size_t i = b; i < e; ++i) k.fma_peak(iters);
-        },
-        1);
-  });
-  const double flop = k.fma_peak(1) * double(iters) * threads;
-  return {flop / t.wall * 1e-9, flop / t.cpu * 1e-9};
+  const Rate r = probe_rate(k.fma_peak, &pool, 20'000'000, 3);
+  return {r.wall, r.cpu};
 }
 
 double score_tile_gflops(const AttentionKernels& k, int d) {

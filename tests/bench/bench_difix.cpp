@@ -85,26 +85,10 @@ void reset_peak_rss() {
 
 // fp32 FMA peak of `threads` threads at once: GFLOP per wall-second, and per CPU-second.
 Timing fma_peak(int threads, bool bf16 = false) {
-  const auto probe = bf16 ? kernels().probe_bf16 : kernels().probe_fma;
-  const int64_t iters = 2000000;
-  ThreadPool* pool = threads > 1 ? &ThreadPool::global() : nullptr;
-  const Timing t = median_timing(
-      3,
-      [&] {
-        if (!pool) {
-          probe(iters);
-          return;
-        }
-        pool->parallel_for(
-            size_t(threads),
-            [&](size_t b, size_t e, int) {
-              for (size_t i = b; i < e; ++i) probe(iters);
-            },
-            1);
-      },
-      /*warmup=*/false);
-  const double flop = probe(1) * double(iters) * threads;
-  return {flop / t.wall * 1e-9, flop / t.cpu * 1e-9};
+  const Rate r = probe_rate(bf16 ? kernels().probe_bf16 : kernels().probe_fma,
+                            threads > 1 ? &ThreadPool::global() : nullptr, 2000000, 3,
+                            /*warmup=*/false);
+  return {r.wall, r.cpu};
 }
 
 // ---- FLOP counts (difix-spec 4.5: 1 MAC = 2 FLOP; norms, softmax, elementwise ignored) ---------

@@ -34,27 +34,10 @@ std::vector<float> random_vec(size_t n, uint32_t seed) {
 // The machine is shared with builds, so every measurement records both the wall time and the
 // process CPU time (all threads); rates per CPU-second show the kernels' efficiency on the cores
 // they actually got, rates per wall-second what a user would see. Both are medians.
-// GFLOP/s of a probe loop run on every thread of `pool` at once (nullptr: the calling thread).
-struct Rate {
-  double wall = 0, cpu = 0;  // GFLOP per wall-second, and per CPU-second of one thread
-};
+// GFLOP/s of a probe loop run on every thread of `pool` at once (nullptr: the calling thread),
+// 2M iterations per thread.
 Rate probe_peak(double (*probe)(int64_t), ThreadPool* pool, int reps) {
-  const int64_t iters = 2000000;
-  const int threads = pool ? pool->size() : 1;
-  const Timing t = median_timing(reps, [&] {
-    if (!pool) {
-      probe(iters);
-      return;
-    }
-    pool->parallel_for(
-        size_t(threads),
-        [&](size_t b, size_t e, int) {
-          for (size_t i = b; i < e; ++i) probe(iters);
-        },
-        1);
-  });
-  const double flop = probe(1) * double(iters) * threads;  // probe(n) returns its flop count
-  return {flop / t.wall * 1e-9, flop / t.cpu * 1e-9};
+  return probe_rate(probe, pool, 2000000, reps);
 }
 
 struct Peaks {

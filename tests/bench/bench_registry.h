@@ -5,8 +5,11 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdint>
 #include <functional>
 #include <vector>
+
+#include "attention/runtime/thread_pool.h"
 
 namespace macro::bench {
 
@@ -69,6 +72,35 @@ inline Timing median_timing(int reps, const std::function<void()>& fn, bool warm
   std::sort(w.begin(), w.end());
   std::sort(c.begin(), c.end());
   return w.empty() ? Timing{} : Timing{w[w.size() / 2], c[c.size() / 2]};
+}
+
+// Peak arithmetic rate of a probe kernel (probe(n) runs n iterations of its loop and returns the
+// FLOP of one iteration): one copy per thread of `pool` at once (nullptr: one copy on the calling
+// thread), `iters` iterations each, medians of `reps` (after one warm-up call unless `warmup` is
+// false). wall: GFLOP per wall-second of all threads; cpu: GFLOP per CPU-second.
+struct Rate {
+  double wall = 0, cpu = 0;
+};
+inline Rate probe_rate(double (*probe)(int64_t), ThreadPool* pool, int64_t iters, int reps,
+                       bool warmup = true) {
+  const int threads = pool ? pool->size() : 1;
+  const Timing t = median_timing(
+      reps,
+      [&] {
+        if (!pool) {
+          probe(iters);
+          return;
+        }
+        pool->parallel_for(
+            size_t(threads),
+            [&](size_t b, size_t e, int) {
+              for (size_t i = b; i < e; ++i) probe(iters);
+            },
+            1);
+      },
+      warmup);
+  const double flop = probe(1) * double(iters) * threads;
+  return {flop / t.wall * 1e-9, flop / t.cpu * 1e-9};
 }
 
 }  // namespace macro::bench
