@@ -203,21 +203,6 @@ double skip_conv_macs(const std::string& vae_manifest, int64_t hh, int64_t ww) {
   return m;
 }
 
-std::string exe_dir() {
-  std::error_code ec;
-  const fs::path p = fs::read_symlink("/proc/self/exe", ec);
-  return ec ? std::string(".") : p.parent_path().string();
-}
-
-std::string default_golden() {
-  if (const char* env = std::getenv("MACRO_GOLDEN"); env && *env) return env;
-  for (const char* rel : {"/../../shared/golden", "/../data/golden"}) {
-    const std::string p = exe_dir() + rel;
-    if (is_directory(p)) return fs::weakly_canonical(p).string();
-  }
-  return exe_dir() + "/../../shared/golden";
-}
-
 std::vector<int> parse_list(const char* s) {
   std::vector<int> out;
   for (const char* p = s; *p;) {
@@ -252,7 +237,7 @@ void row(const char* stage, double flop, const Timing& t, const Timing& peak) {
 int run(int argc, char** argv) {
   Options o;
   o.sizes = {{512, 512}};
-  o.golden = default_golden();
+  o.golden = golden_root();
   for (int i = 1; i < argc; ++i) {
     auto next = [&]() -> const char* { return i + 1 < argc ? argv[++i] : ""; };
     const char* a = argv[i];

@@ -50,22 +50,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string exe_dir() {
-  std::error_code ec;
-  const fs::path p = fs::read_symlink("/proc/self/exe", ec);
-  return ec ? std::string(".") : p.parent_path().string();
-}
-
-std::string golden_root() {
-  if (const char* env = std::getenv("MACRO_GOLDEN"); env && *env) return env;
-  for (const char* rel : {"/../../shared/golden", "/../data/golden"}) {
-    const std::string p = exe_dir() + rel;
-    std::error_code ec;
-    if (fs::is_directory(p, ec)) return fs::weakly_canonical(p).string();
-  }
-  return "/work/shared/golden";
-}
-
 double vm_gb(const char* key) {  // a /proc/self/status line in GiB
   std::ifstream f("/proc/self/status");
   std::string line;

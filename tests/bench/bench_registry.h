@@ -6,7 +6,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
+#include <cstdlib>
+#include <filesystem>
 #include <functional>
+#include <string>
 #include <vector>
 
 #include "attention/runtime/thread_pool.h"
@@ -26,6 +29,25 @@ inline std::vector<Benchmark>& registry() {
 inline bool register_benchmark(Benchmark b) {
   registry().push_back(b);
   return true;
+}
+
+// The folder of the running bench binary ("." if /proc/self/exe cannot be read).
+inline std::string exe_dir() {
+  std::error_code ec;
+  const std::filesystem::path p = std::filesystem::read_symlink("/proc/self/exe", ec);
+  return ec ? std::string(".") : p.parent_path().string();
+}
+
+// The golden folder: $MACRO_GOLDEN, else ../../shared/golden or ../data/golden next to the binary
+// (the first that exists), else <binary dir>/../../shared/golden.
+inline std::string golden_root() {
+  if (const char* env = std::getenv("MACRO_GOLDEN"); env && *env) return env;
+  for (const char* rel : {"/../../shared/golden", "/../data/golden"}) {
+    const std::string p = exe_dir() + rel;
+    std::error_code ec;
+    if (std::filesystem::is_directory(p, ec)) return std::filesystem::weakly_canonical(p).string();
+  }
+  return exe_dir() + "/../../shared/golden";
 }
 
 inline double now_seconds() {
