@@ -1,4 +1,4 @@
-// Shared by the end-to-end enhance tests (test_enhance, test_warp, test_tight_crops,
+// Shared by the end-to-end enhance tests (test_enhance, test_warp, test_tight_crops, test_transfer,
 // test_determinism, test_interrupts): a tiny Difix pipeline folder over the goldens (unet-tiny,
 // vae-tiny; cross-attention width 48, so the prompt context is a fixed [1, 77, 48] tensor) and a
 // small synthetic DL3DV-Closeup scene folder (gs/synth.h generator, enhance/synth_scene_folder.h).

@@ -9,8 +9,8 @@
 #include <filesystem>
 
 #include "enhance/metrics.h"
-#include "enhance/synth_scene_folder.h"
 #include "enhance/transfer.h"
+#include "enhance_fixture.h"
 #include "gs/image_io.h"
 #include "test_support.h"
 
@@ -229,18 +229,7 @@ TEST_CASE("transfer: bad inputs are errors naming the argument", "[transfer]") {
 TEST_CASE("transfer: macro enhance --enhancer transfer writes a PNG and a side-by-side",
           "[transfer]") {
   test::TempDir tmp("macro-transfer");
-  gs::SynthParams p;
-  p.seed = 5;
-  p.kind = gs::SynthKind::kMixed;
-  p.gaussians = 20'000;
-  p.width = 128;
-  p.height = 72;
-  p.training_views = 5;
-  p.closeup_views = 1;
-  auto scene = gs::generate_synthetic_scene(p);
-  REQUIRE(scene.is_ok());
-  const std::string dir = tmp.file("scene");
-  REQUIRE(write_closeup_scene_folder(*scene, dir).is_ok());
+  const std::string dir = test::write_synth_scene(tmp, test::tiny_scene_params());
   const std::string out = tmp.file("out.png"), sbs = tmp.file("sbs.png");
   const std::string cmd = test::macro_exe() + " enhance --quiet --scene-dir " + dir +
                           " --closeup closeup.png --enhancer transfer --out " + out +
