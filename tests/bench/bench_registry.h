@@ -38,7 +38,7 @@ inline std::string exe_dir() {
   return ec ? std::string(".") : p.parent_path().string();
 }
 
-// The golden folder: $MACRO_GOLDEN, else ../../shared/golden or ../data/golden next to the binary
+// The golden folder: $MACRO_GOLDEN, else ../../shared/golden or ../data/golden from the binary
 // (the first that exists), else <binary dir>/../../shared/golden.
 inline std::string golden_root() {
   if (const char* env = std::getenv("MACRO_GOLDEN"); env && *env) return env;
