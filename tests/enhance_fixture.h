@@ -13,6 +13,8 @@
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/safetensors.h"
+#include "attention/runtime/thread_pool.h"
+#include "enhance/enhance.h"
 #include "enhance/scene_input.h"
 #include "enhance/synth_scene_folder.h"
 #include "gs/synth.h"
@@ -84,5 +86,23 @@ struct TinyEnhanceFolder {
     return std::move(in).value();
   }
 };
+
+// enhance_closeup with `o` on a 1-thread pool, then on a 2-thread pool (o.pool is ignored): the
+// pair the thread-count invariance checks compare.
+struct OneAndTwoThreads {
+  enhance::EnhanceResult one, two;
+};
+inline OneAndTwoThreads enhance_on_1_and_2_threads(const enhance::SceneInputs& in,
+                                                   enhance::EnhanceOptions o) {
+  ThreadPool one(1), two(2);
+  o.pool = &one;
+  auto a = enhance::enhance_closeup(in, o);
+  INFO((a.is_ok() ? "" : a.status().message()));
+  REQUIRE(a.is_ok());
+  o.pool = &two;
+  auto b = enhance::enhance_closeup(in, o);
+  REQUIRE(b.is_ok());
+  return {std::move(a).value(), std::move(b).value()};
+}
 
 }  // namespace macro::test

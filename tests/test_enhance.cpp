@@ -47,14 +47,9 @@ TEST_CASE("enhance macro: right size, finite, thread-count invariant, changes th
   o.method = EnhanceMethod::kMacro;
   o.weights = f.pipe;
   o.ctx_path = f.ctx;
-  ThreadPool one(1), two(2);
-  o.pool = &one;
-  auto a = enhance_closeup(in, o);
-  INFO((a.is_ok() ? "" : a.status().message()));
-  REQUIRE(a.is_ok());
-  o.pool = &two;
-  auto b = enhance_closeup(in, o);
-  REQUIRE(b.is_ok());
+  const test::OneAndTwoThreads r = test::enhance_on_1_and_2_threads(in, o);
+  const EnhanceResult* a = &r.one;
+  const EnhanceResult* b = &r.two;
   std::printf("enhance macro: %d views, model %dx%d, %d masked levels, %.0f ms (1 thread)\n",
               a->views, a->model.w, a->model.h, a->masked_levels, a->timings.ms_total);
   CHECK(a->image.width == kW);
@@ -71,6 +66,7 @@ TEST_CASE("enhance macro: right size, finite, thread-count invariant, changes th
 
   // The file form writes the same image (8-bit values, so the PNG round trip is exact).
   const std::string out = f.tmp.file("out.png");
+  ThreadPool two(2);
   o.pool = &two;
   REQUIRE(enhance_to_file(in, o, out).is_ok());
   auto img = gs::read_image(out);

@@ -236,14 +236,9 @@ TEST_CASE("tight crops: plan masks, canvas views and macro enhance on the tiny p
   o.weights = f.pipe;
   o.ctx_path = f.ctx;
   o.plan.crops.crop = CropMode::kTight;
-  ThreadPool one(1), two(2);
-  o.pool = &one;
-  auto a = enhance_closeup(in, o);
-  INFO((a.is_ok() ? "" : a.status().message()));
-  REQUIRE(a.is_ok());
-  o.pool = &two;
-  auto b = enhance_closeup(in, o);
-  REQUIRE(b.is_ok());
+  const test::OneAndTwoThreads r = test::enhance_on_1_and_2_threads(in, o);
+  const EnhanceResult* a = &r.one;
+  const EnhanceResult* b = &r.two;
   CHECK(a->image.data == b->image.data);
   CHECK(a->masked_levels == kUNetLevels);
   for (float x : a->image.data) REQUIRE((std::isfinite(x) && x >= 0.f && x <= 1.f));

@@ -298,14 +298,9 @@ TEST_CASE("enhance warp: runs on the tiny pipeline, thread-count invariant, diff
   o.weights = f.pipe;
   o.ctx_path = f.ctx;
   o.method = EnhanceMethod::kWarp;
-  ThreadPool one(1), two(2);
-  o.pool = &one;
-  auto a = enhance_closeup(in, o);
-  INFO((a.is_ok() ? "" : a.status().message()));
-  REQUIRE(a.is_ok());
-  o.pool = &two;
-  auto b = enhance_closeup(in, o);
-  REQUIRE(b.is_ok());
+  const test::OneAndTwoThreads r = test::enhance_on_1_and_2_threads(in, o);
+  const EnhanceResult* a = &r.one;
+  const EnhanceResult* b = &r.two;
   CHECK(a->image.width == kW);
   CHECK(a->image.height == kH);
   CHECK(a->views >= 2);
