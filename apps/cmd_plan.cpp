@@ -12,12 +12,14 @@ namespace {
 constexpr const char* kUsage =
     "usage: macro plan --closeup FRAME --out plan.json (--scene-dir DIR | --scene PLY --cameras C\n"
     "         --images DIR [--closeups SPLIT]) [--refs K] [--planes P|auto] [--max-planes P]\n"
-    "         [--mask released|paper|none] [--scale axis|per-plane] [--crop full|tight]\n"
-    "         [--occlusion] [--upsampler lanczos|pft-sr] [--debug-dir D]\n"
+    "         [--mask released|paper|none] [--scale axis|per-plane]\n"
+    "         [--crop full|tight|composite] [--occlusion] [--upsampler lanczos|pft-sr]\n"
+    "         [--debug-dir D]\n"
     "  DIR is a DL3DV-Closeup scene folder: images/, sparse/0 (or transforms.json), split.json "
     "and\n"
     "  the trained splat (docs/macro.md lists where it is looked for). Defaults are the released\n"
-    "  MACRO: K=3, P=3, masks 'released', optical-axis scale, full crops, no occlusion test.\n";
+    "  MACRO: K=3, P=3, masks 'released', optical-axis scale, full crops, no occlusion test.\n"
+    "  --crop composite: one view per reference (each pixel from its plane's full crop).\n";
 
 int run_plan(std::vector<std::string> argv) {
   Args args(std::move(argv));
@@ -85,9 +87,11 @@ int run_plan(std::vector<std::string> argv) {
                 plan->closeup_pose_source.c_str(), inputs->candidates.size());
     for (const auto& r : plan->selection.refs) std::printf(" %s", r.name.c_str());
     std::printf(
-        " (coverage %.1f%%), %zu planes, %zu crops (%zu rejected), model %dx%d, %.0f ms -> %s\n",
+        " (coverage %.1f%%), %zu planes, %zu crops (%zu rejected), %d views, model %dx%d, %.0f ms "
+        "-> %s\n",
         100.0 * plan->selection.coverage_fraction(), plan->planes.planes.size(), plan->crops.size(),
-        plan->rejected.size(), plan->model.w, plan->model.h, plan->timings.ms_total, out.c_str());
+        plan->rejected.size(), plan->view_count(), plan->model.w, plan->model.h,
+        plan->timings.ms_total, out.c_str());
   }
   return 0;
 }

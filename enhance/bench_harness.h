@@ -108,7 +108,8 @@ MethodRegistry default_method_registry(const BenchMethodSettings& settings = {})
 // HOOK for the enhancers: adds the `macro enhance` methods (enhance/enhance.h) "difix" (options
 // precision), "macro" (K, P, mask, precision) and "macro-unmasked" (K, P, precision). Option
 // values: K an integer; P an integer or "auto" (up to 5 planes); mask released|paper|none (also
-// on = released, off = none); precision fp32|bf16. A new method is one more registry.add here.
+// on = released, off = none); precision fp32|bf16; crop full|tight|composite (macro and
+// macro-unmasked). A new method is one more registry.add here.
 // Also the weight-free "transfer" (K, P; crops under the plane mask) and "transfer-whole" (K, P;
 // the K references whole, the scale-mismatched ablation), enhance/transfer.h.
 Status register_enhance_bench_methods(MethodRegistry& registry,

@@ -11,7 +11,15 @@ const char* scale_mode_name(ScaleMode m) {
   return m == ScaleMode::kPerPlane ? "per-plane" : "axis";
 }
 const char* crop_mode_name(CropMode m) {
-  return m == CropMode::kTight ? "tight" : "full";
+  switch (m) {
+    case CropMode::kFull:
+      return "full";
+    case CropMode::kTight:
+      return "tight";
+    case CropMode::kComposite:
+      return "composite";
+  }
+  return "?";
 }
 Result<ScaleMode> parse_scale_mode(const std::string& t) {
   if (t == "axis" || t == "released") return ScaleMode::kOpticalAxis;
@@ -21,7 +29,8 @@ Result<ScaleMode> parse_scale_mode(const std::string& t) {
 Result<CropMode> parse_crop_mode(const std::string& t) {
   if (t == "full" || t == "released") return CropMode::kFull;
   if (t == "tight") return CropMode::kTight;
-  return Status::error("--crop: expected full or tight, found '" + t + "'");
+  if (t == "composite") return CropMode::kComposite;
+  return Status::error("--crop: expected full, tight or composite, found '" + t + "'");
 }
 
 namespace {
@@ -233,6 +242,71 @@ gs::Image cut_crop_canvas(const gs::Image& ref, const CropBox& box) {
       for (int ch = 0; ch < 3; ++ch)
         out.at(y, x, ch) = ref.at(ry, rx, std::min(ch, ref.channels - 1));
     }
+  }
+  return out;
+}
+
+std::vector<CompositeView> compose_crop_views(const std::vector<Crop>& crops,
+                                              const PlaneResult& planes,
+                                              const std::vector<std::string>& ref_names,
+                                              const std::vector<Size2>& ref_sizes, Size2 model) {
+  const int W = planes.width, H = planes.height, P = int(planes.planes.size());
+  MACRO_CHECK(ref_names.size() == ref_sizes.size());
+  MACRO_CHECK(planes.labels.size() == size_t(W) * size_t(H) && model.w > 0 && model.h > 0);
+  const size_t hw = size_t(model.w) * size_t(model.h);
+  // The close-up plane map at model resolution (nearest), shared by every view.
+  std::vector<int32_t> labels(hw);
+  for (int y = 0; y < model.h; ++y) {
+    const size_t row = size_t(nearest_index(y, H, model.h)) * size_t(W);
+    for (int x = 0; x < model.w; ++x)
+      labels[size_t(y) * model.w + x] = planes.labels[row + size_t(nearest_index(x, W, model.w))];
+  }
+  std::vector<CompositeView> out;
+  for (size_t r = 0; r < ref_sizes.size(); ++r) {
+    CompositeView v;
+    v.ref = int(r);
+    v.reference = ref_names[r];
+    v.crop.assign(size_t(std::max(P, 1)), -1);
+    bool any = false;
+    for (size_t c = 0; c < crops.size(); ++c)
+      if (crops[c].ref == int(r) && crops[c].plane >= 0 && crops[c].plane < P) {
+        MACRO_CHECK(crops[c].view == model);  // full crops only
+        v.crop[size_t(crops[c].plane)] = int(c);
+        any = true;
+      }
+    if (!any) continue;
+    std::vector<std::vector<uint8_t>> crop_valid(v.crop.size());
+    for (size_t p = 0; p < v.crop.size(); ++p)
+      if (v.crop[p] >= 0)
+        crop_valid[p] =
+            crop_view_validity(crops[size_t(v.crop[p])], ref_sizes[r].w, ref_sizes[r].h);
+    v.labels = labels;
+    v.valid.assign(hw, 0);
+    v.plane_pixels.assign(v.crop.size(), 0);
+    v.valid_pixels.assign(v.crop.size(), 0);
+    for (size_t k = 0; k < hw; ++k) {
+      const size_t s = size_t(v.source_plane(k));
+      ++v.plane_pixels[s];
+      if (v.crop[s] >= 0 && crop_valid[s][k]) {
+        v.valid[k] = 1;
+        ++v.valid_pixels[s];
+      }
+    }
+    out.push_back(std::move(v));
+  }
+  return out;
+}
+
+gs::Image composite_view_image(const CompositeView& v, const std::vector<gs::Image>& crop_views,
+                               Size2 model) {
+  const size_t hw = size_t(model.w) * size_t(model.h);
+  MACRO_CHECK(v.labels.size() == hw && v.valid.size() == hw);
+  gs::Image out(model.w, model.h, 3);
+  for (size_t k = 0; k < hw; ++k) {
+    if (!v.valid[k]) continue;
+    const gs::Image& src = crop_views[size_t(v.crop[size_t(v.source_plane(k))])];
+    MACRO_CHECK(src.width == model.w && src.height == model.h && src.channels == 3);
+    for (int ch = 0; ch < 3; ++ch) out.data[k * 3 + size_t(ch)] = src.data[k * 3 + size_t(ch)];
   }
   return out;
 }

@@ -18,7 +18,9 @@
 // Options: ScaleMode::kPerPlane (s = median z_ref / median z_cu over the plane's valid pixels);
 // CropMode::kTight (only the close-up region the plane occupies: the plane's bounding box in the
 // close-up, mapped at the same scale around the same centre; its view is that box at model scale,
-// sides rounded up to multiples of 8, so the crops of one reference hold about one close-up area).
+// sides rounded up to multiples of 8, so the crops of one reference hold about one close-up area);
+// CropMode::kComposite (the crops' geometry is exactly kFull's, but the network sees ONE model-size
+// view per reference: at every model pixel, the full crop of that pixel's plane; CompositeView).
 #pragma once
 
 #include <cstdint>
@@ -39,9 +41,9 @@ namespace macro::enhance {
 inline constexpr double kMaxCropFactor = 5.0;  // warp.py: crop > 5x the reference is rejected
 
 enum class ScaleMode { kOpticalAxis, kPerPlane };
-enum class CropMode { kFull, kTight };
+enum class CropMode { kFull, kTight, kComposite };
 const char* scale_mode_name(ScaleMode m);  // "axis", "per-plane"
-const char* crop_mode_name(CropMode m);    // "full", "tight"
+const char* crop_mode_name(CropMode m);    // "full", "tight", "composite"
 Result<ScaleMode> parse_scale_mode(const std::string& text);
 Result<CropMode> parse_crop_mode(const std::string& text);
 
@@ -74,9 +76,9 @@ struct CropOptions {
   CropMode crop = CropMode::kFull;
 };
 
-// Crops in view order: bin-major (plane 0 = farthest first), then references in greedy order,
-// skipping rejected ones. closeup.depth is the close-up's MACRO depth, planes its labels.
-// refs: the selected reference cameras (K entries, repeats allowed).
+// Crops in view order (kComposite: the same crops as kFull): bin-major (plane 0 = farthest first),
+// then references in greedy order, skipping rejected ones. closeup.depth is the close-up's MACRO
+// depth, planes its labels. refs: the selected reference cameras (K entries, repeats allowed).
 std::vector<Crop> compute_crops(const DepthView& closeup, const PlaneResult& planes,
                                 const std::vector<gs::Camera>& refs,
                                 const std::vector<std::string>& ref_names, Size2 model,
@@ -99,5 +101,40 @@ gs::Image paste_on_canvas(const gs::Image& view, Size2 model);
 
 // The padded canvas cut from the reference image (black outside), [box h, box w, 3].
 gs::Image cut_crop_canvas(const gs::Image& ref, const CropBox& box);
+
+// ---- --crop composite ---------------------------------------------------------------------------
+// One model-size view per reference r (Wm x Hm = the model size, P planes, model pixel k = (y, x)):
+//   label[k]  = the close-up plane label at close-up pixel (nearest_index(y, H, Hm),
+//               nearest_index(x, W, Wm)), -1 where the close-up pixel has no plane;
+//   source(k) = max(label[k], 0): a pixel without a plane takes the farthest plane's crop (the rule
+//               latent_plane_map applies to an all-invalid cell);
+//   pixel k   = pixel k of the full crop (source(k), r) (its model-size view), valid where that
+//               crop exists (not rejected) and pixel k lies inside the reference; black and
+//               invalid otherwise.
+// So the network sees 1 + K views instead of 1 + K * P, and a reference view mixes the planes'
+// crops at plane boundaries (a departure from the released method, docs/macro.md).
+struct CompositeView {
+  int ref = 0;                        // index into the selected references (greedy order)
+  std::string reference;              // its name
+  std::vector<int> crop;              // [P] index of crop (p, ref) in the crops, -1 = rejected
+  std::vector<int32_t> labels;        // [Hm * Wm] close-up plane label, -1 = none
+  std::vector<uint8_t> valid;         // [Hm * Wm] 1 = valid, 0 = black (padding or no crop)
+  std::vector<int64_t> plane_pixels;  // [P] pixels whose source plane is p
+  std::vector<int64_t> valid_pixels;  // [P] of those, the valid ones
+  int source_plane(size_t k) const { return labels[k] < 0 ? 0 : labels[k]; }
+};
+
+// The composite views of full crops (view == model), one per reference index 0..ref_sizes.size()-1
+// that has at least one crop, in reference order. planes: the close-up's labels [H, W];
+// ref_sizes[r] = (width, height) of reference r.
+std::vector<CompositeView> compose_crop_views(const std::vector<Crop>& crops,
+                                              const PlaneResult& planes,
+                                              const std::vector<std::string>& ref_names,
+                                              const std::vector<Size2>& ref_sizes, Size2 model);
+
+// The composite image [Hm, Wm, 3]: pixel k of crop_views[crop[source(k)]] where valid, else black.
+// crop_views[c] is crop c's model-size view (padding already black).
+gs::Image composite_view_image(const CompositeView& view, const std::vector<gs::Image>& crop_views,
+                               Size2 model);
 
 }  // namespace macro::enhance

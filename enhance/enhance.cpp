@@ -231,9 +231,9 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
   note("render", res.timings.ms_render, std::to_string(W) + "x" + std::to_string(H));
   {
     char buf[160];
-    std::snprintf(buf, sizeof buf, "%zu refs, %zu planes, %zu crops, model %dx%d",
+    std::snprintf(buf, sizeof buf, "%zu refs, %zu planes, %zu crops (--crop %s), model %dx%d",
                   plan.ref_candidates.size(), plan.planes.planes.size(), plan.crops.size(),
-                  plan.model.w, plan.model.h);
+                  crop_mode_name(plan.options.crops.crop), plan.model.w, plan.model.h);
     note("plan", res.timings.ms_plan, buf);
   }
 

@@ -5,7 +5,8 @@
 //
 // Legend: close-up render W x H, model size Wm x Hm (multiples of 8), latent Hm/8 x Wm/8,
 // V = 1 + n views in the plan's order (view 0 = the close-up; crops bin-major, farthest plane
-// first, then references in greedy order), Dc = the U-Net's cross-attention width.
+// first, then references in greedy order; --crop composite: one composite view per reference,
+// V = 1 + K), Dc = the U-Net's cross-attention width.
 //
 // Methods (macro-method.md §6):
 //   3dgs            the raw render, no network;

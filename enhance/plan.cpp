@@ -3,6 +3,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <iterator>
 #include <nlohmann/json.hpp>
 
 #include "attention/runtime/file_io.h"
@@ -16,8 +17,13 @@ using Clock = std::chrono::steady_clock;
 
 }  // namespace
 
+int MacroPlan::view_count() const {
+  return 1 + int(options.crops.crop == CropMode::kComposite ? composites.size() : crops.size());
+}
+
 int64_t MacroPlan::view_tokens() const {
   int64_t t = int64_t(model.w / kLatentPatch) * (model.h / kLatentPatch);
+  if (options.crops.crop == CropMode::kComposite) return t * view_count();
   for (const Crop& c : crops) t += int64_t(c.view.w / kLatentPatch) * (c.view.h / kLatentPatch);
   return t;
 }
@@ -92,6 +98,11 @@ Result<MacroPlan> build_plan(const SceneInputs& in, const PlanOptions& o) {
   t0 = Clock::now();
   plan.crops = compute_crops(plan.closeup_depth, plan.planes, plan.ref_cameras, ref_names,
                              plan.model, o.crops, &plan.rejected, pool);
+  if (o.crops.crop == CropMode::kComposite) {
+    std::vector<Size2> ref_sizes;
+    for (const gs::Camera& c : plan.ref_cameras) ref_sizes.push_back({c.width, c.height});
+    plan.composites = compose_crop_views(plan.crops, plan.planes, ref_names, ref_sizes, plan.model);
+  }
   plan.timings.ms_crops = ms_since(t0);
   // 7. Latent plane map and masks.
   t0 = Clock::now();
@@ -101,7 +112,24 @@ Result<MacroPlan> build_plan(const SceneInputs& in, const PlanOptions& o) {
   if (plan.latent_h < 1 || plan.latent_w < 1)
     return Status::error("close-up '" + in.closeup.name + "' is smaller than 8x8 pixels");
   plan.latent_planes = latent_plane_map(plan.planes.labels, in.closeup.width, in.closeup.height, P);
-  {
+  const std::vector<TokenGrid> grids =
+      unet_token_grids(plan.model.h / kLatentPatch, plan.model.w / kLatentPatch);
+  if (o.crops.crop == CropMode::kComposite) {
+    // Each composite view's labels vote per latent cell at the model size, as the close-up's do at
+    // the render size; validity is nearest-resized per level, as the crops'.
+    const int mh = plan.model.h / kLatentPatch, mw = plan.model.w / kLatentPatch;
+    std::vector<std::vector<int32_t>> view_planes;
+    std::vector<std::vector<uint8_t>> valid;
+    for (const CompositeView& v : plan.composites) {
+      view_planes.push_back(latent_plane_map(v.labels, plan.model.w, plan.model.h, P));
+      valid.push_back(v.valid);
+    }
+    MACRO_ASSIGN_OR_RETURN(
+        plan.masks,
+        build_composite_masks(o.mask, P, plan.latent_planes, plan.latent_h, plan.latent_w,
+                              view_planes, mh, mw, valid, plan.model.h, plan.model.w, grids));
+    plan.masks_built = true;
+  } else {
     // Tight crops sit on the model-size canvas, the rest marked kCanvasPad (plane_masks.h).
     std::vector<int32_t> crop_plane;
     std::vector<std::vector<uint8_t>> valid;
@@ -112,9 +140,7 @@ Result<MacroPlan> build_plan(const SceneInputs& in, const PlanOptions& o) {
     }
     MACRO_ASSIGN_OR_RETURN(
         plan.masks, build_plane_masks(o.mask, P, crop_plane, plan.latent_planes, plan.latent_h,
-                                      plan.latent_w, valid, plan.model.h, plan.model.w,
-                                      unet_token_grids(plan.model.h / kLatentPatch,
-                                                       plan.model.w / kLatentPatch)));
+                                      plan.latent_w, valid, plan.model.h, plan.model.w, grids));
     plan.masks_built = true;
   }
   plan.timings.ms_masks = ms_since(t0);
@@ -148,6 +174,17 @@ Result<PlanViews> build_views(const MacroPlan& plan, const SceneInputs& in,
       }
     v.images.push_back(std::move(view));
     v.validity.push_back(std::move(valid));
+  }
+  if (plan.options.crops.crop == CropMode::kComposite) {
+    // The full crop views [1, 1 + n) become the composites (one per reference).
+    std::vector<gs::Image> crop_views(std::make_move_iterator(v.images.begin() + 1),
+                                      std::make_move_iterator(v.images.end()));
+    v.images.resize(1);
+    v.validity.resize(1);
+    for (const CompositeView& c : plan.composites) {
+      v.images.push_back(composite_view_image(c, crop_views, plan.model));
+      v.validity.push_back(c.valid);
+    }
   }
   return v;
 }
@@ -200,7 +237,16 @@ std::string plan_to_json(const MacroPlan& p) {
   j["rejected_crops"] = json::array();
   for (const CropRejection& r : p.rejected)
     j["rejected_crops"].push_back({{"plane", r.plane}, {"ref_index", r.ref}, {"reason", r.reason}});
-  j["views"] = 1 + p.crops.size();
+  if (p.options.crops.crop == CropMode::kComposite) {
+    j["composite_views"] = json::array();
+    for (const CompositeView& v : p.composites)
+      j["composite_views"].push_back({{"reference", v.reference},
+                                      {"ref_index", v.ref},
+                                      {"crops", v.crop},
+                                      {"plane_pixels", v.plane_pixels},
+                                      {"valid_pixels", v.valid_pixels}});
+  }
+  j["views"] = p.view_count();
   j["view_tokens_level0"] = p.view_tokens();
   j["masks"] = json::array();
   if (p.masks_built)
@@ -266,7 +312,23 @@ Status write_plan_debug(const MacroPlan& p, const PlanViews& views, const std::s
     for (int c = 0; c < 3; ++c) lat.data[i * 3 + size_t(c)] = rgb[c];
   }
   MACRO_TRY(gs::write_png(dir + "/latent_planes.png", lat));
-  for (size_t v = 1; v < views.images.size(); ++v) {
+  const bool composite = p.options.crops.crop == CropMode::kComposite;
+  for (size_t v = 1; v < views.images.size() && composite; ++v) {
+    const CompositeView& c = p.composites[v - 1];
+    gs::Image img = views.images[v], planes(img.width, img.height, 3);
+    for (size_t k = 0; k < views.validity[v].size(); ++k) {
+      float rgb[3];
+      plane_colour(c.source_plane(k), P, rgb);
+      const float dim = views.validity[v][k] ? 1.f : 0.35f;
+      for (int ch = 0; ch < 3; ++ch) planes.data[k * 3 + size_t(ch)] = rgb[ch] * dim;
+      if (views.validity[v][k] == 0) img.data[k * 3] = 0.6f;  // invalid tinted red
+    }
+    char name[96];
+    std::snprintf(name, sizeof name, "/composite_%02zu_r%d", v - 1, c.ref);
+    MACRO_TRY(gs::write_png(dir + name + ".png", img));
+    MACRO_TRY(gs::write_png(dir + name + "_planes.png", planes));
+  }
+  for (size_t v = 1; v < views.images.size() && !composite; ++v) {
     const Crop& c = p.crops[v - 1];
     gs::Image img = views.images[v];
     for (size_t k = 0; k < views.validity[v].size(); ++k)
@@ -282,7 +344,7 @@ Status write_plan_debug(const MacroPlan& p, const PlanViews& views, const std::s
     for (size_t l = 0; l < p.masks.masks.size(); ++l) {
       // V x V blocks of 16 x 16 pixels, brightness = allowed fraction of the view pair.
       const std::vector<int64_t> counts = p.masks.view_pair_counts(int(l));
-      const int V = 1 + int(p.crops.size()), N = p.masks.grids[l].tokens(), B = 16;
+      const int V = p.view_count(), N = p.masks.grids[l].tokens(), B = 16;
       gs::Image img(V * B, V * B, 3);
       for (int qv = 0; qv < V; ++qv)
         for (int kv = 0; kv < V; ++kv) {

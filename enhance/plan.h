@@ -6,7 +6,8 @@
 //
 // Legend: close-up W x H, model size Wm x Hm (multiples of 8), latent Hm/8 x Wm/8, n crops,
 // V = 1 + n views in the order [close-up, crops (plane 0 = farthest first, then references in
-// greedy order)].
+// greedy order)]; with --crop composite, V = 1 + the composite views (one per reference holding a
+// crop, crops.h CompositeView) in the order [close-up, composites (references in greedy order)].
 // Determinism: every reduction runs over fixed chunks in a fixed order, so the plan is identical
 // for any thread count (tested).
 #pragma once
@@ -54,7 +55,8 @@ struct MacroPlan {
   std::vector<int> ref_candidates;      // [K] index into SceneInputs::candidates
   Size2 model;
   PlaneResult planes;
-  std::vector<Crop> crops;  // view order
+  std::vector<Crop> crops;  // view order (composite: the full crops the composites are made of)
+  std::vector<CompositeView> composites;  // --crop composite only: the views after the close-up
   std::vector<CropRejection> rejected;
   std::vector<int32_t> latent_planes;  // [H/8, W/8] majority vote (render resolution)
   int latent_h = 0, latent_w = 0;
@@ -62,13 +64,15 @@ struct MacroPlan {
   PlaneMaskSet masks;
   PlanTimings timings;
   int64_t view_tokens() const;  // level-0 tokens over all views
+  int view_count() const;       // V: 1 + crops (composite: 1 + composites)
 };
 
 Result<MacroPlan> build_plan(const SceneInputs& inputs, const PlanOptions& options);
 
 // The view images, all at the model size: [0] the close-up Lanczos-resized to the model size,
 // then each crop (canvas cut from its reference, black padding, upsampled to its view size,
-// padding forced back to black; a tight crop pasted at the top-left of a black model-size canvas).
+// padding forced back to black; a tight crop pasted at the top-left of a black model-size canvas;
+// composite: each composite view from its full crops, composite_view_image).
 struct PlanViews {
   std::vector<gs::Image> images;               // [V] model size
   std::vector<std::vector<uint8_t>> validity;  // [V] model-size masks: 1 valid, 0 padding,
@@ -80,12 +84,16 @@ Result<PlanViews> build_views(const MacroPlan& plan, const SceneInputs& inputs,
 // JSON: closeup, options, model_size [w,h], planes [{index, depth_median, inv_depth_centroid,
 // pixels, depth_p10, depth_p90}], references [{name, new_coverage}], coverage, crops [{plane,
 // reference, box [x0,y0,x1,y1], scale, valid_fraction, centre, view [w,h]}], rejected, views,
-// masks [{grid [h,w], allowed_pairs, dense_pairs, density}], timings_ms.
+// composite_views (--crop composite) [{reference, ref_index, crops [P] (index or -1),
+// plane_pixels [P], valid_pixels [P]}], masks [{grid [h,w], allowed_pairs, dense_pairs,
+// density}], timings_ms.
 std::string plan_to_json(const MacroPlan& plan);
 Status write_plan_json(const MacroPlan& plan, const std::string& path);
 
 // DIR/closeup.png, closeup_depth.png, plane_map.png (colour per plane, black = invalid),
-// latent_planes.png, crop_<i>_p<plane>_<ref>.png (the view with its padding tinted red),
+// latent_planes.png, crop_<i>_p<plane>_<ref>.png (the view with its padding tinted red; composite:
+// composite_<i>_r<ref>.png, and composite_<i>_r<ref>_planes.png: each pixel's source plane,
+// darkened where invalid),
 // mask_level<l>.png (per level: V x V view blocks, brightness = allowed fraction of the block).
 Status write_plan_debug(const MacroPlan& plan, const PlanViews& views, const std::string& dir);
 

@@ -22,6 +22,16 @@
 // top-left of a black model-size canvas and the rest of the canvas is marked kCanvasPad in its
 // validity. Canvas tokens are outside the view: no query may see them (in every mode) and their
 // own rows see nothing (the attention kernel gives such rows zeros), so they cost no attention.
+// Composite views (--crop composite, crops.h CompositeView): views [close-up, composite_0 ..
+// composite_{n-1}], one per reference; every composite token carries its own plane label (the
+// latent vote of the view's per-pixel labels, nearest-resized per level, as the close-up's) and
+// validity (nearest, as the crops'). Rules:
+//   released  close-up token of plane p -> every close-up token and the VALID composite tokens
+//             labelled p (any view); composite token labelled p -> every composite token labelled
+//             p (any view, padding included); composite tokens never see the close-up.
+//   paper     close-up rows as released; composite token labelled p -> the tokens labelled p of
+//             its own view only.
+//   none      close-up rows see every token of every view; composite rows as released.
 // Masks are BlockSparseMasks built from token groups (close-up tokens grouped by plane), so the
 // attention cost follows the allowed pairs; to_dense() exports the uint8 [V*N_l, V*N_l] form.
 #pragma once
@@ -83,13 +93,28 @@ std::vector<uint8_t> build_level_mask_dense(MaskMode mode, int tokens_per_view,
                                             const std::vector<int32_t>& crop_plane,
                                             const std::vector<uint8_t>& crop_valid);
 
+// The composite rule (see the top) for one level: closeup_plane [N], view_plane [n, N] in
+// [0, planes), view_valid [n, N] (0 or 1). Tokens are grouped by (view, plane, validity), so the
+// cost follows the allowed pairs. Errors name the argument.
+Result<BlockSparseMask> build_composite_level_mask(MaskMode mode, int tokens_per_view, int planes,
+                                                   const std::vector<int32_t>& closeup_plane,
+                                                   const std::vector<int32_t>& view_plane,
+                                                   const std::vector<uint8_t>& view_valid);
+// The same rule as a dense [V*N, V*N] uint8 matrix (the tests' reference).
+std::vector<uint8_t> build_composite_level_mask_dense(MaskMode mode, int tokens_per_view,
+                                                      const std::vector<int32_t>& closeup_plane,
+                                                      const std::vector<int32_t>& view_plane,
+                                                      const std::vector<uint8_t>& view_valid);
+
 struct PlaneMaskSet {
   MaskMode mode = MaskMode::kReleased;
   int planes = 0;
-  std::vector<int32_t> crop_plane;                  // [n]
+  bool composite = false;  // composite views: per-token labels in view_plane, crop_plane all -1
+  std::vector<int32_t> crop_plane;                  // [n] (composite: -1, no single plane)
+  std::vector<std::vector<int32_t>> view_plane;     // composite only: [levels][n * N_l]
   std::vector<TokenGrid> grids;                     // [levels]
   std::vector<std::vector<int32_t>> closeup_plane;  // [levels][N_l]
-  std::vector<std::vector<uint8_t>> crop_valid;     // [levels][n * N_l]
+  std::vector<std::vector<uint8_t>> crop_valid;     // [levels][n * N_l] (composite: per view)
   std::vector<BlockSparseMask> masks;               // [levels]
   // Allowed pairs over all levels divided by the dense (V*N_l)^2 total.
   double density() const;
@@ -106,5 +131,14 @@ Result<PlaneMaskSet> build_plane_masks(MaskMode mode, int planes,
                                        const std::vector<std::vector<uint8_t>>& valid_src,
                                        int valid_h, int valid_w,
                                        const std::vector<TokenGrid>& grids);
+
+// The composite views' masks at every level: plane_src as above (the close-up's latent map);
+// view_plane_src [n][vp_h * vp_w] each composite view's latent plane map (labels in [0, planes));
+// valid_src [n][valid_h * valid_w] each view's validity (0 or 1, e.g. at model size).
+Result<PlaneMaskSet> build_composite_masks(
+    MaskMode mode, int planes, const std::vector<int32_t>& plane_src, int src_h, int src_w,
+    const std::vector<std::vector<int32_t>>& view_plane_src, int vp_h, int vp_w,
+    const std::vector<std::vector<uint8_t>>& valid_src, int valid_h, int valid_w,
+    const std::vector<TokenGrid>& grids);
 
 }  // namespace macro::enhance

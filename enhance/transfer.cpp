@@ -640,10 +640,11 @@ Result<std::vector<TransferSourceImage>> plan_transfer_sources(const MacroPlan& 
     }
     return out;
   }
-  if (plan.options.crops.crop == CropMode::kTight)
-    return Status::error(
-        "transfer: --crop tight is not supported (the transfer resamples each "
-        "crop to the whole close-up frame; use --crop full)");
+  if (plan.options.crops.crop != CropMode::kFull)
+    return Status::error(std::string("transfer: --crop ") +
+                         crop_mode_name(plan.options.crops.crop) +
+                         " is not supported (the transfer resamples each crop to the whole "
+                         "close-up frame; use --crop full)");
   for (const Crop& crop : plan.crops) {
     if (crop.ref < 0 || size_t(crop.ref) >= plan.ref_candidates.size())
       return Status::error("transfer: crop of plane " + std::to_string(crop.plane) +

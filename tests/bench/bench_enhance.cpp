@@ -9,9 +9,10 @@
 // --quick: the same on a 240x136 scene and the tiny golden pipeline (unet-tiny, vae-tiny): every
 // code path in seconds.
 //
-// Per configuration (--config, comma-separated; default macro,auto,tight):
+// Per configuration (--config, comma-separated; default macro,auto,tight,composite):
 //   macro  the released defaults (K = 3, P = 3, full crops, mask released) = the baseline;
-//   auto   --planes auto (max 5);  tight  --crop tight;  unmasked  mask none;  warp  --method warp.
+//   auto   --planes auto (max 5);  tight  --crop tight;  composite  --crop composite (1 + K
+//   views);  unmasked  mask none;  warp  --method warp.
 // Rows: planning stages (close-up render, candidate depth renders + coverage, selection, planes,
 // crops, masks; medians of --reps), view building (crops cut + Lanczos resampling), the attention
 // mask (allowed / computed / dense pairs over the 4 levels) and the L0 attention kernel for one
@@ -85,14 +86,16 @@ Result<Config> make_config(const std::string& name) {
     c.plan.planes.planes = 5;
   } else if (name == "tight") {
     c.plan.crops.crop = enhance::CropMode::kTight;
+  } else if (name == "composite") {
+    c.plan.crops.crop = enhance::CropMode::kComposite;
   } else if (name == "unmasked") {
     c.method = enhance::EnhanceMethod::kMacroUnmasked;
     c.plan.mask = enhance::MaskMode::kNone;
   } else if (name == "warp") {
     c.method = enhance::EnhanceMethod::kWarp;
   } else {
-    return Status::error("--config: expected macro, auto, tight, unmasked or warp, found '" + name +
-                         "'");
+    return Status::error(
+        "--config: expected macro, auto, tight, composite, unmasked or warp, found '" + name + "'");
   }
   return c;
 }
@@ -121,7 +124,7 @@ double attention_seconds(int tokens, const BlockSparseMask* mask, int reps) {
 int run(int argc, char** argv) {
   bool quick = false, net = true, attn = true;
   int reps = 3;
-  std::string configs = "macro,auto,tight", precision = "bf16", weights, keep;
+  std::string configs = "macro,auto,tight,composite", precision = "bf16", weights, keep;
   for (int i = 1; i < argc; ++i) {
     auto next = [&]() -> std::string { return i + 1 < argc ? argv[++i] : ""; };
     const std::string a = argv[i];
@@ -142,11 +145,12 @@ int run(int argc, char** argv) {
     else if (a == "--keep")
       keep = next();
     else {
-      std::fprintf(stderr,
-                   "usage: bench enhance [--quick] [--config macro,auto,tight,unmasked,warp] "
-                   "[--precision f32|bf16|both] [--no-net] [--no-attention] [--reps R] "
-                   "[--weights DIR] "
-                   "[--keep DIR]\n");
+      std::fprintf(
+          stderr,
+          "usage: bench enhance [--quick] [--config macro,auto,tight,composite,unmasked,warp] "
+          "[--precision f32|bf16|both] [--no-net] [--no-attention] [--reps R] "
+          "[--weights DIR] "
+          "[--keep DIR]\n");
       return 2;
     }
   }
@@ -274,8 +278,8 @@ int run(int argc, char** argv) {
     const BlockSparseMask& m0 = plan->masks.masks[0];
     const double t_att = attn ? attention_seconds(m0.nq, &m0, reps) : 0.0;
     std::printf("\n[%s] %zu planes, %zu crops, %d views, model %dx%d, level-0 sequence %d tokens\n",
-                c.name.c_str(), plan->planes.planes.size(), plan->crops.size(),
-                int(1 + plan->crops.size()), plan->model.w, plan->model.h, m0.nq);
+                c.name.c_str(), plan->planes.planes.size(), plan->crops.size(), plan->view_count(),
+                plan->model.w, plan->model.h, m0.nq);
     std::printf(
         "  plan %.1f ms: close-up render %.1f, candidate depths + coverage %.1f, selection %.1f, "
         "planes %.1f, crops %.1f, masks %.1f; views (cut + Lanczos) %.1f ms\n",
@@ -335,7 +339,8 @@ int run(int argc, char** argv) {
 }
 
 const bool registered = register_benchmark(
-    {"enhance", "macro enhance per stage at 960x536 (or --quick); --planes auto, --crop tight",
+    {"enhance",
+     "macro enhance per stage at 960x536 (or --quick); --planes auto, --crop tight|composite",
      run});
 
 }  // namespace
