@@ -1,9 +1,13 @@
 // DINOv2 / DreamSim entries of the metric suite (contract in feature_metrics.h).
 #include "enhance/feature_metrics.h"
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <climits>
+#include <cmath>
+#include <map>
+#include <mutex>
 
 #include "attention/runtime/file_io.h"
 
@@ -52,9 +56,148 @@ std::string default_dreamsim_path() {
   return find_weights("dreamsim", kDreamSimFile);
 }
 
-MetricValue dinov2_distance(const gs::Image&, const gs::Image&, const std::string& weights_path) {
-  return not_computed("dinov2", weights_path.empty() ? default_dinov2_path() : weights_path,
-                      "DINOv2 ViT-S/14");
+// ---- DINOv2 -------------------------------------------------------------------------------------
+
+std::vector<float> resize_bilinear_chw(const gs::Image& image, int oh, int ow) {
+  MACRO_CHECK(image.channels == 3 && image.width > 0 && image.height > 0 && oh > 0 && ow > 0);
+  // One axis: the lower source index, the upper one (clamped) and the upper weight.
+  struct Tap {
+    int i0, i1;
+    float l1;
+  };
+  auto taps = [](int in, int out) {
+    std::vector<Tap> t(static_cast<size_t>(out));
+    const float scale = float(in) / float(out);
+    for (int o = 0; o < out; ++o) {
+      float src = scale * (float(o) + 0.5f) - 0.5f;
+      if (src < 0) src = 0;
+      const int i0 = std::min(int(src), in - 1);
+      t[size_t(o)] = {i0, i0 < in - 1 ? i0 + 1 : i0, src - float(i0)};
+    }
+    return t;
+  };
+  const std::vector<Tap> ty = taps(image.height, oh), tx = taps(image.width, ow);
+  std::vector<float> out(size_t(3) * size_t(oh) * size_t(ow));
+  for (int c = 0; c < 3; ++c)
+    for (int y = 0; y < oh; ++y) {
+      const Tap& a = ty[size_t(y)];
+      const float h1 = a.l1, h0 = 1.0f - a.l1;
+      float* dst = out.data() + (size_t(c) * size_t(oh) + size_t(y)) * size_t(ow);
+      for (int x = 0; x < ow; ++x) {
+        const Tap& b = tx[size_t(x)];
+        const float w1 = b.l1, w0 = 1.0f - b.l1;
+        // torch's order: the outer (height) weights over inner (width) interpolations.
+        dst[x] = h0 * (w0 * image.at(a.i0, b.i0, c) + w1 * image.at(a.i0, b.i1, c)) +
+                 h1 * (w0 * image.at(a.i1, b.i0, c) + w1 * image.at(a.i1, b.i1, c));
+      }
+    }
+  return out;
+}
+
+std::vector<float> dinov2_input(const gs::Image& image) {
+  std::vector<float> x = resize_bilinear_chw(image, kDinov2Size, kDinov2Size);
+  const size_t plane = size_t(kDinov2Size) * size_t(kDinov2Size);
+  for (size_t c = 0; c < 3; ++c)
+    for (size_t i = 0; i < plane; ++i)
+      x[c * plane + i] = (x[c * plane + i] - kDinov2Mean[c]) / kDinov2Std[c];
+  return x;
+}
+
+nets::VitConfig dinov2_config() {
+  return nets::VitConfig::dinov2_small();
+}
+
+namespace {
+
+struct CachedModel {
+  int64_t size = -1, mtime_ns = -1;
+  std::shared_ptr<const nets::VitModel> model;
+};
+
+std::mutex& dinov2_cache_mutex() {
+  static std::mutex m;
+  return m;
+}
+
+// One forward at a time per process: the forwards share the thread pool, which runs one
+// parallel_for at a time.
+std::mutex& dinov2_forward_mutex() {
+  static std::mutex m;
+  return m;
+}
+
+}  // namespace
+
+Result<std::shared_ptr<const nets::VitModel>> load_dinov2(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0)
+    return Status::error(path + ": cannot read the DINOv2 weights (no such file)");
+  const int64_t size = int64_t(st.st_size);
+  const int64_t mtime = int64_t(st.st_mtim.tv_sec) * 1000000000 + int64_t(st.st_mtim.tv_nsec);
+  std::lock_guard<std::mutex> lock(dinov2_cache_mutex());
+  static std::map<std::string, CachedModel> cache;
+  CachedModel& c = cache[path];
+  if (c.model && c.size == size && c.mtime_ns == mtime) return c.model;
+  c = CachedModel();
+  nets::VitLoadOptions opt;
+  opt.ignored_prefixes = {"head.", "mask_token"};  // classifier (num_classes=0), torch.hub buffer
+  auto model = nets::VitModel::load(path, dinov2_config(), opt);
+  if (!model) return model.status().with_context("DINOv2 ViT-S/14");
+  c.size = size;
+  c.mtime_ns = mtime;
+  c.model = std::shared_ptr<const nets::VitModel>(std::move(*model));
+  return c.model;
+}
+
+Result<std::vector<float>> dinov2_embedding(const nets::VitModel& model, const gs::Image& image,
+                                            ThreadPool* pool) {
+  if (image.channels != 3 || image.width < 1 || image.height < 1 ||
+      image.data.size() != image.pixels() * 3)
+    return Status::error("DINOv2: expected a non-empty RGB image, found " +
+                         std::to_string(image.width) + "x" + std::to_string(image.height) + "x" +
+                         std::to_string(image.channels));
+  const std::vector<float> x = dinov2_input(image);
+  std::lock_guard<std::mutex> lock(dinov2_forward_mutex());
+  auto out = model.forward(x.data(), kDinov2Size, kDinov2Size, pool ? pool : &ThreadPool::global());
+  if (!out) return out.status();
+  return std::move(out->cls);
+}
+
+double cosine_distance(const std::vector<float>& a, const std::vector<float>& b) {
+  if (a.size() != b.size() || a.empty()) return std::nan("");
+  double ab = 0, aa = 0, bb = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    ab += double(a[i]) * double(b[i]);
+    aa += double(a[i]) * double(a[i]);
+    bb += double(b[i]) * double(b[i]);
+  }
+  if (!(aa > 0) || !(bb > 0) || !std::isfinite(aa) || !std::isfinite(bb)) return std::nan("");
+  return 1.0 - ab / std::sqrt(aa * bb);
+}
+
+MetricValue dinov2_distance(const gs::Image& pred, const gs::Image& gt,
+                            const std::string& weights_path, ThreadPool* pool) {
+  const std::string path = weights_path.empty() ? default_dinov2_path() : weights_path;
+  MetricValue m;
+  m.name = "dinov2";
+  if (!file_exists(path)) return not_computed("dinov2", path, "DINOv2 ViT-S/14");
+  auto fail = [&](const Status& s) {
+    m.computed = false;
+    m.reason = s.message();
+    return m;
+  };
+  auto model = load_dinov2(path);
+  if (!model) return fail(model.status());
+  auto ep = dinov2_embedding(**model, pred, pool);
+  if (!ep) return fail(ep.status().with_context("prediction"));
+  auto eg = dinov2_embedding(**model, gt, pool);
+  if (!eg) return fail(eg.status().with_context("ground truth"));
+  const double d = cosine_distance(*ep, *eg);
+  if (!std::isfinite(d))
+    return fail(Status::error("DINOv2: an embedding is zero or not finite (" + path + ")"));
+  m.computed = true;
+  m.value = d;
+  return m;
 }
 
 MetricValue dreamsim_distance(const gs::Image&, const gs::Image&, const std::string& weights_path) {

@@ -433,4 +433,62 @@ Result<VitModel::Output> VitModel::forward(const float* image, int64_t h, int64_
   return out;
 }
 
+// ---- random weights (tests, benchmarks) ---------------------------------------------------------
+
+namespace {
+
+// A visitor that records every requested name and shape.
+struct ShapeLister : ParamVisitor {
+  std::vector<std::pair<std::string, std::vector<int64_t>>> items;
+  void param(const std::string& name, Param&, const std::vector<int64_t>& shape) override {
+    items.emplace_back(name, shape);
+  }
+};
+
+bool ends_with(const std::string& s, const std::string& tail) {
+  return s.size() >= tail.size() && s.compare(s.size() - tail.size(), tail.size(), tail) == 0;
+}
+
+}  // namespace
+
+std::map<std::string, OverrideTensor> vit_random_weights(const VitConfig& cfg, uint64_t seed) {
+  std::map<std::string, OverrideTensor> out;
+  auto model = VitModel::build(cfg);
+  if (!model) return out;
+  ShapeLister lister;
+  (*model)->visit(lister);
+  uint64_t state = seed * 0x9E3779B97F4A7C15ull + 0x632BE59BD9B4E019ull;
+  auto uniform = [&state]() {  // [-1, 1), SplitMix64
+    uint64_t z = (state += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    z ^= z >> 31;
+    return float(double(z >> 11) * (2.0 / 9007199254740992.0) - 1.0);
+  };
+  for (const auto& [name, shape] : lister.items) {
+    OverrideTensor t;
+    t.shape = shape;
+    int64_t n = 1;
+    for (int64_t s : shape) n *= s;
+    t.values.resize(size_t(n));
+    const bool norm = name.find("norm") != std::string::npos;
+    float base = 0, amp = 0.02f;
+    if (ends_with(name, "gamma")) {
+      base = 0.15f, amp = 0.1f;
+    } else if (norm && ends_with(name, ".weight")) {
+      base = 1.0f, amp = 0.1f;
+    } else if (ends_with(name, "cls_token") || ends_with(name, "pos_embed")) {
+      amp = 0.1f;
+    } else if (ends_with(name, ".weight") || name == cfg.prefix + "proj") {
+      const int64_t fan_in = name == cfg.prefix + "proj"
+                                 ? shape[0]  // CLIP proj [D, P]
+                                 : n / std::max<int64_t>(shape[0], 1);
+      amp = float(std::sqrt(3.0 / double(std::max<int64_t>(fan_in, 1))));
+    }
+    for (float& v : t.values) v = base + amp * uniform();
+    out.emplace(name, std::move(t));
+  }
+  return out;
+}
+
 }  // namespace macro::nets

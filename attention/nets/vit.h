@@ -164,6 +164,12 @@ class VitModel {
   PackedWeights proj_;                     // [D] -> [P]
 };
 
+// Every tensor a config asks for (full names, prefix included), seeded random values of plausible
+// scale: linear weights uniform with variance 1/in, norm weights 1 +- 0.1, biases +- 0.02,
+// LayerScale gammas in [0.05, 0.25], cls/pos +- 0.1. For tests and benchmarks (write them with
+// write_safetensors to get a file in the checkpoint's layout).
+std::map<std::string, OverrideTensor> vit_random_weights(const VitConfig& cfg, uint64_t seed);
+
 // timm resample_abs_pos_embed on the grid part: src [h0 * w0, D] -> dst [h * w, D] (torch
 // F.interpolate bicubic, align_corners=False; antialias as named). Double arithmetic.
 void resample_pos_grid(const float* src, int64_t h0, int64_t w0, float* dst, int64_t h, int64_t w,

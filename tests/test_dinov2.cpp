@@ -1,0 +1,204 @@
+// The DINOv2 distance (enhance/feature_metrics.*): torch-bilinear input resize against hand-computed
+// values, full-size synthetic timm vit_small_patch14_dinov2 weights (exact names and shapes,
+// seeded random, written as safetensors) through the metric and the CLI, the model cache, and
+// loader errors that name the tensors.
+#include <catch2/catch.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "attention/runtime/file_io.h"
+#include "attention/runtime/safetensors.h"
+#include "enhance/feature_metrics.h"
+#include "test_support.h"
+
+using namespace macro;
+using namespace macro::enhance;
+
+namespace {
+
+using Weights = std::map<std::string, nets::OverrideTensor>;
+
+// The synthetic checkpoint (timm names and shapes), optionally edited, written to dir/name.
+std::string write_dinov2(const test::TempDir& dir, const std::string& name,
+                         const std::function<void(Weights&)>& edit = {}) {
+  Weights ws = nets::vit_random_weights(dinov2_config(), 2024);
+  if (edit) edit(ws);
+  std::vector<TensorToWrite> t;
+  for (const auto& [n, ten] : ws) t.push_back({n, DType::kF32, ten.shape, ten.values.data()});
+  const std::string path = dir.file(name);
+  REQUIRE(write_safetensors(path, t).is_ok());
+  return path;
+}
+
+// A smooth colour pattern and a perturbed copy.
+gs::Image pattern(int w, int h, float shift) {
+  gs::Image im(w, h, 3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int c = 0; c < 3; ++c)
+        im.at(y, x, c) = float(0.5 + 0.4 * std::sin(0.11 * x + 0.07 * y + c + shift));
+  return im;
+}
+
+std::string slurp(const std::string& path) {
+  auto t = read_text_file(path);
+  return t ? *t : std::string();
+}
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+TEST_CASE("dinov2: bilinear resize is torch's align_corners=False antialias=False", "[dinov2]") {
+  // pixel (y, x, c) = row[y] + (c + 1) * col[x]: bilinear is linear, so the result is
+  // resample(row)[y] + (c + 1) * resample(col)[x].
+  const float row[2] = {0.f, 10.f};
+  const float col[5] = {0.f, 1.f, 2.f, 4.f, 8.f};
+  gs::Image im(5, 2, 3);
+  for (int y = 0; y < 2; ++y)
+    for (int x = 0; x < 5; ++x)
+      for (int c = 0; c < 3; ++c) im.at(y, x, c) = row[y] + float(c + 1) * col[x];
+  // Height 2 -> 4 (scale 0.5): source y = (o + 0.5) / 2 - 0.5 = -0.25 (clamped to 0), 0.25, 0.75,
+  // 1.25 (upper neighbour clamped): 0, 2.5, 7.5, 10.
+  const double ry[4] = {0.0, 2.5, 7.5, 10.0};
+  // Width 5 -> 3 (scale 5/3, no antialias): source x = 1/3, 2, 11/3:
+  // (2/3) 0 + (1/3) 1 = 1/3; 2; (1/3) 4 + (2/3) 8 = 20/3.
+  const double rx[3] = {1.0 / 3.0, 2.0, 20.0 / 3.0};
+  const std::vector<float> out = resize_bilinear_chw(im, 4, 3);
+  REQUIRE(out.size() == 3u * 4u * 3u);
+  for (int c = 0; c < 3; ++c)
+    for (int y = 0; y < 4; ++y)
+      for (int x = 0; x < 3; ++x)
+        CHECK(out[size_t((c * 4 + y) * 3 + x)] == Approx(ry[y] + (c + 1) * rx[x]).margin(2e-6));
+  // Same size: the identity.
+  const std::vector<float> same = resize_bilinear_chw(im, 2, 5);
+  for (int c = 0; c < 3; ++c)
+    for (int y = 0; y < 2; ++y)
+      for (int x = 0; x < 5; ++x) CHECK(same[size_t((c * 2 + y) * 5 + x)] == im.at(y, x, c));
+  // The DINOv2 input: 518 x 518, ImageNet mean/std per channel.
+  gs::Image flat(7, 3, 3);
+  for (size_t i = 0; i < flat.data.size(); ++i) flat.data[i] = 0.25f * float(i % 3 + 1);
+  const std::vector<float> x = dinov2_input(flat);
+  REQUIRE(x.size() == 3u * 518u * 518u);
+  for (int c = 0; c < 3; ++c) {
+    const double want = (0.25 * (c + 1) - kDinov2Mean[c]) / kDinov2Std[c];
+    CHECK(x[size_t(c) * 518 * 518] == Approx(want).margin(1e-6));
+    CHECK(x[size_t(c) * 518 * 518 + 518 * 518 - 1] == Approx(want).margin(1e-6));
+  }
+}
+
+TEST_CASE("dinov2: full-size synthetic weights give finite and self-zero and symmetric distances",
+          "[dinov2]") {
+  test::TempDir dir("dinov2-full");
+  const std::string path = write_dinov2(dir, "vit_small_patch14_dinov2.safetensors");
+  const gs::Image a = pattern(96, 64, 0.f), b = pattern(96, 64, 0.8f);
+  auto t0 = std::chrono::steady_clock::now();
+  auto model = load_dinov2(path);
+  INFO((model.is_ok() ? "" : model.status().message()));
+  REQUIRE(model.is_ok());
+  std::printf("dinov2: load %.2f s, %.1f MiB packed\n", seconds_since(t0),
+              double((*model)->weight_bytes()) / (1 << 20));
+  // Cached: the same object again.
+  auto again = load_dinov2(path);
+  REQUIRE(again.is_ok());
+  CHECK(again->get() == model->get());
+
+  t0 = std::chrono::steady_clock::now();
+  const MetricValue d_ab = dinov2_distance(a, b, path);
+  std::printf("dinov2: distance of one pair (2 embeddings at 518x518) %.2f s\n",
+              seconds_since(t0));
+  INFO(d_ab.reason);
+  REQUIRE(d_ab.computed);
+  CHECK(d_ab.name == "dinov2");
+  CHECK(std::isfinite(d_ab.value));
+  CHECK(d_ab.value > 1e-6);  // different images, different embeddings
+  CHECK(d_ab.value < 2.0);
+  const MetricValue d_aa = dinov2_distance(a, a, path);
+  REQUIRE(d_aa.computed);
+  CHECK(std::abs(d_aa.value) <= 1e-6);
+  // Symmetry, on the embeddings the metric uses (deterministic forward: bit-identical).
+  auto ea = dinov2_embedding(**model, a);
+  auto eb = dinov2_embedding(**model, b);
+  REQUIRE(ea.is_ok());
+  REQUIRE(eb.is_ok());
+  REQUIRE(ea->size() == 384u);
+  CHECK(cosine_distance(*ea, *eb) == cosine_distance(*eb, *ea));
+  CHECK(std::abs(cosine_distance(*ea, *eb) - d_ab.value) <= 1e-12);
+}
+
+TEST_CASE("dinov2: loader errors name the tensors and are 'not computed' and never a number",
+          "[dinov2]") {
+  test::TempDir dir("dinov2-bad");
+  const gs::Image a = pattern(32, 32, 0.f);
+  // Absent: the existing reason, with the path.
+  const MetricValue none = dinov2_distance(a, a, dir.file("absent.safetensors"));
+  CHECK_FALSE(none.computed);
+  CHECK_THAT(none.reason, Catch::Contains("weights not supplied") &&
+                              Catch::Contains(dir.file("absent.safetensors")));
+  // Not a safetensors file.
+  REQUIRE(write_file_atomic(dir.file("junk.safetensors"), std::string(64, 'x')).is_ok());
+  const MetricValue junk = dinov2_distance(a, a, dir.file("junk.safetensors"));
+  CHECK_FALSE(junk.computed);
+  CHECK_THAT(junk.reason, Catch::Contains("junk.safetensors"));
+  // torch.hub / timm extras are accepted; a missing, an extra and a mis-shaped tensor are named.
+  const std::string bad = write_dinov2(dir, "bad.safetensors", [](Weights& ws) {
+    ws["mask_token"] = {{1, 384}, std::vector<float>(384, 0.f)};
+    ws["head.weight"] = {{1000, 384}, std::vector<float>(1000 * 384, 0.f)};
+    ws["head.bias"] = {{1000}, std::vector<float>(1000, 0.f)};
+    ws.erase("blocks.11.ls2.gamma");
+    ws["blocks.12.norm1.weight"] = {{384}, std::vector<float>(384, 1.f)};
+    ws["pos_embed"] = {{1, 257, 384}, std::vector<float>(257 * 384, 0.f)};
+  });
+  const MetricValue m = dinov2_distance(a, a, bad);
+  CHECK_FALSE(m.computed);
+  CHECK_THAT(m.reason, Catch::Contains("bad.safetensors") &&
+                           Catch::Contains("missing (blocks.11.ls2.gamma [384])") &&
+                           Catch::Contains("pos_embed: expected [1,1370,384], found [1,257,384]") &&
+                           Catch::Contains("unused (blocks.12.norm1.weight)"));
+  CHECK_THAT(m.reason, !Catch::Contains("head.weight") && !Catch::Contains("mask_token"));
+  auto direct = load_dinov2(bad);
+  REQUIRE_FALSE(direct.is_ok());
+  CHECK_THAT(direct.status().message(), Catch::Contains("DINOv2"));
+  // A bad image is refused by name, not computed.
+  auto good = write_dinov2(dir, "good.safetensors", [](Weights& ws) {
+    ws["mask_token"] = {{1, 384}, std::vector<float>(384, 0.f)};  // torch.hub layout
+  });
+  const MetricValue empty = dinov2_distance(gs::Image(), a, good);
+  CHECK_FALSE(empty.computed);
+  CHECK_THAT(empty.reason, Catch::Contains("prediction") && Catch::Contains("RGB image"));
+}
+
+TEST_CASE("dinov2: macro metrics prints a number with --dinov2 and 'not computed' without",
+          "[dinov2]") {
+  test::TempDir dir("dinov2-cli");
+  const std::string path = write_dinov2(dir, "w.safetensors");
+  const std::string img = test::shared_dir() + "/images";
+  const std::string out = dir.file("out.txt"), err = dir.file("err.txt");
+  const std::string base = "env -u MACRO_QUIET " + test::macro_exe() + " metrics --pred " + img +
+                           "/ex_p0.png --gt " + img + "/ex_ref.png --lpips-backbone " +
+                           dir.file("none.safetensors");
+  REQUIRE(test::run_command(base + " --dinov2 " + path + " --json >" + out + " 2>" + err) == 0);
+  const nlohmann::json j = nlohmann::json::parse(slurp(out));
+  INFO(slurp(out) << slurp(err));
+  REQUIRE(j["dinov2"].is_number());
+  const double v = j["dinov2"].get<double>();
+  CHECK(std::isfinite(v));
+  CHECK(v > 0.0);
+  CHECK(v < 2.0);
+  // Text form: "dinov2: <number>".
+  REQUIRE(test::run_command(base + " --dinov2 " + path + " >" + out + " 2>" + err) == 0);
+  CHECK_THAT(slurp(out), Catch::Contains("dinov2: 0.") || Catch::Contains("dinov2: 1."));
+  // Without the file.
+  REQUIRE(test::run_command(base + " --dinov2 " + dir.file("absent.safetensors") + " >" + out +
+                            " 2>" + err) == 0);
+  CHECK_THAT(slurp(out), Catch::Contains("dinov2: not computed: weights not supplied"));
+}
