@@ -452,11 +452,10 @@ Result<SceneSplit> load_and_construct(const std::string& folder, const std::stri
 Status write_scene_split(const SceneSplit& scene, const PairParams& params,
                          const std::string& out_path, bool copy_gt) {
   namespace fs = std::filesystem;
-  MACRO_TRY(write_file_atomic(
-      out_path, split_json(scene.cameras, scene.pc, params, scene.name, scene.num_points)));
-  if (!copy_gt) return Status::ok();
+  // The close-ups first: a missing image leaves no split behind.
   const fs::path out_dir = fs::absolute(out_path).parent_path();
-  for (const PairMeasure& m : scene.pc.eval_pairs) {
+  for (size_t k = 0; copy_gt && k < scene.pc.eval_pairs.size(); ++k) {
+    const PairMeasure& m = scene.pc.eval_pairs[k];
     const std::string& frame = scene.cameras.cameras[size_t(m.close)].name;
     const fs::path src = fs::path(scene.folder) / "images" / frame;
     const fs::path dst = out_dir / "closeup_gt" / frame;
@@ -469,11 +468,11 @@ Status write_scene_split(const SceneSplit& scene, const PairParams& params,
     MACRO_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, read_file(src.string()));
     MACRO_TRY(write_file_atomic(dst.string(), bytes.data(), bytes.size()));
   }
-  return Status::ok();
+  return write_file_atomic(
+      out_path, split_json(scene.cameras, scene.pc, params, scene.name, scene.num_points));
 }
 
-// ---- Many scenes
-// ----------------------------------------------------------------------------------
+// ---- Many scenes -----------------------------------------------------------------------------
 
 namespace {
 
@@ -620,6 +619,11 @@ Result<SceneRanking> rank_scenes(const RootParams& rp) {
     } else if (rp.top > 0 && kept >= rp.top) {
       r.status = SceneStatus::kNotInTop;
       r.reason = "not among the --top " + std::to_string(rp.top) + " scenes";
+    } else if (!rp.overwrite && file_exists(r.split_path) && !is_generated_split(r.split_path)) {
+      r.status = SceneStatus::kFailed;  // checked here so that it does not take a --top place
+      r.reason = r.split_path +
+                 ": exists and was not written by `bench pairs` (no \"pair_construction\" "
+                 "record); not replaced (--overwrite replaces it, --out-dir writes elsewhere)";
     } else {
       ++kept;
     }
@@ -642,23 +646,20 @@ Result<SceneRanking> rank_scenes(const RootParams& rp) {
         continue;
       }
       Status written = Status::ok();
-      if (exists && !rp.overwrite && !is_generated_split(r.split_path)) {
-        written = Status::error(r.split_path +
-                                ": exists and was not written by `bench pairs` (no "
-                                "\"pair_construction\" record); not replaced (--overwrite "
-                                "replaces it, --out-dir writes elsewhere)");
-      } else {
-        std::error_code ec;
-        fs::create_directories(fs::path(r.split_path).parent_path(), ec);
-        if (ec)
-          written = Status::error(fs::path(r.split_path).parent_path().string() +
-                                  ": cannot create folder: " + ec.message());
-        else
-          written = write_scene_split(*built[i], p, r.split_path, rp.copy_gt);
-      }
+      std::error_code ec;
+      fs::create_directories(fs::path(r.split_path).parent_path(), ec);
+      if (ec)
+        written = Status::error(fs::path(r.split_path).parent_path().string() +
+                                ": cannot create folder: " + ec.message());
+      else
+        written = write_scene_split(*built[i], p, r.split_path, rp.copy_gt);
       if (!written) {
         r.status = SceneStatus::kFailed;
         r.reason = written.message();
+        if (exists && is_generated_split(r.split_path)) {
+          std::error_code rm;
+          r.removed_stale_split = fs::remove(r.split_path, rm) && !rm;
+        }
       }
       r.seconds += ms_since(t0) / 1000.0;
       built[i].reset();

@@ -744,8 +744,9 @@ Rig parallel_rig() {
   Rig rig;
   for (int i = 0; i < 10; ++i) {
     const double d = 2.0 + 0.5 * i;
-    rig.cameras.cameras.push_back(
-        rig_camera("p" + std::to_string(i), kA - Eigen::Vector3d(0, 0, d), {0, 0, 1}));
+    char name[8];
+    std::snprintf(name, sizeof name, "p%d", i);
+    rig.cameras.cameras.push_back(rig_camera(name, kA - Eigen::Vector3d(0, 0, d), {0, 0, 1}));
     rig.distance.push_back(d);
   }
   add_cube(&rig.points, kA);
@@ -975,11 +976,39 @@ TEST_CASE("pairs --root: --top and --min-score keep the best splits, reruns repl
     CHECK(r->scenes[1].scored);  // still ranked by its score
     CHECK(*read_text_file(rs.split("b_mid")) == mine);
     CHECK(*read_text_file(rs.split("e_flat")) == mine);  // not ours: never removed
+    rp.top = 2;  // b_mid does not take one of the two places
+    r = enhance::rank_scenes(rp);
+    REQUIRE(r.is_ok());
+    CHECK(statuses(*r)["c_near"] == "selected");
+    CHECK(statuses(*r)["b_mid"] == "failed");
+    CHECK(statuses(*r)["a_far"] == "selected");
+    CHECK(r->selected == 2);
+    rp.top = 0;
     rp.overwrite = true;
     r = enhance::rank_scenes(rp);
     REQUIRE(r.is_ok());
     CHECK(statuses(*r)["b_mid"] == "selected");
     CHECK(gs::load_closeup_split(rs.split("b_mid"))->closeup_eval_pairs.size() == 3);
+  }
+  SECTION("--copy-gt: close-ups beside each split; no images, no split") {
+    rp.copy_gt = true;
+    auto r = enhance::rank_scenes(rp);
+    REQUIRE(r.is_ok());
+    CHECK(r->selected == 0);
+    CHECK(r->failed == 5);
+    CHECK(r->scenes[0].reason ==
+          rs.root + "/c_near/images/c0_cA: close-up image not found (--copy-gt)");
+    CHECK(r->scenes[0].removed_stale_split);  // the split of the first run is gone
+    for (const char* s : {"a_far", "b_mid", "c_near"}) CHECK_FALSE(file_exists(rs.split(s)));
+    fs::create_directories(rs.root + "/c_near/images");
+    for (const gs::Camera& c : scaled_rig(0.25).cameras.cameras)
+      REQUIRE(write_file_atomic(rs.root + "/c_near/images/" + c.name, "png " + c.name).is_ok());
+    r = enhance::rank_scenes(rp);
+    REQUIRE(r.is_ok());
+    CHECK(statuses(*r)["c_near"] == "selected");
+    CHECK(r->selected == 1);
+    CHECK(*read_text_file(rs.root + "/c_near/closeup_gt/c1_cB") == "png c1_cB");
+    CHECK(file_exists(rs.split("c_near")));
   }
   SECTION("--out-dir: splits and ranking elsewhere, the scenes untouched") {
     for (const char* s : {"a_far", "b_mid", "c_near"}) fs::remove(rs.split(s));
