@@ -604,8 +604,10 @@ Result<SceneRanking> rank_scenes(const RootParams& rp) {
   std::vector<size_t> order(rows.size());
   std::iota(order.begin(), order.end(), size_t(0));
   std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    const double sa = rows[a].scored ? rows[a].score.score : -INFINITY;
-    const double sb = rows[b].scored ? rows[b].score.score : -INFINITY;
+    const auto key = [](const RankedScene& r) {  // NaN cannot occur (d > 0), but never sorts
+      return r.scored && !std::isnan(r.score.score) ? r.score.score : -INFINITY;
+    };
+    const double sa = key(rows[a]), sb = key(rows[b]);
     if (sa != sb) return sa > sb;
     return rows[a].name < rows[b].name;
   });
