@@ -1,7 +1,7 @@
-// The DINOv2 distance (enhance/feature_metrics.*): torch-bilinear input resize against hand-computed
-// values, full-size synthetic timm vit_small_patch14_dinov2 weights (exact names and shapes,
-// seeded random, written as safetensors) through the metric and the CLI, the model cache, and
-// loader errors that name the tensors.
+// The DINOv2 distance (enhance/feature_metrics.*): torch-bilinear input resize against
+// hand-computed values, full-size synthetic timm vit_small_patch14_dinov2 weights (exact names and
+// shapes, seeded random, written as safetensors) through the metric and the CLI, the model cache,
+// and loader errors that name the tensors.
 #include <catch2/catch.hpp>
 
 #include <chrono>
@@ -114,8 +114,7 @@ TEST_CASE("dinov2: full-size synthetic weights give finite and self-zero and sym
 
   t0 = std::chrono::steady_clock::now();
   const MetricValue d_ab = dinov2_distance(a, b, path);
-  std::printf("dinov2: distance of one pair (2 embeddings at 518x518) %.2f s\n",
-              seconds_since(t0));
+  std::printf("dinov2: distance of one pair (2 embeddings at 518x518) %.2f s\n", seconds_since(t0));
   INFO(d_ab.reason);
   REQUIRE(d_ab.computed);
   CHECK(d_ab.name == "dinov2");

@@ -101,7 +101,8 @@ RefOut reference_forward(const VitConfig& cfg, const Weights& ws, const std::vec
         for (int64_t kj = 0; kj < t; ++kj) {
           double dot = 0;
           for (int64_t c = 0; c < dh; ++c)
-            dot += qkv[size_t(qi * 3 * d + hd * dh + c)] * qkv[size_t(kj * 3 * d + d + hd * dh + c)];
+            dot +=
+                qkv[size_t(qi * 3 * d + hd * dh + c)] * qkv[size_t(kj * 3 * d + d + hd * dh + c)];
           s[size_t(kj)] = dot / std::sqrt(double(dh));
           mx = std::max(mx, s[size_t(kj)]);
         }
@@ -116,8 +117,8 @@ RefOut reference_forward(const VitConfig& cfg, const Weights& ws, const std::vec
       }
     auto o = linear(att, t, d, d, w(ws, b + "attn.proj.weight"), &w(ws, b + "attn.proj.bias"));
     for (int64_t k = 0; k < t * d; ++k)
-      x[size_t(k)] += (cfg.layer_scale ? double(w(ws, b + "ls1.gamma")[size_t(k % d)]) : 1.0) *
-                      o[size_t(k)];
+      x[size_t(k)] +=
+          (cfg.layer_scale ? double(w(ws, b + "ls1.gamma")[size_t(k % d)]) : 1.0) * o[size_t(k)];
     n = layer_norm_ref(x, t, d, w(ws, b + "norm2.weight"), w(ws, b + "norm2.bias"), eps);
     auto hid = linear(n, t, d, ff, w(ws, b + "mlp.fc1.weight"), &w(ws, b + "mlp.fc1.bias"));
     for (double& v : hid)
@@ -125,13 +126,13 @@ RefOut reference_forward(const VitConfig& cfg, const Weights& ws, const std::vec
                                         : 0.5 * v * (1.0 + std::erf(v / std::sqrt(2.0)));
     auto y = linear(hid, t, ff, d, w(ws, b + "mlp.fc2.weight"), &w(ws, b + "mlp.fc2.bias"));
     for (int64_t k = 0; k < t * d; ++k)
-      x[size_t(k)] += (cfg.layer_scale ? double(w(ws, b + "ls2.gamma")[size_t(k % d)]) : 1.0) *
-                      y[size_t(k)];
+      x[size_t(k)] +=
+          (cfg.layer_scale ? double(w(ws, b + "ls2.gamma")[size_t(k % d)]) : 1.0) * y[size_t(k)];
   }
   RefOut r;
-  r.tokens = cfg.final_norm
-                 ? layer_norm_ref(x, t, d, w(ws, pre + "norm.weight"), w(ws, pre + "norm.bias"), eps)
-                 : x;
+  r.tokens = cfg.final_norm ? layer_norm_ref(x, t, d, w(ws, pre + "norm.weight"),
+                                             w(ws, pre + "norm.bias"), eps)
+                            : x;
   if (cfg.proj_dim > 0) {
     const auto& pj = w(ws, pre + "proj");  // [D, P]
     r.cls.assign(size_t(cfg.proj_dim), 0.0);
@@ -258,8 +259,8 @@ TEST_CASE("vit: forward matches the double reference for every option and ISA pa
       REQUIRE(out->cls.size() == size_t(var.cfg.out_dim()));
       REQUIRE(out->tokens.size() == ref.tokens.size());
       const double e_cls = max_rel(out->cls, ref.cls), e_tok = rel_err(out->tokens, ref.tokens);
-      std::printf("vit %-11s [%s]: cls max rel %.2e, tokens rel L2 %.2e\n", var.name,
-                  isa_name(isa), e_cls, e_tok);
+      std::printf("vit %-11s [%s]: cls max rel %.2e, tokens rel L2 %.2e\n", var.name, isa_name(isa),
+                  e_cls, e_tok);
       CHECK(e_cls < 1e-5);
       CHECK(e_tok < 1e-5);
       // CLS only (no token output): the same CLS, bit for bit.
@@ -401,7 +402,8 @@ TEST_CASE("vit: loads a safetensors file by name with prefix and ignored names a
   test::TempDir dir("vit-load");
   auto write = [&](const std::string& path, const Weights& m) {
     std::vector<TensorToWrite> t;
-    for (const auto& [name, ten] : m) t.push_back({name, DType::kF32, ten.shape, ten.values.data()});
+    for (const auto& [name, ten] : m)
+      t.push_back({name, DType::kF32, ten.shape, ten.values.data()});
     REQUIRE(write_safetensors(path, t).is_ok());
   };
   // Plus tensors the caller declares as not parameters.
@@ -423,9 +425,9 @@ TEST_CASE("vit: loads a safetensors file by name with prefix and ignored names a
   // Without the ignore list the extras are reported as unused, by name.
   auto strict = VitModel::load(good, cfg);
   REQUIRE_FALSE(strict.is_ok());
-  CHECK_THAT(strict.status().message(),
-             Catch::Contains("unused") && Catch::Contains("visual.head.weight") &&
-                 Catch::Contains("visual.mask_token"));
+  CHECK_THAT(strict.status().message(), Catch::Contains("unused") &&
+                                            Catch::Contains("visual.head.weight") &&
+                                            Catch::Contains("visual.mask_token"));
   // Missing and mis-shaped tensors, by name.
   Weights broken = ws;
   broken.erase("visual.blocks.1.mlp.fc2.bias");

@@ -153,8 +153,8 @@ std::vector<double> bicubic_axis(int64_t in, int64_t out, bool antialias) {
       const double real = scale * (double(o) + 0.5) - 0.5;
       const double f = std::floor(real);
       const double t = real - f;
-      const double c[4] = {cubic_far(t + 1, -0.75), cubic_near(t, -0.75),
-                           cubic_near(1 - t, -0.75), cubic_far(2 - t, -0.75)};
+      const double c[4] = {cubic_far(t + 1, -0.75), cubic_near(t, -0.75), cubic_near(1 - t, -0.75),
+                           cubic_far(2 - t, -0.75)};
       for (int k = 0; k < 4; ++k) {
         const int64_t i = std::clamp(int64_t(f) - 1 + k, int64_t(0), in - 1);
         row[i] += c[k];
@@ -223,9 +223,10 @@ Result<std::unique_ptr<VitModel>> VitModel::build(const VitConfig& cfg) {
   if (cfg.width < 1) return bad("width", "at least 1", cfg.width);
   if (cfg.depth < 0) return bad("depth", "at least 0", cfg.depth);
   if (cfg.heads < 1 || cfg.width % cfg.heads != 0 || cfg.width / cfg.heads > 512)
-    return bad("heads", "a divisor of the width " + std::to_string(cfg.width) +
-                            " giving a head dim of at most 512",
-               cfg.heads);
+    return bad(
+        "heads",
+        "a divisor of the width " + std::to_string(cfg.width) + " giving a head dim of at most 512",
+        cfg.heads);
   if (cfg.mlp_hidden < 1) return bad("mlp_hidden", "at least 1", cfg.mlp_hidden);
   if (cfg.patch < 1 || cfg.patch > 64) return bad("patch", "1..64", cfg.patch);
   if (cfg.grid_h < 1 || cfg.grid_w < 1 || cfg.grid_h * cfg.grid_w > (1 << 20))
@@ -252,7 +253,8 @@ void VitModel::visit(ParamVisitor& v) {
   v.param(pre + "patch_embed.proj.weight", patch_embed.weight, {d, 3, p, p});
   if (cfg_.patch_bias) v.param(pre + "patch_embed.proj.bias", patch_embed.bias, {d});
   if (cfg_.norm_pre) norm_pre.visit(pre + "norm_pre", v);
-  for (size_t i = 0; i < blocks.size(); ++i) blocks[i].visit(pre + "blocks." + std::to_string(i), v);
+  for (size_t i = 0; i < blocks.size(); ++i)
+    blocks[i].visit(pre + "blocks." + std::to_string(i), v);
   if (cfg_.final_norm) norm.visit(pre + "norm", v);
   if (cfg_.proj_dim > 0) v.param(pre + "proj", proj_param, {d, cfg_.proj_dim});
 }
@@ -267,8 +269,8 @@ void VitModel::pack(Precision p) {
   if (cfg_.final_norm) norm.pack();
   if (cfg_.proj_dim > 0) {
     ParamF32 w(proj_param);  // [D, P] = W^T of a Linear
-    proj_ = PackedWeights::pack_kn(w.data(), cfg_.width, cfg_.proj_dim, cfg_.proj_dim,
-                                   weight_type(p));
+    proj_ =
+        PackedWeights::pack_kn(w.data(), cfg_.width, cfg_.proj_dim, cfg_.proj_dim, weight_type(p));
     release_param(proj_param);
     proj_param = Param();
   }
@@ -322,12 +324,12 @@ void VitModel::forward_impl(const Run& r, const float* image, int64_t gh, int64_
   const int64_t img_w = gw * p, img_h = gh * p;
   const bool resample = gh != cfg_.grid_h || gw != cfg_.grid_w;
   ScratchFrame frame(r);
-  float* x = r.alloc(t * d);                             // residual stream [T, D]
-  float* n = r.alloc(t * d);                             // LN output, attention output [T, D]
+  float* x = r.alloc(t * d);                               // residual stream [T, D]
+  float* n = r.alloc(t * d);                               // LN output, attention output [T, D]
   float* big = r.alloc(t * std::max<int64_t>(3 * d, ff));  // qkv [T, 3D], fc1 [T, F]
-  float* patches = r.alloc(n_patch * kp);                // unfolded patches [N, 3 p p]
-  float* pos_r = resample ? r.alloc(t * d) : nullptr;    // resampled pos_embed [T, D]
-  float* row = r.alloc(d);                               // final-normed CLS [D]
+  float* patches = r.alloc(n_patch * kp);                  // unfolded patches [N, 3 p p]
+  float* pos_r = resample ? r.alloc(t * d) : nullptr;      // resampled pos_embed [T, D]
+  float* row = r.alloc(d);                                 // final-normed CLS [D]
   const float* pos = pos_.data();
   if (!r.planning()) {
     for (int64_t py = 0; py < gh; ++py)
@@ -405,9 +407,10 @@ Result<VitModel::Output> VitModel::forward(const float* image, int64_t h, int64_
                                            ThreadPool* pool, bool all_tokens, Arena* arena) const {
   const int64_t p = cfg_.patch;
   if (!image || h < p || w < p || h % p != 0 || w % p != 0)
-    return Status::error("vit: input image: expected [3, H, W] with H and W positive multiples "
-                         "of the patch size " + std::to_string(p) + ", found " +
-                         std::to_string(h) + "x" + std::to_string(w));
+    return Status::error(
+        "vit: input image: expected [3, H, W] with H and W positive multiples "
+        "of the patch size " +
+        std::to_string(p) + ", found " + std::to_string(h) + "x" + std::to_string(w));
   const int64_t gh = h / p, gw = w / p;
   if (gh * gw > (1 << 20))
     return Status::error("vit: input image: expected at most 2^20 patches, found " +
@@ -480,9 +483,8 @@ std::map<std::string, OverrideTensor> vit_random_weights(const VitConfig& cfg, u
     } else if (ends_with(name, "cls_token") || ends_with(name, "pos_embed")) {
       amp = 0.1f;
     } else if (ends_with(name, ".weight") || name == cfg.prefix + "proj") {
-      const int64_t fan_in = name == cfg.prefix + "proj"
-                                 ? shape[0]  // CLIP proj [D, P]
-                                 : n / std::max<int64_t>(shape[0], 1);
+      const int64_t fan_in = name == cfg.prefix + "proj" ? shape[0]  // CLIP proj [D, P]
+                                                         : n / std::max<int64_t>(shape[0], 1);
       amp = float(std::sqrt(3.0 / double(std::max<int64_t>(fan_in, 1))));
     }
     for (float& v : t.values) v = base + amp * uniform();

@@ -7,7 +7,8 @@
 // P output projection width (CLIP `proj`).
 //
 //   x0   = [cls_token ; patch_embed(image)] + pos_embed                [T, D]
-//          patch_embed = conv p x p stride p (a GEMM over unfolded patches, [N, 3 p p] x [3 p p, D])
+//          patch_embed = conv p x p stride p: a GEMM [N, 3 p p] x [3 p p, D] over unfolded
+//          patches
 //   x    = norm_pre(x0)                       (optional; CLIP's ln_pre)
 //   per block (pre-LN):
 //     x += ls1 * proj(attn(qkv(norm1(x))))    [T, D]   softmax(q k^T / sqrt(Dh)) v per head
@@ -59,21 +60,21 @@ enum class VitAct { kGelu, kQuickGelu };
 enum class PosEmbedResample { kRefuse, kBicubic, kBicubicAntialias };
 
 struct VitConfig {
-  std::string prefix;                 // prepended to every name ("" for a timm state_dict)
-  int64_t width = 384;                // D
-  int depth = 12;                     // blocks
-  int heads = 6;                      // Hd (D % Hd == 0, Dh <= 512)
-  int64_t mlp_hidden = 1536;          // F
-  int patch = 14;                     // p
-  int64_t grid_h = 37, grid_w = 37;   // stored pos_embed grid (img_size / p)
-  float ln_eps = 1e-6f;               // every LayerNorm
+  std::string prefix;                // prepended to every name ("" for a timm state_dict)
+  int64_t width = 384;               // D
+  int depth = 12;                    // blocks
+  int heads = 6;                     // Hd (D % Hd == 0, Dh <= 512)
+  int64_t mlp_hidden = 1536;         // F
+  int patch = 14;                    // p
+  int64_t grid_h = 37, grid_w = 37;  // stored pos_embed grid (img_size / p)
+  float ln_eps = 1e-6f;              // every LayerNorm
   VitAct act = VitAct::kGelu;
-  bool layer_scale = true;            // blocks.{i}.ls{1,2}.gamma
-  bool qkv_bias = true;               // blocks.{i}.attn.qkv.bias
-  bool patch_bias = true;             // patch_embed.proj.bias (CLIP's conv1 has none)
-  bool norm_pre = false;              // norm_pre.{weight,bias} (CLIP ln_pre)
-  bool final_norm = true;             // norm.{weight,bias} (CLIP ln_post)
-  int64_t proj_dim = 0;               // P > 0: `proj` [D, P], cls = norm(x)[0] @ proj
+  bool layer_scale = true;  // blocks.{i}.ls{1,2}.gamma
+  bool qkv_bias = true;     // blocks.{i}.attn.qkv.bias
+  bool patch_bias = true;   // patch_embed.proj.bias (CLIP's conv1 has none)
+  bool norm_pre = false;    // norm_pre.{weight,bias} (CLIP ln_pre)
+  bool final_norm = true;   // norm.{weight,bias} (CLIP ln_post)
+  int64_t proj_dim = 0;     // P > 0: `proj` [D, P], cls = norm(x)[0] @ proj
   PosEmbedResample pos_resample = PosEmbedResample::kBicubicAntialias;
 
   // timm vit_small_patch14_dinov2 (num_classes=0): D 384, 12 blocks, 6 heads, F 1536, p 14,
@@ -120,8 +121,8 @@ struct VitBlock {
 
 struct VitLoadOptions {
   Precision precision = Precision::kF32;
-  double lora_scale = 0.0;                   // > 0: merge PEFT LoRA triples (WeightStore)
-  std::set<std::string> ignored;             // full names in the file that are not parameters
+  double lora_scale = 0.0;                    // > 0: merge PEFT LoRA triples (WeightStore)
+  std::set<std::string> ignored;              // full names in the file that are not parameters
   std::vector<std::string> ignored_prefixes;  // full-name prefixes likewise ("head.", "mask_token")
   const std::map<std::string, OverrideTensor>* overrides = nullptr;  // full names; see above
 };
@@ -161,7 +162,7 @@ class VitModel {
   Linear patch_embed;                      // [D, 3 p p] GEMM over unfolded patches
   LayerNorm norm_pre, norm;
   std::vector<VitBlock> blocks;
-  PackedWeights proj_;                     // [D] -> [P]
+  PackedWeights proj_;  // [D] -> [P]
 };
 
 // Every tensor a config asks for (full names, prefix included), seeded random values of plausible

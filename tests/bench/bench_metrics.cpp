@@ -1,9 +1,15 @@
-// bench metrics: PSNR, SSIM and LPIPS-Alex on one 960x540 pair (MACRO's evaluation size).
+// bench metrics: PSNR, SSIM, LPIPS-Alex and DINOv2 on one 960x540 pair (MACRO's evaluation size).
 // SSIM: the separable threaded path at 1 and 2 threads; baseline = the direct 2-D double twin
 // (ssim_reference, 1 thread) measured in the same run. LPIPS: the conv2d path at 1 and 2 threads;
 // baseline = the double-accumulation twin (distance_reference) on the same pair, one run.
+// DINOv2: one embedding (518x518 resize + ViT-S/14 forward, fp32) at 1 and 2 threads; baseline =
+// the 1-thread run. Weights: --dinov2 F, else seeded synthetic weights of the real shapes (same
+// cost) written to a temporary file.
 //
-//   bench metrics [--reps R] [--backbone alexnet.safetensors] [--width W] [--height H]
+//   bench metrics [--reps R] [--backbone alexnet.safetensors] [--dinov2 F] [--width W]
+//                 [--height H]
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -11,16 +17,56 @@
 #include <cstring>
 #include <string>
 
+#include "attention/runtime/safetensors.h"
 #include "bench_registry.h"
+#include "enhance/feature_metrics.h"
 #include "enhance/lpips.h"
 #include "enhance/metrics.h"
 
 namespace macro::bench {
 namespace {
 
+void bench_dinov2(const gs::Image& a, const gs::Image& b, std::string weights, int reps) {
+  std::string temp;
+  if (weights.empty()) {
+    temp = "/tmp/macro-bench-dinov2-" + std::to_string(::getpid()) + ".safetensors";
+    const auto ws = nets::vit_random_weights(enhance::dinov2_config(), 2024);
+    std::vector<TensorToWrite> t;
+    for (const auto& [n, ten] : ws) t.push_back({n, DType::kF32, ten.shape, ten.values.data()});
+    if (Status s = write_safetensors(temp, t); !s) {
+      std::printf("dinov2: skipped: %s\n", s.message().c_str());
+      return;
+    }
+    weights = temp;
+  }
+  const double t0 = now_seconds();
+  auto model = enhance::load_dinov2(weights);
+  if (!model) {
+    std::printf("dinov2: skipped: %s\n", model.status().message().c_str());
+  } else {
+    std::printf("dinov2 load (%s)                  %8.1f ms\n", temp.empty() ? "file" : "synthetic",
+                1e3 * (now_seconds() - t0));
+    ThreadPool one(1), two(2);
+    double base = 0;
+    for (ThreadPool* pool : {&one, &two}) {
+      const double t = median_seconds(std::min(reps, 3), [&] {
+        auto e = enhance::dinov2_embedding(**model, a, pool);
+        MACRO_CHECK(e.is_ok());
+      });
+      if (pool == &one) base = t;
+      std::printf("dinov2 embedding 518x518, %d thread(s) %8.1f ms  %.2fx%s\n", pool->size(),
+                  1e3 * t, base / t, pool == &one ? "  baseline" : "");
+    }
+    const enhance::MetricValue d = enhance::dinov2_distance(a, b, weights, &two);
+    std::printf("dinov2 distance of the pair: %.6f\n", d.computed ? d.value : -1.0);
+  }
+  if (!temp.empty()) std::remove(temp.c_str());
+}
+
 int run(int argc, char** argv) {
   int reps = 7, width = 960, height = 540;
   // Default: the golden's random backbone beside the source tree (same cost as the real one).
+  std::string dinov2;
   std::string backbone = std::string(__FILE__);
   backbone = backbone.substr(0, backbone.rfind('/')) +
              "/../../../shared/golden/metrics/lpips-alex-random-backbone.safetensors";
@@ -29,6 +75,8 @@ int run(int argc, char** argv) {
       reps = std::atoi(argv[i + 1]);
     else if (!std::strcmp(argv[i], "--backbone"))
       backbone = argv[i + 1];
+    else if (!std::strcmp(argv[i], "--dinov2"))
+      dinov2 = argv[i + 1];
     else if (!std::strcmp(argv[i], "--width"))
       width = std::atoi(argv[i + 1]);
     else if (!std::strcmp(argv[i], "--height"))
@@ -62,6 +110,7 @@ int run(int argc, char** argv) {
   auto net = enhance::LpipsAlex::load(backbone, "");
   if (!net) {
     std::printf("lpips: skipped: %s\n", net.status().message().c_str());
+    bench_dinov2(a, b, dinov2, reps);
     return 0;
   }
   const double t_lref = median_seconds(
@@ -73,11 +122,12 @@ int run(int argc, char** argv) {
     std::printf("lpips conv2d, %d thread(s)               %8.1f ms  (%.6f)  %.1fx\n", pool->size(),
                 1e3 * t, v, t_lref / t);
   }
+  bench_dinov2(a, b, dinov2, reps);
   return 0;
 }
 
 const bool registered =
-    register_benchmark({"metrics", "PSNR / SSIM / LPIPS-Alex on a 960x540 pair", run});
+    register_benchmark({"metrics", "PSNR / SSIM / LPIPS-Alex / DINOv2 on a 960x540 pair", run});
 
 }  // namespace
 }  // namespace macro::bench
