@@ -107,10 +107,24 @@ TEST_CASE("dinov2: full-size synthetic weights give finite and self-zero and sym
   REQUIRE(model.is_ok());
   std::printf("dinov2: load %.2f s, %.1f MiB packed\n", seconds_since(t0),
               double((*model)->weight_bytes()) / (1 << 20));
-  // Cached: the same object again.
+  // Cached: the same object again, also when asked from several threads at once.
   auto again = load_dinov2(path);
   REQUIRE(again.is_ok());
   CHECK(again->get() == model->get());
+  {
+    ThreadPool pool(2);
+    std::vector<const nets::VitModel*> seen(4, nullptr);
+    pool.parallel_for(
+        4,
+        [&](size_t b, size_t e, int) {
+          for (size_t i = b; i < e; ++i) {
+            auto m = load_dinov2(path);
+            if (m) seen[i] = m->get();
+          }
+        },
+        1);
+    for (const nets::VitModel* p : seen) CHECK(p == model->get());
+  }
 
   t0 = std::chrono::steady_clock::now();
   const MetricValue d_ab = dinov2_distance(a, b, path);
@@ -132,6 +146,13 @@ TEST_CASE("dinov2: full-size synthetic weights give finite and self-zero and sym
   REQUIRE(ea->size() == 384u);
   CHECK(cosine_distance(*ea, *eb) == cosine_distance(*eb, *ea));
   CHECK(std::abs(cosine_distance(*ea, *eb) - d_ab.value) <= 1e-12);
+  // A replaced file (new modification time) is loaded again.
+  const std::string path2 = write_dinov2(dir, "vit_small_patch14_dinov2.safetensors",
+                                         [](Weights& ws) { ws["norm.bias"].values[0] += 1.0f; });
+  REQUIRE(path2 == path);
+  auto reloaded = load_dinov2(path);
+  REQUIRE(reloaded.is_ok());
+  CHECK(reloaded->get() != model->get());
 }
 
 TEST_CASE("dinov2: loader errors name the tensors and are 'not computed' and never a number",
