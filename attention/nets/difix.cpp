@@ -84,7 +84,10 @@ Result<DifixOutputs> DifixPipeline::step(const TensorView& images, const TensorV
     arena_.reserve(step_workspace_bytes(images.dim(0), images.dim(2), images.dim(3), ctx.dim(1)));
   // (otherwise encode/forward report the bad shape)
   DifixOutputs o;
-  MACRO_ASSIGN_OR_RETURN(VaeEncoding enc, vae_->encode(images, /*keep_skips=*/1, pool, &arena_));
+  // View 0's skips live from encode to decode: in bf16 for a bf16 model (the same decode bits).
+  const bool bf16_skips = vae_->precision() == Precision::kBf16;
+  MACRO_ASSIGN_OR_RETURN(VaeEncoding enc,
+                         vae_->encode(images, /*keep_skips=*/1, pool, &arena_, bf16_skips));
   o.z = std::move(enc.z);
   MACRO_ASSIGN_OR_RETURN(o.eps,
                          unet_->forward(o.z, float(timestep), ctx, masks, pool, {}, &arena_));

@@ -14,9 +14,9 @@
 //   eps = unet(z, t, ctx, masks)                    [V, 4, h, w]   (attn1 joint over the views)
 //   z0  = (z - sqrt(1 - abar_t) eps) / sqrt(abar_t) [V, 4, h, w]
 //   image = vae.decode(z0[0], skips of view 0)      [1, 3, H, W]   (not clamped)
-// t = 199 by default. Only view 0's encoder skips are kept. Every stage runs on one scratch arena
-// owned by the pipeline, reserved once to the largest stage of the input shape and reused by later
-// steps (steps are serialised on it).
+// t = 199 by default. Only view 0's encoder skips are kept (in bf16 for a bf16 model). Every
+// stage runs on one scratch arena owned by the pipeline, reserved once to the largest stage of the
+// input shape and reused by later steps (steps are serialised on it).
 #pragma once
 
 #include <memory>

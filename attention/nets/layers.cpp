@@ -98,6 +98,28 @@ void copy_floats(const Run& r, float* dst, const float* src, int64_t n) {
   });
 }
 
+void gather_rows(const Run& r, float* dst, const float* src, int64_t c, int64_t h, int64_t w,
+                 int64_t y0, int64_t y1) {
+  if (r.planning()) return;
+  const int64_t n = (y1 - y0) * w;
+  parallel(r, size_t(c), [&](size_t b, size_t e) {
+    for (size_t ch = b; ch < e; ++ch)
+      std::memcpy(dst + int64_t(ch) * n, src + int64_t(ch) * h * w + y0 * w,
+                  size_t(n) * sizeof(float));
+  });
+}
+
+void scatter_rows(const Run& r, float* dst, const float* src, int64_t c, int64_t h, int64_t w,
+                  int64_t y0, int64_t y1) {
+  if (r.planning()) return;
+  const int64_t n = (y1 - y0) * w;
+  parallel(r, size_t(c), [&](size_t b, size_t e) {
+    for (size_t ch = b; ch < e; ++ch)
+      std::memcpy(dst + int64_t(ch) * h * w + y0 * w, src + int64_t(ch) * n,
+                  size_t(n) * sizeof(float));
+  });
+}
+
 void tokens_to_nchw_add(const Run& r, float* dst, const float* src, const float* tokens,
                         int64_t ldt, int64_t n, int64_t c, int64_t hw) {
   if (r.planning()) return;
@@ -285,6 +307,20 @@ void Conv2d::forward_scratch(const Run& r, float* x, int64_t n, int64_t h, int64
   conv2d(s, x, packed, residual, y, r.pool);
 }
 
+void Conv2d::forward_rows(const Run& r, const float* x, int64_t h, int64_t w, int64_t y0,
+                          int64_t y1, float* in, float* y, const float* residual,
+                          const GroupNorm::Stats* pre) const {
+  const int hk = k / 2;
+  const int64_t iy0 = std::max<int64_t>(0, y0 - hk), iy1 = std::min<int64_t>(h, y1 + hk);
+  if (r.planning()) return;
+  if (pre)
+    GroupNorm::apply(r, *pre, in, (iy1 - iy0) * w, x + iy0 * w, h * w, (iy1 - iy0) * w);
+  else
+    gather_rows(r, in, x, c_in, h, w, iy0, iy1);
+  forward_scratch(r, in, 1, iy1 - iy0, w, y, residual, 1, int(hk - (y0 - iy0)), hk,
+                  int(hk - (iy1 - y1)), hk);
+}
+
 // ---- norms -------------------------------------------------------------------------------------
 
 void GroupNorm::init(int64_t channels, int num_groups, float epsilon) {
@@ -311,6 +347,43 @@ void GroupNorm::forward(const Run& r, float* dst, const float* src, int64_t n, i
   p.eps = eps;
   p.act = silu ? Act::kSilu : Act::kNone;
   group_norm(dst, src, gamma.data(), beta.data(), n, c, hw, p, r.pool);
+}
+
+// The statistics exactly as ops.cpp's group_norm computes them (same kernels, same order).
+void GroupNorm::stats(const Run& r, const float* x, int64_t hw, bool silu, Stats* st) const {
+  st->mean.assign(size_t(c), 0.0);
+  st->a.assign(size_t(c), 0.0f);
+  st->b.assign(size_t(c), 0.0f);
+  st->silu = silu;
+  if (r.planning()) return;
+  const OpsKernels& k = ops_kernels();
+  const int64_t cpg = c / groups, group_len = cpg * hw;
+  parallel(r, size_t(groups), [&](size_t b0, size_t b1) {
+    for (size_t g = b0; g < b1; ++g) {
+      const float* xg = x + int64_t(g) * group_len;
+      const double mean = group_len ? k.sum(xg, group_len) / double(group_len) : 0.0;
+      const double var = group_len ? k.sum_sq_dev(xg, group_len, mean) / double(group_len) : 0.0;
+      const double rstd = 1.0 / std::sqrt(var + double(eps));
+      for (int64_t ci = 0; ci < cpg; ++ci) {
+        const size_t ch = size_t(int64_t(g) * cpg + ci);
+        st->mean[ch] = mean;
+        st->a[ch] = float(rstd * gamma[ch]);
+        st->b[ch] = beta[ch];
+      }
+    }
+  });
+}
+
+void GroupNorm::apply(const Run& r, const Stats& st, float* dst, int64_t dst_plane,
+                      const float* src, int64_t src_plane, int64_t len) {
+  if (r.planning()) return;
+  const OpsKernels& k = ops_kernels();
+  const Act act = st.silu ? Act::kSilu : Act::kNone;
+  parallel(r, st.mean.size(), [&](size_t b, size_t e) {
+    for (size_t ch = b; ch < e; ++ch)
+      k.affine_act(dst + int64_t(ch) * dst_plane, src + int64_t(ch) * src_plane, len, st.mean[ch],
+                   st.a[ch], st.b[ch], act);
+  });
 }
 
 void LayerNorm::init(int64_t features, float epsilon) {
@@ -398,6 +471,54 @@ void ResnetBlock2D::forward(const Run& r, const float* x, int64_t n, int64_t h, 
   conv2.forward_scratch(r, t2, n, h, w, out, residual, 1, 1, 1, 1, 1);  // out = residual + h
 }
 
+void ResnetBlock2D::forward_lean(const Run& r, float* x, int64_t h, int64_t w, float* t2,
+                                 int64_t band_rows) const {
+  MACRO_CHECK(temb == 0 && lean_ok(c_in, c_out) && band_rows >= 1);
+  MACRO_CHECK(has_shortcut || t2 != nullptr || r.planning());
+  const int64_t hw = h * w, rows = std::min(band_rows, h), band = c_out * rows * w;
+  ScratchFrame frame(r);
+  GroupNorm::Stats g1;
+  norm1.stats(r, x, hw, /*silu=*/true, &g1);
+  float* in = r.alloc(c_in * (rows + 2) * w);  // a band's conv input with its halo rows
+  if (has_shortcut) {
+    // conv1 -> planes [Cout, 2 Cout) of x, shortcut -> planes [0, Cout); band k is written after
+    // band k + 1 has read x (its halo row above is band k's last row).
+    float* t = r.planning() ? nullptr : x + c_out * hw;
+    float* tb[2] = {r.alloc(band), r.alloc(band)};
+    float* sb[2] = {r.alloc(band), r.alloc(band)};
+    int64_t p0 = -1, p1 = -1, k = 0;
+    for (int64_t y0 = 0; y0 < h; y0 += rows, ++k) {
+      const int64_t y1 = std::min(h, y0 + rows);
+      conv1.forward_rows(r, x, h, w, y0, y1, in, tb[k % 2], nullptr, &g1);
+      conv_shortcut.forward_rows(r, x, h, w, y0, y1, in, sb[k % 2], nullptr);
+      if (p0 >= 0) {
+        scatter_rows(r, t, tb[(k - 1) % 2], c_out, h, w, p0, p1);
+        scatter_rows(r, x, sb[(k - 1) % 2], c_out, h, w, p0, p1);
+      }
+      p0 = y0, p1 = y1;
+    }
+    scatter_rows(r, t, tb[(k - 1) % 2], c_out, h, w, p0, p1);
+    scatter_rows(r, x, sb[(k - 1) % 2], c_out, h, w, p0, p1);
+    norm2.forward(r, t, t, 1, hw, /*silu=*/true);
+    conv2.forward_scratch(r, t, 1, h, w, x, /*residual=*/x, 1, 1, 1, 1, 1);  // x = shortcut + h
+    return;
+  }
+  float* yb = r.alloc(band);
+  for (int64_t y0 = 0; y0 < h; y0 += rows) {
+    const int64_t y1 = std::min(h, y0 + rows);
+    conv1.forward_rows(r, x, h, w, y0, y1, in, yb, nullptr, &g1);
+    scatter_rows(r, t2, yb, c_out, h, w, y0, y1);
+  }
+  norm2.forward(r, t2, t2, 1, hw, /*silu=*/true);
+  float* res = r.alloc(band);
+  for (int64_t y0 = 0; y0 < h; y0 += rows) {  // x rows are dead once their band is written
+    const int64_t y1 = std::min(h, y0 + rows);
+    gather_rows(r, res, x, c_out, h, w, y0, y1);
+    conv2.forward_rows(r, t2, h, w, y0, y1, in, yb, res);
+    scatter_rows(r, x, yb, c_out, h, w, y0, y1);
+  }
+}
+
 // ---- resampling --------------------------------------------------------------------------------
 
 void Downsample2D::init(int64_t channels, bool vae_pad) {
@@ -439,6 +560,38 @@ void Upsample2D::forward_in_place(const Run& r, float* x, int64_t n, int64_t c, 
                                   int64_t w, int64_t oh, int64_t ow, float* tmp) const {
   if (!r.planning()) upsample_nearest(tmp, x, n * c, h, w, oh, ow, r.pool);
   conv.forward_scratch(r, tmp, n, oh, ow, x, nullptr, 1, 1, 1, 1, 1);
+}
+
+void Upsample2D::forward_lean(const Run& r, const float* x, int64_t c, int64_t h, int64_t w,
+                              int64_t oh, int64_t ow, float* out, int64_t band_rows) const {
+  MACRO_CHECK(band_rows >= 1 && h > 0 && w > 0);
+  const int64_t rows = std::min(band_rows, oh);
+  ScratchFrame frame(r);
+  float* in = r.alloc(c * (rows + 2) * ow);
+  float* yb = r.alloc(c * rows * ow);
+  if (r.planning()) return;
+  const bool twice = ow == 2 * w;
+  for (int64_t y0 = 0; y0 < oh; y0 += rows) {
+    const int64_t y1 = std::min(oh, y0 + rows);
+    const int64_t iy0 = std::max<int64_t>(0, y0 - 1), iy1 = std::min(oh, y1 + 1);
+    const int64_t n = iy1 - iy0;
+    // Nearest rows, with ops.cpp's upsample_nearest source index floor(y * h / oh).
+    parallel(r, size_t(c), [&](size_t b, size_t e) {
+      for (size_t ch = b; ch < e; ++ch)
+        for (int64_t y = iy0; y < iy1; ++y) {
+          const float* src = x + (int64_t(ch) * h + std::min(h - 1, y * h / oh)) * w;
+          float* d = in + (int64_t(ch) * n + (y - iy0)) * ow;
+          if (twice) {
+            for (int64_t i = 0; i < w; ++i) d[2 * i] = d[2 * i + 1] = src[i];
+          } else {
+            for (int64_t i = 0; i < ow; ++i) d[i] = src[std::min(w - 1, i * w / ow)];
+          }
+        }
+    });
+    conv.forward_scratch(r, in, 1, n, ow, yb, nullptr, 1, int(1 - (y0 - iy0)), 1,
+                         int(1 - (iy1 - y1)), 1);
+    scatter_rows(r, out, yb, c, oh, ow, y0, y1);
+  }
 }
 
 // ---- VAE attention -----------------------------------------------------------------------------

@@ -119,6 +119,34 @@ struct FusedLinear {
                bool trans_x = false) const;
 };
 
+struct GroupNorm {
+  int64_t c = 0;
+  int groups = 32;
+  float eps = 1e-5f;
+  Param weight, bias;
+  std::vector<float> gamma, beta;
+
+  void init(int64_t channels, int num_groups, float epsilon);
+  void visit(const std::string& prefix, ParamVisitor& v);
+  void pack();
+  size_t bytes() const { return (gamma.size() + beta.size()) * sizeof(float); }
+  // dst, src [N, C, HW] (may alias); silu fuses the activation.
+  void forward(const Run& r, float* dst, const float* src, int64_t n, int64_t hw, bool silu) const;
+
+  // The same in two steps, for row bands of one image: statistics of x [C, HW] (the mean and
+  // scale forward() uses), then the normalisation of any part of the planes, bit-identical to
+  // forward() on those elements.
+  struct Stats {
+    std::vector<double> mean;  // per channel (its group's mean)
+    std::vector<float> a, b;   // per channel: y = act((x - mean) * a + b)
+    bool silu = false;
+  };
+  void stats(const Run& r, const float* x, int64_t hw, bool silu, Stats* st) const;
+  // dst [C, len] (plane stride dst_plane) = norm(src [C, len] (plane stride src_plane)).
+  static void apply(const Run& r, const Stats& st, float* dst, int64_t dst_plane, const float* src,
+                    int64_t src_plane, int64_t len);
+};
+
 struct Conv2d {
   int64_t c_in = 0, c_out = 0;
   int k = 3;
@@ -143,21 +171,14 @@ struct Conv2d {
                     const float* residual = nullptr) const {
     forward(r, x, n, h, w, y, residual, 1, k / 2, k / 2, k / 2, k / 2);
   }
-};
-
-struct GroupNorm {
-  int64_t c = 0;
-  int groups = 32;
-  float eps = 1e-5f;
-  Param weight, bias;
-  std::vector<float> gamma, beta;
-
-  void init(int64_t channels, int num_groups, float epsilon);
-  void visit(const std::string& prefix, ParamVisitor& v);
-  void pack();
-  size_t bytes() const { return (gamma.size() + beta.size()) * sizeof(float); }
-  // dst, src [N, C, HW] (may alias); silu fuses the activation.
-  void forward(const Run& r, float* dst, const float* src, int64_t n, int64_t hw, bool silu) const;
+  // Output rows [y0, y1) of the same-padded stride-1 conv of one image x [Cin, H, W]: the input
+  // rows it reads (with k/2 halo rows, clipped) are gathered into `in` [Cin, y1 - y0 + 2(k/2), W]
+  // (through `pre`, a GroupNorm(+SiLU) with whole-image statistics, when given), then
+  // y [Cout, y1 - y0, W] = conv + b (+ residual [Cout, y1 - y0, W], may alias y). Bit-identical
+  // to those rows of forward_same (with pre applied to the whole image first).
+  void forward_rows(const Run& r, const float* x, int64_t h, int64_t w, int64_t y0, int64_t y1,
+                    float* in, float* y, const float* residual,
+                    const GroupNorm::Stats* pre = nullptr) const;
 };
 
 struct LayerNorm {
@@ -198,6 +219,17 @@ struct ResnetBlock2D {
   void forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w,
                const float* temb_silu, float* out, bool x_is_scratch = false,
                int64_t out_capacity = 0) const;
+
+  // The memory-lean form for one image at a large resolution (VAE, temb == 0, Cin >= Cout): the
+  // result replaces x (planes [0, Cout) of x's buffer, the caller's scratch). The convs run by
+  // bands of `band_rows` output rows, so no whole t1 = SiLU(GN1(x)) exists; conv1's output t2
+  // [Cout, H, W] goes to `t2` (without a shortcut; must not overlap x) or, with a shortcut (then
+  // Cin >= 2 Cout), together with the shortcut over x itself, each band written once the next
+  // band has read its halo rows. Peak: x plus t2 (or x alone) plus the bands. Bit-identical to
+  // forward().
+  static bool lean_ok(int64_t cin, int64_t cout) { return cin == cout || cin >= 2 * cout; }
+  void forward_lean(const Run& r, float* x, int64_t h, int64_t w, float* t2,
+                    int64_t band_rows) const;
 };
 
 // Stride-2 3x3 conv. UNet: symmetric pad 1 (out = ceil(n/2)); VAE encoder: pad right/bottom 1 only.
@@ -230,6 +262,11 @@ struct Upsample2D {
   // Both buffers must hold [N, C, oh, ow]; the result is in x.
   void forward_in_place(const Run& r, float* x, int64_t n, int64_t c, int64_t h, int64_t w,
                         int64_t oh, int64_t ow, float* tmp) const;
+  // One image by bands of `band_rows` output rows, each resized and convolved from x [C, h, w]
+  // with its halo rows: out [C, oh, ow] (must not overlap x) with no whole resized temporary.
+  // Bit-identical to forward().
+  void forward_lean(const Run& r, const float* x, int64_t c, int64_t h, int64_t w, int64_t oh,
+                    int64_t ow, float* out, int64_t band_rows) const;
 };
 
 // VAE mid-block attention: GN(eps) -> tokens -> single-head attention (q/k/v/out with biases,
@@ -251,6 +288,13 @@ struct VaeAttention {
 Result<std::string> component_weights_path(const std::string& folder);
 
 // ---- helpers (all no-ops while planning) --------------------------------------------------------
+
+// Rows [y0, y1) of c planes: dst [C, y1 - y0, W] <- src [C, H, W] (gather_rows) or back
+// (scatter_rows).
+void gather_rows(const Run& r, float* dst, const float* src, int64_t c, int64_t h, int64_t w,
+                 int64_t y0, int64_t y1);
+void scatter_rows(const Run& r, float* dst, const float* src, int64_t c, int64_t h, int64_t w,
+                  int64_t y0, int64_t y1);
 
 // Round x to bf16 in place when the run is bf16.
 void round_if_bf16(const Run& r, float* x, int64_t n);

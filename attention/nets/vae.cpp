@@ -178,8 +178,34 @@ Result<std::unique_ptr<DifixVae>> DifixVae::load(const std::string& folder, Prec
 
 // ---- encode ------------------------------------------------------------------------------------
 
+int64_t DifixVae::band_rows(int64_t width) const {
+  if (band_rows_ >= 0) return band_rows_;
+  return std::max<int64_t>(4, kBandPixels / std::max<int64_t>(1, width));
+}
+
+namespace {
+
+// dst (bf16) = RNE(src), by chunks on the run's pool.
+void store_bf16(const Run& r, uint16_t* dst, const float* src, int64_t n) {
+  if (r.planning()) return;
+  constexpr int64_t kChunk = 1 << 16;
+  const int64_t chunks = (n + kChunk - 1) / kChunk;
+  auto fn = [&](size_t b, size_t e, int) {
+    for (size_t c = b; c < e; ++c) {
+      const int64_t lo = int64_t(c) * kChunk, hi = std::min(n, lo + kChunk);
+      f32_to_bf16(src + lo, dst + lo, hi - lo);
+    }
+  };
+  if (r.pool && r.pool->size() > 1)
+    r.pool->parallel_for(size_t(chunks), fn, 1);
+  else
+    fn(0, size_t(chunks), 0);
+}
+
+}  // namespace
+
 void DifixVae::encode_impl(const Run& r, const float* x, int64_t h, int64_t w, float* moments,
-                           const std::vector<float*>& skip_out) const {
+                           const std::vector<SkipOut>& skip_out) const {
   const int n = levels();
   const auto& boc = cfg_.block_out_channels;
   // Ping-pong buffers for the largest level activation.
@@ -192,26 +218,43 @@ void DifixVae::encode_impl(const Run& r, const float* x, int64_t h, int64_t w, f
       if (b.has_down) b.downsampler.out_size(hh, ww, &hh, &ww);
     }
   }
+  // Banded full-resolution level: its resnets need x and t2 only (both fit the ping-pong pair).
+  const int64_t rows = band_rows(w);
+  bool lean = rows > 0;
+  for (const ResnetBlock2D& rb : down_blocks[0].resnets)
+    lean = lean && rb.c_in == rb.c_out && rb.temb == 0;
   float* buf[2] = {r.alloc(max_act), r.alloc(max_act)};
   auto other = [&](const float* cur) { return cur == buf[0] ? buf[1] : buf[0]; };
   int64_t hh = h, ww = w, cc = boc[0];
-  float* cur = skip_out[0] ? skip_out[0] : buf[0];
+  float* cur = skip_out[0].f32 ? skip_out[0].f32 : buf[0];
   enc_conv_in.forward_same(r, x, 1, hh, ww, cur);  // S_0
+  if (skip_out[0].bf16) store_bf16(r, skip_out[0].bf16, cur, cc * hh * ww);
   for (int i = 0; i < n; ++i) {
     const VaeBlock& b = down_blocks[size_t(i)];
-    for (const ResnetBlock2D& rb : b.resnets) {
-      float* o = other(cur);
-      rb.forward(r, cur, 1, hh, ww, nullptr, o);
-      cur = o;
-      cc = rb.c_out;
+    if (i == 0 && lean) {
+      if (cur != buf[0] && cur != buf[1]) {  // S_0 is the caller's skip: work on a copy
+        copy_floats(r, buf[0], cur, cc * hh * ww);
+        cur = buf[0];
+      }
+      for (const ResnetBlock2D& rb : b.resnets) rb.forward_lean(r, cur, hh, ww, other(cur), rows);
+    } else {
+      for (const ResnetBlock2D& rb : b.resnets) {
+        float* o = other(cur);
+        rb.forward(r, cur, 1, hh, ww, nullptr, o, /*x_is_scratch=*/false,
+                   /*out_capacity=*/lean ? max_act : 0);
+        cur = o;
+        cc = rb.c_out;
+      }
     }
     if (b.has_down) {
       int64_t oh, ow;
       b.downsampler.out_size(hh, ww, &oh, &ow);
-      float* o = skip_out[size_t(i + 1)] ? skip_out[size_t(i + 1)] : other(cur);  // S_{i+1}
+      const SkipOut& so = skip_out[size_t(i + 1)];
+      float* o = so.f32 ? so.f32 : other(cur);  // S_{i+1}
       b.downsampler.forward(r, cur, 1, hh, ww, o);
       cur = o;
       hh = oh, ww = ow;
+      if (so.bf16) store_bf16(r, so.bf16, cur, cc * hh * ww);
     }
   }
   float* a = other(cur);
@@ -226,19 +269,19 @@ void DifixVae::encode_impl(const Run& r, const float* x, int64_t h, int64_t w, f
 size_t DifixVae::encode_workspace_bytes(int64_t h, int64_t w) const {
   Workspace plan;
   encode_impl(Run{&plan, nullptr, precision_}, nullptr, h, w, nullptr,
-              std::vector<float*>(size_t(levels()), nullptr));
+              std::vector<SkipOut>(size_t(levels())));
   return plan.peak();
 }
 
 size_t DifixVae::decode_workspace_bytes(int64_t h, int64_t w) const {
   Workspace plan;
   decode_impl(Run{&plan, nullptr, precision_}, nullptr, h / downscale(), w / downscale(),
-              std::vector<const float*>(size_t(levels()), nullptr), nullptr);
+              std::vector<SkipIn>(size_t(levels())), nullptr);
   return plan.peak();
 }
 
 Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skips, ThreadPool* pool,
-                                     Arena* arena) const {
+                                     Arena* arena, bool bf16_skips) const {
   const int64_t f = downscale();
   if (images.dtype != DType::kF32 || images.rank != 4 || !images.is_contiguous() ||
       images.dim(1) != cfg_.in_channels || images.dim(0) < 1 || images.dim(2) < f ||
@@ -249,6 +292,9 @@ Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skip
                          images.describe());
   const int64_t n = images.dim(0), H = images.dim(2), W = images.dim(3);
   if (keep_skips < 0 || keep_skips > n) return Status::error("vae: keep_skips out of range");
+  if (bf16_skips && precision_ != Precision::kBf16)
+    return Status::error("vae: bf16 skips need a bf16 model, this one is " +
+                         std::string(precision_name(precision_)));
   const int64_t h = H / f, w = W / f, lat = cfg_.latent_channels;
   VaeEncoding enc;
   enc.moments = Tensor::f32({n, 2 * lat, h, w});
@@ -256,23 +302,28 @@ Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skip
   {
     int64_t hh = H, ww = W;
     for (int i = 0; i < levels(); ++i) {
-      enc.skips.push_back(Tensor::f32({keep_skips, skip_channels(i), hh, ww}));
+      const Shape shape{keep_skips, skip_channels(i), hh, ww};
+      enc.skips.push_back(bf16_skips ? Tensor(DType::kBF16, shape) : Tensor::f32(shape));
       if (down_blocks[size_t(i)].has_down)
         down_blocks[size_t(i)].downsampler.out_size(hh, ww, &hh, &ww);
     }
   }
   auto skip_ptrs = [&](int64_t img) {
-    std::vector<float*> p(size_t(levels()), nullptr);
+    std::vector<SkipOut> p(static_cast<size_t>(levels()));
     if (img < keep_skips)
       for (int i = 0; i < levels(); ++i) {
-        const Tensor& s = enc.skips[size_t(i)];
-        p[size_t(i)] = s.f32() + img * (s.numel() / keep_skips);
+        Tensor& s = enc.skips[size_t(i)];
+        const int64_t off = img * (s.numel() / keep_skips);
+        if (bf16_skips)
+          p[size_t(i)].bf16 = s.view().u16() + off;
+        else
+          p[size_t(i)].f32 = s.f32() + off;
       }
     return p;
   };
   Workspace plan;
-  std::vector<float*> none(size_t(levels()), nullptr);
-  encode_impl(Run{&plan, pool, precision_}, nullptr, H, W, nullptr, none);
+  encode_impl(Run{&plan, pool, precision_}, nullptr, H, W, nullptr,
+              std::vector<SkipOut>(size_t(levels())));
   Arena local;
   Arena& a = prepare_arena(arena, local, plan.peak());
   const int64_t in_img = cfg_.in_channels * H * W;
@@ -292,21 +343,61 @@ Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skip
 
 // ---- decode ------------------------------------------------------------------------------------
 
+void DifixVae::add_skip(const Run& r, const Conv2d& sc, const SkipIn& s, int64_t hh, int64_t ww,
+                        float* h) const {
+  if (!s.bf16) {  // h += skip_conv(S): the residual is h itself
+    sc.forward(r, s.f32, 1, hh, ww, h, /*residual=*/h, 1, 0, 0, 0, 0);
+    return;
+  }
+  // bf16 skips, widened by row bands (the 1x1 conv rounds them back to the same bf16 values).
+  const int64_t rows = std::max<int64_t>(1, band_rows(ww) > 0 ? band_rows(ww) : hh);
+  const int64_t bh = std::min(rows, hh);
+  ScratchFrame frame(r);
+  float* in = r.alloc(sc.c_in * bh * ww);
+  float* yb = r.alloc(sc.c_out * bh * ww);
+  if (r.planning()) return;
+  for (int64_t y0 = 0; y0 < hh; y0 += bh) {
+    const int64_t y1 = std::min(hh, y0 + bh), n = (y1 - y0) * ww;
+    for (int64_t c = 0; c < sc.c_in; ++c)
+      bf16_to_f32(s.bf16 + c * hh * ww + y0 * ww, in + c * n, n);
+    gather_rows(r, yb, h, sc.c_out, hh, ww, y0, y1);
+    sc.forward_scratch(r, in, 1, y1 - y0, ww, yb, /*residual=*/yb, 1, 0, 0, 0, 0);
+    scatter_rows(r, h, yb, sc.c_out, hh, ww, y0, y1);
+  }
+}
+
 void DifixVae::decode_impl(const Run& r, const float* z, int64_t h, int64_t w,
-                           const std::vector<const float*>& skips, float* out) const {
+                           const std::vector<SkipIn>& skips, float* out) const {
   const int n = levels();
   const int64_t lat = cfg_.latent_channels;
-  int64_t max_act = 0;
+  // Banded full-resolution level (the last): the transition upsample goes by bands from a copy
+  // of its input into the level's one buffer R, whose resnets then need x and t2 only (x alone
+  // with a shortcut); the lower levels ping-pong in R's two halves.
+  const int64_t rows = band_rows(w << (n - 1));
+  bool lean = rows > 0 && n >= 2;
+  for (const ResnetBlock2D& rb : up_blocks[size_t(n - 1)].resnets)
+    lean = lean && ResnetBlock2D::lean_ok(rb.c_in, rb.c_out) && rb.temb == 0;
+  int64_t max_act = 0;  // lean: without the full-resolution level
   {
     int64_t hh = h, ww = w;
     for (int i = 0; i < n; ++i) {
       const VaeBlock& b = up_blocks[size_t(i)];
-      max_act = std::max(max_act, std::max(b.c_in, b.c_out) * hh * ww);
+      if (!(lean && i == n - 1)) max_act = std::max(max_act, std::max(b.c_in, b.c_out) * hh * ww);
       if (b.has_up) hh *= 2, ww *= 2;
-      max_act = std::max(max_act, b.c_out * hh * ww);
+      if (!(lean && i == n - 2)) max_act = std::max(max_act, b.c_out * hh * ww);
     }
   }
-  float* buf[2] = {r.alloc(max_act), r.alloc(max_act)};
+  float* buf[2];
+  if (lean) {
+    const VaeBlock& last = up_blocks[size_t(n - 1)];
+    const int64_t full = (h << (n - 1)) * (w << (n - 1));
+    const int64_t region = std::max({2 * max_act, last.c_in * full, 2 * last.c_out * full});
+    buf[0] = r.alloc(region);
+    buf[1] = r.planning() ? nullptr : buf[0] + max_act;
+  } else {
+    buf[0] = r.alloc(max_act);
+    buf[1] = r.alloc(max_act);
+  }
   auto other = [&](const float* cur) { return cur == buf[0] ? buf[1] : buf[0]; };
   float* d = r.alloc(lat * h * w);
   float* p = r.alloc(lat * h * w);
@@ -318,23 +409,43 @@ void DifixVae::decode_impl(const Run& r, const float* z, int64_t h, int64_t w,
   int64_t hh = h, ww = w, cc = up_blocks[0].c_in;
   for (int i = 0; i < n; ++i) {
     const VaeBlock& b = up_blocks[size_t(i)];
-    if (!cfg_.ignore_skip) {  // h += skip_conv_{i+1}(gamma * S_{n-1-i}); gamma is in the weights
-      const Conv2d& sc = skip_convs[size_t(i)];
-      sc.forward(r, skips[size_t(n - 1 - i)], 1, hh, ww, cur, /*residual=*/cur, 1, 0, 0, 0, 0);
+    // h += skip_conv_{i+1}(gamma * S_{n-1-i}); gamma is in the weights
+    if (!cfg_.ignore_skip)
+      add_skip(r, skip_convs[size_t(i)], skips[size_t(n - 1 - i)], hh, ww, cur);
+    if (lean && i == n - 1) {
+      for (const ResnetBlock2D& rb : b.resnets) {
+        MACRO_CHECK(cur == buf[0]);
+        float* t2 = rb.has_shortcut || r.planning() ? nullptr : cur + rb.c_out * hh * ww;
+        rb.forward_lean(r, cur, hh, ww, t2, rows);  // the result replaces x
+        cc = rb.c_out;
+      }
+      break;
     }
     for (const ResnetBlock2D& rb : b.resnets) {
       float* o = other(cur);
       // At the full-resolution level the ping-pong buffers (sized for the widest upsampled
-      // tensor) have room for conv1's output behind the block's own output.
+      // tensor) have room for conv1's output behind the block output.
       rb.forward(r, cur, 1, hh, ww, nullptr, o, /*x_is_scratch=*/true, /*out_capacity=*/max_act);
       cur = o;
       cc = rb.c_out;
     }
-    if (b.has_up) {  // both ping-pong buffers hold max_act: resize into the other one
+    if (b.has_up && lean && i == n - 2) {  // into R by bands, from a copy of the input
+      ScratchFrame frame(r);
+      float* src = r.alloc(cc * hh * ww);
+      copy_floats(r, src, cur, cc * hh * ww);
+      b.upsampler.forward_lean(r, src, cc, hh, ww, 2 * hh, 2 * ww, buf[0], rows);
+      cur = buf[0];
+      hh *= 2, ww *= 2;
+    } else if (b.has_up) {  // both ping-pong buffers hold max_act: resize into the other one
       MACRO_CHECK(cur == buf[0] || cur == buf[1]);
       b.upsampler.forward_in_place(r, cur, 1, cc, hh, ww, 2 * hh, 2 * ww, other(cur));
       hh *= 2, ww *= 2;
     }
+  }
+  if (lean) {  // in place: GroupNorm reads each group whole before writing it
+    dec_norm_out.forward(r, cur, cur, 1, hh * ww, /*silu=*/true);
+    dec_conv_out.forward_scratch(r, cur, 1, hh, ww, out, nullptr, 1, 1, 1, 1, 1);
+    return;
   }
   float* t = other(cur);
   dec_norm_out.forward(r, t, cur, 1, hh * ww, /*silu=*/true);
@@ -352,16 +463,24 @@ Result<Tensor> DifixVae::decode(const TensorView& z, const std::vector<TensorVie
   if (int(skips.size()) != levels())
     return Status::error("vae: expected " + std::to_string(levels()) + " skip tensors, found " +
                          std::to_string(skips.size()));
-  std::vector<const float*> ptrs;
+  const bool bf16_ok = precision_ == Precision::kBf16;
+  std::vector<SkipIn> ptrs;
   for (int i = 0; i < levels(); ++i) {
     const TensorView& s = skips[size_t(i)];
     const int64_t scale_i = f >> i;  // S_i is at H / 2^i
-    if (s.dtype != DType::kF32 || s.rank != 4 || !s.is_contiguous() || s.dim(0) != 1 ||
+    const bool dtype_ok = s.dtype == DType::kF32 || (bf16_ok && s.dtype == DType::kBF16);
+    if (!dtype_ok || s.rank != 4 || !s.is_contiguous() || s.dim(0) != 1 ||
         s.dim(1) != skip_channels(i) || s.dim(2) != h * scale_i || s.dim(3) != w * scale_i)
-      return Status::error("vae: skip" + std::to_string(i) + ": expected contiguous F32 [1," +
+      return Status::error("vae: skip" + std::to_string(i) + ": expected contiguous " +
+                           (bf16_ok ? "F32 or BF16" : "F32") + " [1," +
                            std::to_string(skip_channels(i)) + "," + std::to_string(h * scale_i) +
                            "," + std::to_string(w * scale_i) + "], found " + s.describe());
-    ptrs.push_back(s.f32());
+    SkipIn in;
+    if (s.dtype == DType::kF32)
+      in.f32 = s.f32();
+    else
+      in.bf16 = s.u16();
+    ptrs.push_back(in);
   }
   Tensor out = Tensor::f32({1, cfg_.out_channels, h * f, w * f});
   Workspace plan;

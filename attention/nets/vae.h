@@ -55,7 +55,8 @@ struct VaeMidBlock {
 struct VaeEncoding {
   Tensor moments;             // [N, 2L, h, w]
   Tensor z;                   // [N, L, h, w] = scaling_factor * mean
-  std::vector<Tensor> skips;  // S_i [K, C_i, H_i, W_i] for the first K = keep_skips images
+  std::vector<Tensor> skips;  // S_i [K, C_i, H_i, W_i] for the first K = keep_skips images (F32,
+                              // or BF16 when encoded with bf16_skips)
 };
 
 class DifixVae {
@@ -76,24 +77,49 @@ class DifixVae {
   // images [N, Cin, H, W] (H, W multiples of downscale()). Skips are kept for the first
   // `keep_skips` images (0..N). Images are encoded one at a time (the convs are threaded inside),
   // all on one arena: `arena` (optional, empty; reused across calls, grown if needed) or a local.
+  // bf16_skips (bf16 models only): the skips are stored in bf16, half the bytes; the decoder's
+  // bf16 skip convs round their input to bf16 anyway, so a decode gives the same bits.
   Result<VaeEncoding> encode(const TensorView& images, int64_t keep_skips, ThreadPool* pool,
-                             Arena* arena = nullptr) const;
+                             Arena* arena = nullptr, bool bf16_skips = false) const;
   // z [1, L, h, w] with that image's skips S_i [1, C_i, H_i, W_i] (views of any encoding with
-  // matching sizes) -> image [1, Cout, H, W], not clamped.
+  // matching sizes; F32, or BF16 for a bf16 model) -> image [1, Cout, H, W], not clamped.
   Result<Tensor> decode(const TensorView& z, const std::vector<TensorView>& skips, ThreadPool* pool,
                         Arena* arena = nullptr) const;
   // Scratch bytes of one image's encode / decode at H x W pixels (the planned arena sizes).
   size_t encode_workspace_bytes(int64_t h, int64_t w) const;
   size_t decode_workspace_bytes(int64_t h, int64_t w) const;
 
+  // Memory: the full-resolution level (the encoder's first, the decoder's last) runs by bands of
+  // output rows (ResnetBlock2D::forward_lean, Upsample2D::forward_lean), so it holds two
+  // full-resolution tensors of its width instead of three (encoder) or four (decoder).
+  // rows > 0: bands of that many rows; kAutoBands (the default): about kBandPixels pixels per
+  // band; 0: whole images (the reference the band path is tested against). Results are
+  // bit-identical in every mode.
+  static constexpr int64_t kAutoBands = -1, kBandPixels = 8192;
+  void set_band_rows(int64_t rows) { band_rows_ = rows; }
+  Precision precision() const { return precision_; }
+
  private:
+  struct SkipIn {  // one skip of the decoded image: fp32 or bf16
+    const float* f32 = nullptr;
+    const uint16_t* bf16 = nullptr;
+  };
+  struct SkipOut {  // where encode_impl stores a skip: fp32 (written in place) or bf16 (a copy)
+    float* f32 = nullptr;
+    uint16_t* bf16 = nullptr;
+  };
+  int64_t band_rows(int64_t width) const;  // 0: whole images
   void encode_impl(const Run& r, const float* x, int64_t h, int64_t w, float* moments,
-                   const std::vector<float*>& skip_out) const;
+                   const std::vector<SkipOut>& skip_out) const;
   void decode_impl(const Run& r, const float* z, int64_t h, int64_t w,
-                   const std::vector<const float*>& skips, float* out) const;
+                   const std::vector<SkipIn>& skips, float* out) const;
+  // h += skip_conv(S) at one level: S [Cs, hh, ww], h [C, hh, ww].
+  void add_skip(const Run& r, const Conv2d& sc, const SkipIn& s, int64_t hh, int64_t ww,
+                float* h) const;
 
   VaeConfig cfg_;
   Precision precision_ = Precision::kF32;
+  int64_t band_rows_ = kAutoBands;
   // encoder
   Conv2d enc_conv_in, enc_conv_out, quant_conv;
   std::vector<VaeBlock> down_blocks;

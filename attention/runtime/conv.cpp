@@ -7,7 +7,8 @@
 // neighbouring channels under the same tap. The input is converted once per call into channel-pair
 // planes xp[Cin2/2][H][W] of 32-bit words (even channel in the low half; a per-thread buffer grown
 // once, not allocated per call) and the pair panels are then gathered exactly like the fp32 ones,
-// one 32-bit word per pixel.
+// one 32-bit word per pixel. Large images go by bands of output rows (conv_rows: the shape re-cut
+// to the band's input rows), so that buffer stays small.
 //
 // Stride-1 gathers into 32-column panels use the path's vector gather when it has one
 // (KernelTable::conv_rows32: masked loads per output-row run); otherwise, and for stride 2, the
@@ -190,17 +191,97 @@ ConvWeights ConvWeights::pack(const float* w, const float* bias, int64_t c_out, 
   return cw;
 }
 
-// bf16 channel-pair planes of one image: grown once per calling thread, reused by every call.
+// bf16 channel-pair planes: grown once per calling thread to at most one band, reused by every
+// call.
 thread_local std::vector<uint32_t> t_pair_planes;
+size_t g_pair_band_words = size_t(4) << 20;  // 16 MB of pair words per band (conv2d_set_pair_band)
 
 void conv2d_release_scratch() {
   std::vector<uint32_t>().swap(t_pair_planes);
+}
+
+size_t conv2d_set_pair_band(size_t words) {
+  const size_t old = g_pair_band_words;
+  g_pair_band_words = std::max<size_t>(1, words);
+  return old;
 }
 
 void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const float* residual,
             float* y, ThreadPool* pool) {
   conv2d(s, x, w, residual, y, ConvAct::kNone, pool);
 }
+
+namespace {
+
+// Output rows [oy0, oy1) of one image read input rows [iy0, iy1) (clipped to the image).
+void input_rows(const Conv2dShape& s, int64_t oy0, int64_t oy1, int64_t* iy0, int64_t* iy1) {
+  *iy0 = std::clamp<int64_t>(oy0 * s.stride - s.pad_top, 0, s.h);
+  *iy1 = std::clamp<int64_t>((oy1 - 1) * s.stride - s.pad_top + s.kh, *iy0, s.h);
+}
+
+// The GEMM over output rows [oy0, oy1) of image b, whose input rows [iy0, iy1) are in `xf` (fp32,
+// plane stride `plane`) or `xp` (bf16 pair words, plane stride `plane`): the shape is re-cut to
+// those rows, with the padding that falls inside the band. Each output pixel sums the same K in the
+// same blocks as an unbanded call (KC depends on K only), so banding changes no bit.
+void conv_rows(const Conv2dShape& s, const float* xf, const uint32_t* xp, int64_t iy0, int64_t iy1,
+               int64_t oy0, int64_t oy1, const ConvWeights& w, const float* residual, float* y,
+               ConvAct act, ThreadPool* pool) {
+  const GemmKernel& kern = w.packed().kernel();
+  const bool bf16 = w.type() == WeightType::kBf16;
+  const int64_t cin2 = (s.c_in + 1) / 2 * 2;
+  const int64_t oh = s.out_h(), ow = s.out_w();
+  Conv2dShape b = s;
+  b.n = 1;
+  b.h = iy1 - iy0;
+  b.pad_top = int(iy0 - (oy0 * s.stride - s.pad_top));  // rows above the band that read as zero
+  b.pad_bottom = int(std::max<int64_t>(0, (oy1 - 1) * s.stride - s.pad_top + s.kh - iy1));
+  MACRO_CHECK(b.pad_top >= 0 && b.out_h() == oy1 - oy0 && b.out_w() == ow);
+  Im2colCtx ctx{&b, xf, xp, cin2, oy1 - oy0, ow, kernels_for(w.packed().isa()).conv_rows32};
+  detail::Operand oa{nullptr, nullptr, w.packed().panels(), w.packed().k_padded()};
+  detail::Operand ob{pack_im2col, &ctx, nullptr, 0};
+  detail::DriverShape ds;
+  ds.M = s.c_out;
+  ds.N = (oy1 - oy0) * ow;
+  ds.K = bf16 ? cin2 * s.kh * s.kw : s.c_in * s.kh * s.kw;
+  ds.C = y + oy0 * ow;
+  ds.ldc = oh * ow;
+  // All output channels in one task (the im2col panels are then gathered once), up to 512.
+  ds.mc = detail::round_up(std::min<int64_t>(s.c_out, 512), kern.mr);
+  ds.nc = int64_t(kern.nr) * std::max(1, 256 / kern.nr);
+  GemmParams p;
+  p.bias_m = w.bias();
+  p.relu = act == ConvAct::kRelu;
+  if (residual) {
+    p.residual = residual + oy0 * ow;
+    p.ldr = oh * ow;
+  }
+  detail::run_gemm(kern, ds, oa, ob, p, pool);
+}
+
+// Input rows [iy0, iy1) of image xb [Cin, H, W] as pair words xp[Cin2/2][iy1 - iy0][W].
+void convert_pairs(const Conv2dShape& s, const float* xb, int64_t iy0, int64_t iy1, uint32_t* xp,
+                   ThreadPool* pool) {
+  const int64_t HW = s.h * s.w, n = (iy1 - iy0) * s.w, cin2 = (s.c_in + 1) / 2 * 2;
+  auto convert = [&](size_t p0, size_t p1, int) {
+    for (size_t cp = p0; cp < p1; ++cp) {
+      const int64_t c0 = 2 * int64_t(cp), c1 = c0 + 1;
+      const float* x0 = xb + c0 * HW + iy0 * s.w;
+      const float* x1 = c1 < s.c_in ? xb + c1 * HW + iy0 * s.w : nullptr;
+      uint32_t* dst = xp + cp * n;
+      if (x1) {
+        for (int64_t i = 0; i < n; ++i) dst[i] = bf16_bits(x0[i]) | (bf16_bits(x1[i]) << 16);
+      } else {
+        for (int64_t i = 0; i < n; ++i) dst[i] = bf16_bits(x0[i]);
+      }
+    }
+  };
+  if (pool)
+    pool->parallel_for(size_t(cin2 / 2), convert, 1);
+  else
+    convert(0, size_t(cin2 / 2), 0);
+}
+
+}  // namespace
 
 void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const float* residual,
             float* y, ConvAct act, ThreadPool* pool) {
@@ -209,54 +290,35 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
               s.pad_right >= 0);
   const int64_t oh = s.out_h(), ow = s.out_w();
   if (oh <= 0 || ow <= 0 || s.n <= 0 || s.c_out <= 0) return;
-  const GemmKernel& kern = w.packed().kernel();
   const bool bf16 = w.type() == WeightType::kBf16;
   const int64_t cin2 = (s.c_in + 1) / 2 * 2;
-  const int64_t K = bf16 ? cin2 * s.kh * s.kw : s.c_in * s.kh * s.kw;
-  const int64_t npix = oh * ow, HW = s.h * s.w;
-  std::vector<uint32_t>& xp = t_pair_planes;
-  if (bf16 && xp.size() < size_t(cin2 / 2 * HW)) xp.resize(size_t(cin2 / 2 * HW));
+  const int64_t HW = s.h * s.w;
   for (int64_t b = 0; b < s.n; ++b) {
     const float* xb = x + b * s.c_in * HW;
-    if (bf16) {
-      auto convert = [&](size_t p0, size_t p1, int) {
-        for (size_t cp = p0; cp < p1; ++cp) {
-          const int64_t c0 = 2 * int64_t(cp), c1 = c0 + 1;
-          const float* x0 = xb + c0 * HW;
-          const float* x1 = c1 < s.c_in ? xb + c1 * HW : nullptr;
-          uint32_t* dst = xp.data() + cp * HW;
-          if (x1) {
-            for (int64_t i = 0; i < HW; ++i) dst[i] = bf16_bits(x0[i]) | (bf16_bits(x1[i]) << 16);
-          } else {
-            for (int64_t i = 0; i < HW; ++i) dst[i] = bf16_bits(x0[i]);
-          }
-        }
-      };
-      if (pool)
-        pool->parallel_for(size_t(cin2 / 2), convert, 1);
-      else
-        convert(0, size_t(cin2 / 2), 0);
+    const float* rb = residual ? residual + b * s.c_out * oh * ow : nullptr;
+    float* yb = y + b * s.c_out * oh * ow;
+    if (!bf16) {
+      conv_rows(s, xb, nullptr, 0, s.h, 0, oh, w, rb, yb, act, pool);
+      continue;
     }
-    Im2colCtx ctx{&s, xb, xp.data(), cin2, oh, ow, kernels_for(w.packed().isa()).conv_rows32};
-    detail::Operand oa{nullptr, nullptr, w.packed().panels(), w.packed().k_padded()};
-    detail::Operand ob{pack_im2col, &ctx, nullptr, 0};
-    detail::DriverShape ds;
-    ds.M = s.c_out;
-    ds.N = npix;
-    ds.K = K;
-    ds.C = y + b * s.c_out * npix;
-    ds.ldc = npix;
-    // All output channels in one task (the im2col panels are then gathered once), up to 512.
-    ds.mc = detail::round_up(std::min<int64_t>(s.c_out, 512), kern.mr);
-    ds.nc = int64_t(kern.nr) * std::max(1, 256 / kern.nr);
-    GemmParams p;
-    p.bias_m = w.bias();
-    p.relu = act == ConvAct::kRelu;
-    if (residual) {
-      p.residual = residual + b * s.c_out * npix;
-      p.ldr = npix;
+    // bf16: the input converted once into pair planes, by bands of output rows when the whole
+    // image's planes would exceed the band budget (then the halo rows are converted twice).
+    const int64_t row_words = cin2 / 2 * s.w;
+    int64_t band = oh;
+    if (size_t(cin2 / 2 * HW) > g_pair_band_words) {
+      const int64_t in_rows = std::max<int64_t>(s.kh, int64_t(g_pair_band_words) / row_words);
+      band = std::max<int64_t>(1, (in_rows - s.kh) / s.stride + 1);
     }
-    detail::run_gemm(kern, ds, oa, ob, p, pool);
+    for (int64_t oy0 = 0; oy0 < oh; oy0 += band) {
+      const int64_t oy1 = std::min(oh, oy0 + band);
+      int64_t iy0, iy1;
+      input_rows(s, oy0, oy1, &iy0, &iy1);
+      std::vector<uint32_t>& xp = t_pair_planes;
+      const size_t words = size_t(cin2 / 2 * (iy1 - iy0) * s.w);
+      if (xp.size() < words) xp.resize(words);
+      convert_pairs(s, xb, iy0, iy1, xp.data(), pool);
+      conv_rows(s, nullptr, xp.data(), iy0, iy1, oy0, oy1, w, rb, yb, act, pool);
+    }
   }
 }
 

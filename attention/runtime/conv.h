@@ -80,9 +80,13 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
             float* y, ConvAct act, ThreadPool* pool = nullptr);
 
 // bf16 convs convert the input image once per call into channel-pair planes (Cin/2 x H x W 32-bit
-// words) held in a per-thread buffer that grows to the largest image seen and is then reused
-// (no allocation per call). This frees the calling thread's buffer (e.g. after a large decode).
+// words) held in a per-thread buffer that grows to the largest band seen and is then reused
+// (no allocation per call). An image whose planes exceed the band budget (4 Mi words = 16 MB by
+// default) is convolved by bands of output rows, each converting only its input rows (halo rows
+// twice); results are bit-identical to one band. This frees the calling thread's buffer.
 void conv2d_release_scratch();
+// Sets the band budget in pair words (>= 1; tests force banding on small images); returns the old.
+size_t conv2d_set_pair_band(size_t words);
 
 // Convenience for tests and one-off calls: packs the weights on each call.
 void conv2d(const Conv2dShape& s, const float* x, const float* weight, const float* bias,

@@ -19,9 +19,11 @@
 //   bench difix [--size 512|960|all] [--stage all|encode|unet|decode|load]
 //               [--precision f32|bf16|both]
 //               [--threads 1,2] [--reps R] [--warmup] [--views V] [--random-latents] [--dir DIR]
-//               [--storage bf16|f32] [--golden DIR]
+//               [--storage bf16|f32] [--golden DIR] [--whole]
 // --views V: V views (default 2; the MACRO case runs 10 at 960x536). --random-latents: with
-// --stage unet, feed uniform random latents instead of encoding the images first.
+// --stage unet, feed uniform random latents instead of encoding the images first. --whole: the
+// VAE's whole-image paths (no row bands, whole-image bf16 pair planes, fp32 skips): the memory
+// baseline. Peak RSS is also printed per stage (VmHWM reset before each stage; -1 = not run).
 //
 // The synthetic folder is written once (default <bench dir>/bench-data/difix-synthetic-<storage>)
 // and reused; --storage bf16 (default) halves it (U-Net 1.7 GB instead of 3.5 GB; a bf16 run packs
@@ -221,6 +223,7 @@ struct Options {
   int reps = 1;
   bool warmup = false;
   bool random_latents = false;  // --stage unet without the (untimed) encode: z uniform in [-1, 1]
+  bool lean = true;             // --whole: the whole-image VAE paths (the memory baseline)
   int64_t views = 2;
   std::string dir, storage = "bf16", golden;
 };
@@ -280,6 +283,8 @@ int run(int argc, char** argv) {
       o.threads = parse_list(next());
     } else if (!std::strcmp(a, "--random-latents")) {
       o.random_latents = true;
+    } else if (!std::strcmp(a, "--whole")) {
+      o.lean = false;
     } else if (!std::strcmp(a, "--warmup")) {
       o.warmup = true;
     } else if (!std::strcmp(a, "--views")) {
@@ -348,6 +353,11 @@ int run(int argc, char** argv) {
       return 1;
     }
     const nets::DifixPipeline& p = **pipe;
+    // --whole: the VAE's whole-image paths, whole-image bf16 pair planes and fp32 skips (what a
+    // step held before the banded paths); default: as DifixPipeline::step runs.
+    const bool bf16_skips = o.lean && prec == Precision::kBf16;
+    const_cast<nets::DifixVae&>(p.vae()).set_band_rows(o.lean ? nets::DifixVae::kAutoBands : 0);
+    if (!o.lean) conv2d_set_pair_band(size_t(1) << 40);
     std::printf(
         "\n[%s] loaded in %.1f s (cpu %.1f s): networks hold %.2f GiB; peak RSS while loading "
         "%.2f GiB, resident after %.2f GiB (ru_maxrss so far %.2f GB)\n",
@@ -403,7 +413,7 @@ int run(int argc, char** argv) {
         nets::VaeEncoding enc;
         Status err = Status::ok();
         auto do_encode = [&] {
-          auto r = p.vae().encode(images, 1, pool, &arena);
+          auto r = p.vae().encode(images, 1, pool, &arena, bf16_skips);
           if (!r.is_ok()) {
             err = r.status();
             return;
@@ -431,8 +441,15 @@ int run(int argc, char** argv) {
           image = std::move(*r);
         };
         Timing te{}, tu{}, td{};
+        // Peak RSS per stage: VmHWM reset before each stage, read after it.
+        double hwm[3] = {-1, -1, -1};
+        auto stage_peak = [&](int i) {
+          hwm[i] = proc_status_gb("VmHWM:");
+          reset_peak_rss();
+        };
         if (all || o.stage == "encode") {
           te = median_timing(o.reps, do_encode, o.warmup);
+          stage_peak(0);
         } else if (o.random_latents && o.stage == "unet") {
           enc.z = Tensor::f32({views, int64_t(vc.latent_channels), h, w});
           for (int64_t i = 0; i < enc.z.numel(); ++i) enc.z.f32()[i] = u(rng);
@@ -445,7 +462,9 @@ int run(int argc, char** argv) {
         }
         if (all || o.stage == "encode") row("encode", enc_flop, te, pk0);
         if (all || o.stage == "unet") {
+          reset_peak_rss();
           tu = median_timing(o.reps, do_unet, o.warmup);
+          stage_peak(1);
           if (!err) {
             std::fprintf(stderr, "bench difix: %s\n", err.message().c_str());
             return 1;
@@ -453,7 +472,9 @@ int run(int argc, char** argv) {
           row("unet", unet_flop, tu, pk0);
         }
         if (all || o.stage == "decode") {
+          reset_peak_rss();
           td = median_timing(o.reps, do_decode, o.warmup);
+          stage_peak(2);
           if (!err) {
             std::fprintf(stderr, "bench difix: %s\n", err.message().c_str());
             return 1;
@@ -467,9 +488,10 @@ int run(int argc, char** argv) {
           row("step", enc_flop + unet_flop + dec_flop, tot, pk);
         }
         std::printf(
-            "    (FMA peak after: %.1f GFLOP/s; peak RSS while running the stages %.2f GiB; "
-            "ru_maxrss so far %.2f GB)\n",
-            pk1.wall, proc_status_gb("VmHWM:"), peak_rss_gb());
+            "    (FMA peak after: %.1f GFLOP/s; peak RSS while running the stages %.2f GiB: "
+            "encode %.2f, unet %.2f, decode %.2f; ru_maxrss so far %.2f GB)\n",
+            pk1.wall, std::max({hwm[0], hwm[1], hwm[2], proc_status_gb("VmHWM:")}), hwm[0], hwm[1],
+            hwm[2], peak_rss_gb());
         std::fflush(stdout);
       }
     }
