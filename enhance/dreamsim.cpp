@@ -399,22 +399,32 @@ Result<double> DreamSimModel::distance(const gs::Image& pred, const gs::Image& g
   return dreamsim_embedding_distance(a, b);
 }
 
+namespace {
+std::mutex g_cache_mutex;
+std::shared_ptr<const DreamSimModel> g_cached;  // under g_cache_mutex
+}  // namespace
+
+Result<std::shared_ptr<const DreamSimModel>> dreamsim_cached_model(const std::string& weights_path) {
+  const std::string path = weights_path.empty() ? default_dreamsim_path() : weights_path;
+  std::lock_guard<std::mutex> lock(g_cache_mutex);
+  if (!g_cached || g_cached->path() != path) {
+    g_cached.reset();  // release the old model's memory before loading the new one
+    MACRO_ASSIGN_OR_RETURN(auto loaded, DreamSimModel::load(path));
+    g_cached = std::move(loaded);
+  }
+  return g_cached;
+}
+
+void dreamsim_release_cached_model() {
+  std::lock_guard<std::mutex> lock(g_cache_mutex);
+  g_cached.reset();
+}
+
 Result<double> dreamsim_distance_value(const gs::Image& pred, const gs::Image& gt,
                                        const std::string& weights_path, ThreadPool& pool) {
-  static std::mutex cache_mutex;
-  static std::shared_ptr<const DreamSimModel> cached;
   MACRO_TRY(check_pair(pred, gt));
-  const std::string path = weights_path.empty() ? default_dreamsim_path() : weights_path;
-  std::shared_ptr<const DreamSimModel> model;
-  {
-    std::lock_guard<std::mutex> lock(cache_mutex);
-    if (!cached || cached->path() != path) {
-      cached.reset();  // release the old model's memory before loading the new one
-      MACRO_ASSIGN_OR_RETURN(auto loaded, DreamSimModel::load(path));
-      cached = std::move(loaded);
-    }
-    model = cached;
-  }
+  MACRO_ASSIGN_OR_RETURN(std::shared_ptr<const DreamSimModel> model,
+                         dreamsim_cached_model(weights_path));
   return model->distance(pred, gt, pool);
 }
 

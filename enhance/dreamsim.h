@@ -135,9 +135,15 @@ class DreamSimModel {
   mutable std::vector<Arena> arenas_;  // one per backbone, reused across calls (under mutex_)
 };
 
-// The metric entry: the model for `weights_path` ("" = default_dreamsim_path()) is loaded once and
-// kept (one cached model; a different path replaces it); thread-safe. Errors: the file is missing
-// (naming the path), the file is bad (naming tensors), the images are bad.
+// The model for `weights_path` ("" = default_dreamsim_path()), loaded once and kept: one cached
+// model (about 1 GB of fp32 weights); a different path replaces it. Thread-safe.
+Result<std::shared_ptr<const DreamSimModel>> dreamsim_cached_model(const std::string& weights_path);
+// Drops the cached model (its memory is freed once no caller holds it).
+void dreamsim_release_cached_model();
+
+// The metric entry: dreamsim_cached_model(weights_path)->distance(pred, gt). Thread-safe; must not
+// be called from inside a job running on `pool`. Errors: the file is missing (naming the path),
+// the file is bad (naming tensors), the images are bad (naming the field).
 Result<double> dreamsim_distance_value(const gs::Image& pred, const gs::Image& gt,
                                        const std::string& weights_path = "",
                                        ThreadPool& pool = ThreadPool::global());

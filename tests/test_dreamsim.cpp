@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <map>
 #include <random>
 
@@ -309,7 +310,7 @@ TEST_CASE("Pillow BICUBIC 8-bit resize to 224 matches Pillow 9.4", "[dreamsim]")
   }
 }
 
-TEST_CASE("DreamSim preprocessing quantises, resizes and scales to [0, 1] CHW", "[dreamsim]") {
+TEST_CASE("DreamSim preprocessing quantises and scales to [0 1] CHW and refuses bad images", "[dreamsim]") {
   gs::Image im = pattern(224, 224);
   im.data[0] = 0.5f / 255.0f + 1e-4f;  // rounds up to 1
   im.data[1] = 2.0f;                     // clamps to 255
@@ -496,7 +497,7 @@ TEST_CASE("DreamSim weight file errors name the tensor", "[dreamsim]") {
   CHECK_THAT(v.status().message(), Catch::Contains("absent.safetensors"));
 }
 
-TEST_CASE("DreamSim full-size layout: the exact file loads and gives d(x,x)=0, symmetric, finite",
+TEST_CASE("DreamSim full-size layout: the exact file loads and d(x x) = 0 and is symmetric and finite",
           "[dreamsim]") {
   const DreamSimConfig cfg = DreamSimConfig::ensemble();
   CHECK(cfg.embed_dim() == 1792);
@@ -519,8 +520,11 @@ TEST_CASE("DreamSim full-size layout: the exact file loads and gives d(x,x)=0, s
   // under PEFT names with r 16 as the released adapter.
   test::TempDir dir("dreamsim-full");
   const std::string path = dir.file("dreamsim_ensemble.safetensors");
-  std::mt19937_64 rng(7);
-  std::normal_distribution<float> nd(0.f, 1.f);
+  uint64_t state = 0x9E3779B97F4A7C15ull;
+  auto uniform = [&state]() {  // xorshift64*: U(-1, 1), cheap for 260 M values
+    state ^= state >> 12, state ^= state << 25, state ^= state >> 27;
+    return float(double((state * 0x2545F4914F6CDD1Dull) >> 11) * 0x1.0p-52 - 1.0);
+  };
   std::vector<std::vector<uint16_t>> data;
   std::vector<TensorToWrite> out;
   auto bf16 = [](float f) {
@@ -528,11 +532,13 @@ TEST_CASE("DreamSim full-size layout: the exact file loads and gives d(x,x)=0, s
     std::memcpy(&u, &f, 4);
     return uint16_t((u + 0x7fff + ((u >> 16) & 1)) >> 16);
   };
+  // Norm weights 1, biases 0.02 u, matrices u * sqrt(3 / fan_in) (unit variance per output).
   auto add = [&](const std::string& name, const std::vector<int64_t>& shape, bool norm_w, bool bias) {
     std::vector<uint16_t> v(size_t(numel(shape)));
-    const double fan = shape.size() >= 2 ? double(numel(shape) / shape[0]) : 1.0;
-    for (auto& x : v)
-      x = bf16(norm_w ? 1.0f : bias ? 0.02f * nd(rng) : float(nd(rng) / std::sqrt(fan)) * 0.5f);
+    const float amp = norm_w ? 0.f
+                      : bias ? 0.02f
+                             : float(std::sqrt(3.0 * shape[0] / double(numel(shape))));
+    for (auto& x : v) x = bf16(norm_w ? 1.0f : amp * uniform());
     data.push_back(std::move(v));
     out.push_back({name, DType::kBF16, shape, data.back().data()});
   };
@@ -554,18 +560,20 @@ TEST_CASE("DreamSim full-size layout: the exact file loads and gives d(x,x)=0, s
   REQUIRE(write_safetensors(path, out, {{"lora_alpha", "8"}}).is_ok());
   data.clear();
   const auto t0 = std::chrono::steady_clock::now();
-  auto model = DreamSimModel::load(path, cfg);
+  auto model = dreamsim_cached_model(path);  // the metric entry's loader and cache
   REQUIRE(model.is_ok());
   const auto t1 = std::chrono::steady_clock::now();
   CHECK((*model)->lora_merged() == 36);
-  const gs::Image a = noise_image(96, 64, 9), b = pattern(300, 250);
+  std::filesystem::remove(path);  // from here on only the cached model can answer
+  auto again = dreamsim_cached_model(path);
+  REQUIRE(again.is_ok());
+  CHECK(again->get() == model->get());
+  const gs::Image a = noise_image(96, 64, 9), b = noise_image(96, 64, 10);
   auto ea = (*model)->embed(a);
   const auto t2 = std::chrono::steady_clock::now();
   auto eb = (*model)->embed(b);
-  auto ea2 = (*model)->embed(a);
   REQUIRE(ea.is_ok());
   REQUIRE(eb.is_ok());
-  REQUIRE(ea2.is_ok());
   REQUIRE(ea->size() == 1792);
   WARN("full-size DreamSim: load " << std::chrono::duration<double>(t1 - t0).count()
                                    << " s, one embedding (3 ViT-B/16) "
@@ -576,13 +584,66 @@ TEST_CASE("DreamSim full-size layout: the exact file loads and gives d(x,x)=0, s
     norm += double(v) * v;
   }
   CHECK(norm == Approx(1.0).margin(1e-5));
-  CHECK(*ea == *ea2);  // deterministic, so d(x, x) is exactly 0
-  CHECK(dreamsim_embedding_distance(*ea, *ea2) == Approx(0.0).margin(1e-12));
-  const double dab = dreamsim_embedding_distance(*ea, *eb), dba = dreamsim_embedding_distance(*eb, *ea);
+  const double dab = dreamsim_embedding_distance(*ea, *eb);
   CHECK(std::isfinite(dab));
   CHECK(dab > 0.0);
   CHECK(dab <= 2.0);
-  CHECK(dab == dba);
+  // The entry point, pair reversed, recomputes both embeddings: bit-identical to d(a, b) means
+  // the pipeline is deterministic and symmetric, so d(x, x) is exactly 0.
+  auto dba = dreamsim_distance_value(b, a, path);
+  REQUIRE(dba.is_ok());
+  CHECK(*dba == dab);
+  CHECK(dreamsim_embedding_distance(*ea, *ea) == Approx(0.0).margin(1e-12));
+  dreamsim_release_cached_model();
+  auto gone = dreamsim_distance_value(b, a, path);  // the file was deleted: reload fails
+  REQUIRE_FALSE(gone.is_ok());
+  CHECK_THAT(gone.status().message(), Catch::Contains(path));
+}
+
+TEST_CASE("DreamSim ensemble config is the released model", "[dreamsim]") {
+  const DreamSimConfig cfg = DreamSimConfig::ensemble();
+  REQUIRE(cfg.backbones.size() == 3);
+  CHECK(cfg.image_size == 224);
+  const char* names[] = {"dino", "clip", "open_clip"};
+  for (size_t i = 0; i < 3; ++i) {
+    const DreamSimBackbone& b = cfg.backbones[i];
+    INFO(b.name);
+    CHECK(b.name == names[i]);
+    CHECK(b.vit.prefix == b.name + ".");
+    CHECK(b.vit.width == 768);
+    CHECK(b.vit.depth == 12);
+    CHECK(b.vit.heads == 12);
+    CHECK(b.vit.mlp_hidden == 3072);
+    CHECK(b.vit.patch == 16);
+    CHECK(b.vit.grid_h == 14);
+    CHECK(b.vit.grid_w == 14);
+    CHECK_FALSE(b.vit.layer_scale);
+    CHECK(b.vit.qkv_bias);
+    CHECK(b.vit.patch_bias);
+  }
+  const DreamSimBackbone &dino = cfg.backbones[0], &clip = cfg.backbones[1],
+                         &oclip = cfg.backbones[2];
+  // DINO 'cls': the last block's output before `norm`; eps 1e-6; exact GELU; ImageNet stats.
+  CHECK_FALSE(dino.vit.final_norm);
+  CHECK_FALSE(dino.vit.norm_pre);
+  CHECK(dino.vit.proj_dim == 0);
+  CHECK(dino.vit.ln_eps == 1e-6f);
+  CHECK(dino.vit.act == nets::VitAct::kGelu);
+  CHECK(dino.mean == kImagenetMean);
+  CHECK(dino.std == kImagenetStd);
+  // CLIP / OpenCLIP 'embedding': ln_pre, ln_post, proj 512, eps 1e-5; QuickGELU only for CLIP.
+  for (const DreamSimBackbone* b : {&clip, &oclip}) {
+    CHECK(b->vit.norm_pre);
+    CHECK(b->vit.final_norm);
+    CHECK(b->vit.proj_dim == 512);
+    CHECK(b->vit.ln_eps == 1e-5f);
+    CHECK(b->mean == kOpenAiClipMean);
+    CHECK(b->std == kOpenAiClipStd);
+  }
+  CHECK(clip.vit.act == nets::VitAct::kQuickGelu);
+  CHECK(oclip.vit.act == nets::VitAct::kGelu);
+  CHECK(kImagenetMean[0] == 0.485f);
+  CHECK(kOpenAiClipStd[2] == 0.27577711f);
 }
 
 TEST_CASE("DreamSim model calls from several threads agree with a serial call", "[dreamsim]") {
