@@ -421,11 +421,11 @@ void dreamsim_release_cached_model() {
 }
 
 Result<double> dreamsim_distance_value(const gs::Image& pred, const gs::Image& gt,
-                                       const std::string& weights_path, ThreadPool& pool) {
+                                       const std::string& weights_path, ThreadPool* pool) {
   MACRO_TRY(check_pair(pred, gt));
   MACRO_ASSIGN_OR_RETURN(std::shared_ptr<const DreamSimModel> model,
                          dreamsim_cached_model(weights_path));
-  return model->distance(pred, gt, pool);
+  return model->distance(pred, gt, pool ? *pool : ThreadPool::global());
 }
 
 }  // namespace macro::enhance

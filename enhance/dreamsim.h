@@ -141,11 +141,12 @@ Result<std::shared_ptr<const DreamSimModel>> dreamsim_cached_model(const std::st
 // Drops the cached model (its memory is freed once no caller holds it).
 void dreamsim_release_cached_model();
 
-// The metric entry: dreamsim_cached_model(weights_path)->distance(pred, gt). Thread-safe; must not
-// be called from inside a job running on `pool`. Errors: the file is missing (naming the path),
-// the file is bad (naming tensors), the images are bad (naming the field).
+// The metric entry: dreamsim_cached_model(weights_path)->distance(pred, gt) on `pool` (nullptr =
+// ThreadPool::global()). Thread-safe; must not be called from inside a job running on that pool.
+// Errors: the file is missing (naming the path), the file is bad (naming tensors), the images are
+// bad (naming the field).
 Result<double> dreamsim_distance_value(const gs::Image& pred, const gs::Image& gt,
                                        const std::string& weights_path = "",
-                                       ThreadPool& pool = ThreadPool::global());
+                                       ThreadPool* pool = nullptr);
 
 }  // namespace macro::enhance
