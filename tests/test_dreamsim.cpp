@@ -310,7 +310,7 @@ TEST_CASE("Pillow BICUBIC 8-bit resize to 224 matches Pillow 9.4", "[dreamsim]")
   }
 }
 
-TEST_CASE("DreamSim preprocessing quantises and scales to [0 1] CHW and refuses bad images", "[dreamsim]") {
+TEST_CASE("DreamSim preprocessing quantises and scales to CHW in 0..1 and refuses bad images", "[dreamsim]") {
   gs::Image im = pattern(224, 224);
   im.data[0] = 0.5f / 255.0f + 1e-4f;  // rounds up to 1
   im.data[1] = 2.0f;                     // clamps to 255
