@@ -6,6 +6,7 @@
 
 #include "attention/nets/vae.h"
 #include "attention/runtime/conv.h"
+#include "attention/runtime/cpu.h"
 #include "attention/runtime/safetensors.h"
 #include "golden_tensors.h"
 #include "test_support.h"
@@ -48,32 +49,39 @@ TEST_CASE("vae: banded full-resolution level is bit-identical to whole images", 
   auto g = SafeTensors::open(dir + "/case-roundtrip.safetensors");
   REQUIRE(g.is_ok());
   const Tensor images = test::read_tensor(*g, "input.image");  // [2, 3, 40, 56]
-  for (Precision p : {Precision::kF32, Precision::kBf16}) {
-    auto vae = DifixVae::load(dir, p);
-    REQUIRE(vae.is_ok());
-    (*vae)->set_band_rows(0);
-    const Outputs whole = run(**vae, images);
-    // Bands of 1, 3 (uneven last band) and 7 rows; 64 pair words per bf16 conv band.
-    for (int64_t rows : {1, 3, 7}) {
-      INFO(precision_name(p) << ", band rows " << rows);
-      (*vae)->set_band_rows(rows);
-      const size_t old = conv2d_set_pair_band(rows == 3 ? 64 : size_t(4) << 20);
-      const Outputs banded = run(**vae, images);
-      conv2d_set_pair_band(old);
-      CHECK(same_bits(banded.moments, whole.moments));
-      for (size_t i = 0; i < whole.skips.size(); ++i)
-        CHECK(same_bits(banded.skips[i], whole.skips[i]));
-      CHECK(same_bits(banded.image, whole.image));
+  const Isa saved = active_isa();
+  for (Isa isa : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512, Isa::kAvx512Bf16}) {
+    if (!isa_supported(isa)) continue;
+    REQUIRE(set_isa(isa).is_ok());
+    for (Precision p : {Precision::kF32, Precision::kBf16}) {
+      INFO(isa_name(isa));
+      auto vae = DifixVae::load(dir, p);
+      REQUIRE(vae.is_ok());
+      (*vae)->set_band_rows(0);
+      const Outputs whole = run(**vae, images);
+      // Bands of 1, 3 (uneven last band) and 7 rows; 64 pair words per bf16 conv band.
+      for (int64_t rows : {1, 3, 7}) {
+        INFO(precision_name(p) << ", band rows " << rows);
+        (*vae)->set_band_rows(rows);
+        const size_t old = conv2d_set_pair_band(rows == 3 ? 64 : size_t(4) << 20);
+        const Outputs banded = run(**vae, images);
+        conv2d_set_pair_band(old);
+        CHECK(same_bits(banded.moments, whole.moments));
+        for (size_t i = 0; i < whole.skips.size(); ++i)
+          CHECK(same_bits(banded.skips[i], whole.skips[i]));
+        CHECK(same_bits(banded.image, whole.image));
+      }
+      // The planned scratch shrinks with bands (40 x 56 is one auto band; 4 rows is several).
+      (*vae)->set_band_rows(4);
+      const size_t lean_dec = (*vae)->decode_workspace_bytes(40, 56);
+      const size_t lean_enc = (*vae)->encode_workspace_bytes(40, 56);
+      (*vae)->set_band_rows(0);
+      CHECK(lean_dec < (*vae)->decode_workspace_bytes(40, 56));
+      CHECK(lean_enc < (*vae)->encode_workspace_bytes(40, 56));
+      (*vae)->set_band_rows(DifixVae::kAutoBands);
     }
-    // The planned scratch shrinks with bands (40 x 56 is one auto band; 4 rows is several).
-    (*vae)->set_band_rows(4);
-    const size_t lean_dec = (*vae)->decode_workspace_bytes(40, 56);
-    const size_t lean_enc = (*vae)->encode_workspace_bytes(40, 56);
-    (*vae)->set_band_rows(0);
-    CHECK(lean_dec < (*vae)->decode_workspace_bytes(40, 56));
-    CHECK(lean_enc < (*vae)->encode_workspace_bytes(40, 56));
-    (*vae)->set_band_rows(DifixVae::kAutoBands);
   }
+  REQUIRE(set_isa(saved).is_ok());
 }
 
 TEST_CASE("vae: bf16 skips decode to the same bits; fp32 models refuse them", "[vae][mem]") {
