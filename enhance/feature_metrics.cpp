@@ -6,6 +6,7 @@
 
 #include <climits>
 #include <cmath>
+#include <cstring>
 #include <map>
 #include <mutex>
 
@@ -163,6 +164,72 @@ Result<std::vector<float>> dinov2_embedding(const nets::VitModel& model, const g
   return std::move(out->cls);
 }
 
+namespace {
+
+// Recent embeddings, so that a ground truth scored against several methods is embedded once.
+// Keyed by the model (a weak_ptr: an entry of a freed model never matches a new one at the same
+// address), the size and two independent 64-bit hashes of the pixel values.
+struct EmbeddingEntry {
+  std::weak_ptr<const nets::VitModel> model;
+  int width = 0, height = 0;
+  uint64_t h1 = 0, h2 = 0;
+  std::vector<float> embedding;
+};
+constexpr size_t kEmbeddingCacheEntries = 16;
+
+struct EmbeddingCache {
+  std::mutex mutex;
+  std::vector<EmbeddingEntry> entries;  // oldest first
+  Dinov2CacheStats stats;
+};
+EmbeddingCache& embedding_cache() {
+  static EmbeddingCache c;
+  return c;
+}
+
+void hash_image(const gs::Image& image, uint64_t* h1, uint64_t* h2) {
+  uint64_t a = 0xcbf29ce484222325ull, b = 0x243F6A8885A308D3ull;
+  for (float v : image.data) {
+    uint32_t w;
+    std::memcpy(&w, &v, 4);
+    a = (a ^ w) * 0x100000001b3ull;                               // FNV-1a over 32-bit words
+    b = (b + w + 0x9E3779B97F4A7C15ull) * 0xBF58476D1CE4E5B9ull;  // multiply-mix
+    b ^= b >> 29;
+  }
+  *h1 = a;
+  *h2 = b;
+}
+
+Result<std::vector<float>> cached_embedding(const std::shared_ptr<const nets::VitModel>& model,
+                                            const gs::Image& image, ThreadPool* pool) {
+  uint64_t h1 = 0, h2 = 0;
+  hash_image(image, &h1, &h2);
+  EmbeddingCache& c = embedding_cache();
+  {
+    std::lock_guard<std::mutex> lock(c.mutex);
+    for (const EmbeddingEntry& e : c.entries)
+      if (e.width == image.width && e.height == image.height && e.h1 == h1 && e.h2 == h2 &&
+          e.model.lock() == model) {
+        ++c.stats.hits;
+        return e.embedding;
+      }
+  }
+  MACRO_ASSIGN_OR_RETURN(std::vector<float> emb, dinov2_embedding(*model, image, pool));
+  std::lock_guard<std::mutex> lock(c.mutex);
+  ++c.stats.computed;
+  if (c.entries.size() >= kEmbeddingCacheEntries) c.entries.erase(c.entries.begin());
+  c.entries.push_back({model, image.width, image.height, h1, h2, emb});
+  return emb;
+}
+
+}  // namespace
+
+Dinov2CacheStats dinov2_cache_stats() {
+  EmbeddingCache& c = embedding_cache();
+  std::lock_guard<std::mutex> lock(c.mutex);
+  return c.stats;
+}
+
 double cosine_distance(const std::vector<float>& a, const std::vector<float>& b) {
   if (a.size() != b.size() || a.empty()) return std::nan("");
   double ab = 0, aa = 0, bb = 0;
@@ -188,9 +255,9 @@ MetricValue dinov2_distance(const gs::Image& pred, const gs::Image& gt,
   };
   auto model = load_dinov2(path);
   if (!model) return fail(model.status());
-  auto ep = dinov2_embedding(**model, pred, pool);
+  auto ep = cached_embedding(*model, pred, pool);
   if (!ep) return fail(ep.status().with_context("prediction"));
-  auto eg = dinov2_embedding(**model, gt, pool);
+  auto eg = cached_embedding(*model, gt, pool);
   if (!eg) return fail(eg.status().with_context("ground truth"));
   const double d = cosine_distance(*ep, *eg);
   if (!std::isfinite(d))

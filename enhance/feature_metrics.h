@@ -9,7 +9,8 @@
 //    `timm/vit_small_patch14_dinov2.lvd142m` model.safetensors loads as is; the torch.hub DINOv2
 //    state_dict too). `head.*` and `mask_token` are accepted and ignored; anything else missing,
 //    extra or mis-shaped makes the entry "not computed" with a reason naming the tensors. The
-//    loaded model is cached (by path, size and modification time) across calls, thread-safely.
+//    loaded model is cached (by path, size and modification time) across calls, thread-safely,
+//    and so are the embeddings of the last few images (a GT scored against several methods).
 //  - DreamSim: `dreamsim(pretrained=True)`, the default ensemble (DINO ViT-B/16, CLIP ViT-B/16,
 //    OpenCLIP ViT-B/16), its own 224x224 preprocessing; score = 1 - cosine of the concatenated
 //    embeddings. Not implemented yet: always "not computed" with the reason (weights not
@@ -17,6 +18,7 @@
 // Neither function ever returns a made-up number.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -63,6 +65,13 @@ Result<std::shared_ptr<const nets::VitModel>> load_dinov2(const std::string& pat
 // The 384-d embedding (pooled CLS) of an RGB image in [0, 1].
 Result<std::vector<float>> dinov2_embedding(const nets::VitModel& model, const gs::Image& image,
                                             ThreadPool* pool = nullptr);
+// dinov2_distance keeps the embeddings of the last 16 images (keyed by the model, the size and two
+// 64-bit hashes of the pixels), so a ground truth scored against several methods is embedded
+// once. Counts since the process started:
+struct Dinov2CacheStats {
+  uint64_t computed = 0, hits = 0;
+};
+Dinov2CacheStats dinov2_cache_stats();
 // 1 - cosine(a, b), double accumulation; NaN when either vector is zero or not finite.
 double cosine_distance(const std::vector<float>& a, const std::vector<float>& b);
 

@@ -126,6 +126,7 @@ TEST_CASE("dinov2: full-size synthetic weights give finite and self-zero and sym
     for (const nets::VitModel* p : seen) CHECK(p == model->get());
   }
 
+  const Dinov2CacheStats s0 = dinov2_cache_stats();
   t0 = std::chrono::steady_clock::now();
   const MetricValue d_ab = dinov2_distance(a, b, path);
   std::printf("dinov2: distance of one pair (2 embeddings at 518x518) %.2f s\n", seconds_since(t0));
@@ -135,15 +136,30 @@ TEST_CASE("dinov2: full-size synthetic weights give finite and self-zero and sym
   CHECK(std::isfinite(d_ab.value));
   CHECK(d_ab.value > 1e-6);  // different images, different embeddings
   CHECK(d_ab.value < 2.0);
+  const Dinov2CacheStats s1 = dinov2_cache_stats();
+  CHECK(s1.computed - s0.computed == 2);
+  // Both embeddings are cached now: the same pair again, reversed, and a against itself cost no
+  // forward. Symmetric and self-zero.
+  const MetricValue d_ba = dinov2_distance(b, a, path);
   const MetricValue d_aa = dinov2_distance(a, a, path);
+  REQUIRE(d_ba.computed);
   REQUIRE(d_aa.computed);
+  CHECK(d_ba.value == d_ab.value);
   CHECK(std::abs(d_aa.value) <= 1e-6);
-  // Symmetry, on the embeddings the metric uses (deterministic forward: bit-identical).
+  const Dinov2CacheStats s2 = dinov2_cache_stats();
+  CHECK(s2.computed == s1.computed);
+  CHECK(s2.hits - s1.hits == 4);
+  // Uncached forwards: deterministic (bit-identical embeddings, so d(x, x) = 0 without the cache
+  // too) and the metric is 1 - cos of exactly these embeddings.
   auto ea = dinov2_embedding(**model, a);
+  auto ea2 = dinov2_embedding(**model, a);
   auto eb = dinov2_embedding(**model, b);
   REQUIRE(ea.is_ok());
+  REQUIRE(ea2.is_ok());
   REQUIRE(eb.is_ok());
   REQUIRE(ea->size() == 384u);
+  CHECK(*ea == *ea2);
+  CHECK(cosine_distance(*ea, *ea2) == Approx(0.0).margin(1e-12));
   CHECK(cosine_distance(*ea, *eb) == cosine_distance(*eb, *ea));
   CHECK(std::abs(cosine_distance(*ea, *eb) - d_ab.value) <= 1e-12);
   // A replaced file (new modification time) is loaded again.
