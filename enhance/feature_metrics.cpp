@@ -11,6 +11,7 @@
 #include <mutex>
 
 #include "attention/runtime/file_io.h"
+#include "enhance/dreamsim.h"
 
 namespace macro::enhance {
 namespace {
@@ -36,15 +37,12 @@ std::string find_weights(const std::string& sub, const std::string& file) {
   return rel;
 }
 
-MetricValue not_computed(const char* name, const std::string& path, const char* network) {
+// The entry for absent weights (callers check file_exists first).
+MetricValue not_computed(const char* name, const std::string& path) {
   MetricValue m;
   m.name = name;
   m.computed = false;
-  if (!file_exists(path))
-    m.reason = std::string("weights not supplied (expected at ") + path + ")";
-  else
-    m.reason = std::string("the ") + network + " network is not implemented in this engine " +
-               "yet (weights found at " + path + ")";
+  m.reason = std::string("weights not supplied (expected at ") + path + ")";
   return m;
 }
 
@@ -247,7 +245,7 @@ MetricValue dinov2_distance(const gs::Image& pred, const gs::Image& gt,
   const std::string path = weights_path.empty() ? default_dinov2_path() : weights_path;
   MetricValue m;
   m.name = "dinov2";
-  if (!file_exists(path)) return not_computed("dinov2", path, "DINOv2 ViT-S/14");
+  if (!file_exists(path)) return not_computed("dinov2", path);
   auto fail = [&](const Status& s) {
     m.computed = false;
     m.reason = s.message();
@@ -267,9 +265,21 @@ MetricValue dinov2_distance(const gs::Image& pred, const gs::Image& gt,
   return m;
 }
 
-MetricValue dreamsim_distance(const gs::Image&, const gs::Image&, const std::string& weights_path) {
-  return not_computed("dreamsim", weights_path.empty() ? default_dreamsim_path() : weights_path,
-                      "DreamSim ensemble");
+MetricValue dreamsim_distance(const gs::Image& pred, const gs::Image& gt,
+                              const std::string& weights_path, ThreadPool* pool) {
+  const std::string path = weights_path.empty() ? default_dreamsim_path() : weights_path;
+  if (!file_exists(path)) return not_computed("dreamsim", path);
+  MetricValue m;
+  m.name = "dreamsim";
+  Result<double> d = dreamsim_distance_value(pred, gt, path, pool);
+  if (!d) {
+    m.computed = false;
+    m.reason = d.status().message();
+    return m;
+  }
+  m.computed = true;
+  m.value = *d;
+  return m;
 }
 
 }  // namespace macro::enhance

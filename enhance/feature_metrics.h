@@ -11,10 +11,11 @@
 //    extra or mis-shaped makes the entry "not computed" with a reason naming the tensors. The
 //    loaded model is cached (by path, size and modification time) across calls, thread-safely,
 //    and so are the embeddings of the last few images (a GT scored against several methods).
-//  - DreamSim: `dreamsim(pretrained=True)`, the default ensemble (DINO ViT-B/16, CLIP ViT-B/16,
-//    OpenCLIP ViT-B/16), its own 224x224 preprocessing; score = 1 - cosine of the concatenated
-//    embeddings. Not implemented yet: always "not computed" with the reason (weights not
-//    supplied, and where they are expected; or weights present but the network not implemented).
+//  - DreamSim (computed when the weights are supplied; enhance/dreamsim.h, docs/dreamsim.md):
+//    `dreamsim(pretrained=True)`, the default ensemble (DINO ViT-B/16 CLS, CLIP ViT-B/16 and
+//    OpenCLIP ViT-B/16 projected embeddings) with its own 224x224 Pillow-bicubic preprocessing;
+//    the concatenated embedding is centred and L2-normalised; score = 1 - cosine. Without the
+//    file, or with a bad one, the entry is "not computed" with the reason.
 // Neither function ever returns a made-up number.
 #pragma once
 
@@ -41,8 +42,9 @@ std::string default_dreamsim_path();
 // 518x518). pool nullptr = ThreadPool::global().
 MetricValue dinov2_distance(const gs::Image& pred, const gs::Image& gt,
                             const std::string& weights_path = "", ThreadPool* pool = nullptr);
+// DreamSim (enhance/dreamsim.h): both images go through its 224x224 preprocessing.
 MetricValue dreamsim_distance(const gs::Image& pred, const gs::Image& gt,
-                              const std::string& weights_path = "");
+                              const std::string& weights_path = "", ThreadPool* pool = nullptr);
 
 // ---- DINOv2 parts (exposed for tests and benchmarks) --------------------------------------------
 

@@ -338,8 +338,8 @@ Result<std::vector<MetricValue>> compute_metrics(const gs::Image& pred_in, const
     out.push_back(std::move(m));
   }
   if (options.feature_metrics) {
-    out.push_back(dinov2_distance(pred, gt, options.dinov2_weights));
-    out.push_back(dreamsim_distance(pred, gt, options.dreamsim_weights));
+    out.push_back(dinov2_distance(pred, gt, options.dinov2_weights, &pool));
+    out.push_back(dreamsim_distance(pred, gt, options.dreamsim_weights, &pool));
   }
   return out;
 }

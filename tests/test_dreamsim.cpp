@@ -14,6 +14,7 @@
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/safetensors.h"
 #include "enhance/dreamsim.h"
+#include "enhance/feature_metrics.h"
 #include "test_support.h"
 
 using namespace macro;
@@ -564,6 +565,7 @@ TEST_CASE("DreamSim full-size layout: the exact file loads and d(x x) = 0 and is
   REQUIRE(model.is_ok());
   const auto t1 = std::chrono::steady_clock::now();
   CHECK((*model)->lora_merged() == 36);
+  const MetricValue entry = dreamsim_distance(noise_image(96, 64, 9), noise_image(96, 64, 10), path);
   std::filesystem::remove(path);  // from here on only the cached model can answer
   auto again = dreamsim_cached_model(path);
   REQUIRE(again.is_ok());
@@ -594,10 +596,16 @@ TEST_CASE("DreamSim full-size layout: the exact file loads and d(x x) = 0 and is
   REQUIRE(dba.is_ok());
   CHECK(*dba == dab);
   CHECK(dreamsim_embedding_distance(*ea, *ea) == Approx(0.0).margin(1e-12));
+  // The metric-suite entry (called while the file existed) gave the same number.
+  CHECK(entry.computed);
+  CHECK(entry.value == dab);
   dreamsim_release_cached_model();
   auto gone = dreamsim_distance_value(b, a, path);  // the file was deleted: reload fails
   REQUIRE_FALSE(gone.is_ok());
   CHECK_THAT(gone.status().message(), Catch::Contains(path));
+  const MetricValue absent = dreamsim_distance(a, b, path);
+  CHECK_FALSE(absent.computed);
+  CHECK_THAT(absent.reason, Catch::Contains("weights not supplied") && Catch::Contains(path));
 }
 
 TEST_CASE("DreamSim ensemble config is the released model", "[dreamsim]") {
