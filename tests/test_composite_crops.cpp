@@ -13,6 +13,7 @@
 #include <random>
 
 #include "attention/runtime/file_io.h"
+#include "enhance/bench_harness.h"
 #include "enhance/crops.h"
 #include "enhance/enhance.h"
 #include "enhance_fixture.h"
@@ -361,6 +362,27 @@ TEST_CASE("macro enhance --crop composite on the tiny pipeline: deterministic, f
       CHECK(fr->views > 4);
       CHECK(fr->image.data != r.one.image.data);
     }
+  }
+  // The bench grid's "crop" option reaches the macro method (enhance/bench_harness.h).
+  {
+    BenchMethodSettings settings;
+    settings.difix_weights = f.pipe;
+    settings.ctx_path = f.ctx;
+    const MethodRegistry registry = default_method_registry(settings);
+    const BenchMethod* macro = registry.find("macro");
+    REQUIRE(macro);
+    BenchPair pair;
+    const BenchOptions opts = {{"crop", "composite"}};
+    auto out = macro->run(MethodContext{pair, in, opts});
+    REQUIRE(out.is_ok());
+    o.method = EnhanceMethod::kMacro;
+    auto same = enhance_closeup(in, o);
+    REQUIRE(same.is_ok());
+    CHECK(out->image.data == same->image.data);
+    const BenchOptions bad = {{"crop", "mosaic"}};
+    auto refused = macro->run(MethodContext{pair, in, bad});
+    REQUIRE(!refused.is_ok());
+    CHECK_THAT(refused.status().message(), Catch::Contains("--crop"));
   }
   // The transfer enhancer refuses composite views, naming --crop.
   EnhanceOptions t = o;
