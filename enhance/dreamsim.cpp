@@ -1,6 +1,8 @@
 // DreamSim ensemble distance (contract and sources in dreamsim.h, docs/dreamsim.md).
 #include "enhance/dreamsim.h"
 
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -400,17 +402,36 @@ Result<double> DreamSimModel::distance(const gs::Image& pred, const gs::Image& g
 }
 
 namespace {
+struct FileStamp {
+  int64_t size = -1, mtime_ns = -1;
+  bool operator==(const FileStamp& o) const { return size == o.size && mtime_ns == o.mtime_ns; }
+};
+// Size and modification time; size -1 when the file cannot be stat'ed.
+FileStamp file_stamp(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return {};
+  return {int64_t(st.st_size),
+          int64_t(st.st_mtim.tv_sec) * 1000000000 + int64_t(st.st_mtim.tv_nsec)};
+}
+
 std::mutex g_cache_mutex;
 std::shared_ptr<const DreamSimModel> g_cached;  // under g_cache_mutex
+FileStamp g_cached_stamp;                       // of the file g_cached was loaded from
 }  // namespace
 
 Result<std::shared_ptr<const DreamSimModel>> dreamsim_cached_model(const std::string& weights_path) {
   const std::string path = weights_path.empty() ? default_dreamsim_path() : weights_path;
   std::lock_guard<std::mutex> lock(g_cache_mutex);
-  if (!g_cached || g_cached->path() != path) {
+  const FileStamp stamp = file_stamp(path);
+  // A replaced file (another size or modification time) is loaded again; a file removed after
+  // loading keeps answering from the cached model.
+  const bool replaced = stamp.size >= 0 && !(stamp == g_cached_stamp);
+  if (!g_cached || g_cached->path() != path || replaced) {
     g_cached.reset();  // release the old model's memory before loading the new one
+    g_cached_stamp = FileStamp();
     MACRO_ASSIGN_OR_RETURN(auto loaded, DreamSimModel::load(path));
     g_cached = std::move(loaded);
+    g_cached_stamp = stamp;
   }
   return g_cached;
 }

@@ -136,7 +136,9 @@ class DreamSimModel {
 };
 
 // The model for `weights_path` ("" = default_dreamsim_path()), loaded once and kept: one cached
-// model (about 1 GB of fp32 weights); a different path replaces it. Thread-safe.
+// model (about 1 GB of fp32 weights); a different path, or the same file replaced (another size
+// or modification time), replaces it; a file removed after loading keeps the cached model.
+// Thread-safe.
 Result<std::shared_ptr<const DreamSimModel>> dreamsim_cached_model(const std::string& weights_path);
 // Drops the cached model (its memory is freed once no caller holds it).
 void dreamsim_release_cached_model();

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <random>
 
@@ -599,6 +600,16 @@ TEST_CASE("DreamSim full-size layout: the exact file loads and d(x x) = 0 and is
   // The metric-suite entry (called while the file existed) gave the same number.
   CHECK(entry.computed);
   CHECK(entry.value == dab);
+  // A file written again at the path (another size and time) is loaded again, never answered
+  // by the stale model: here a broken one, so the reload fails naming it.
+  {
+    std::ofstream junk(path, std::ios::binary);
+    junk << std::string(64, 'x');
+  }
+  auto replaced = dreamsim_cached_model(path);
+  REQUIRE_FALSE(replaced.is_ok());
+  CHECK_THAT(replaced.status().message(), Catch::Contains(path));
+  std::filesystem::remove(path);
   dreamsim_release_cached_model();
   auto gone = dreamsim_distance_value(b, a, path);  // the file was deleted: reload fails
   REQUIRE_FALSE(gone.is_ok());
