@@ -96,6 +96,65 @@ TEST_CASE("dinov2: bilinear resize is torch's align_corners=False antialias=Fals
   }
 }
 
+TEST_CASE("dinov2: the config is timm vit_small_patch14_dinov2 with its exact tensor list",
+          "[dinov2]") {
+  // Written from timm (models/vision_transformer.py): vit_small_patch14_dinov2 = patch 14, D 384,
+  // 12 blocks, 6 heads, init_values 1e-5 (LayerScale), mlp_ratio 4, qkv_bias True, pre_norm False
+  // (so the patch conv has a bias and norm_pre is Identity), global_pool 'token' (fc_norm Identity,
+  // `norm` before the pool); fixed_input_size makes img_size the cfg's 518 (37 x 37 grid); timm's
+  // LayerNorm eps 1e-6; act nn.GELU (exact erf).
+  const nets::VitConfig c = dinov2_config();
+  CHECK(c.prefix.empty());
+  CHECK(c.width == 384);
+  CHECK(c.depth == 12);
+  CHECK(c.heads == 6);
+  CHECK(c.mlp_hidden == 1536);
+  CHECK(c.patch == 14);
+  CHECK(c.grid_h == 37);
+  CHECK(c.grid_w == 37);
+  CHECK(c.ln_eps == 1e-6f);
+  CHECK(c.act == nets::VitAct::kGelu);
+  CHECK(c.layer_scale);
+  CHECK(c.qkv_bias);
+  CHECK(c.patch_bias);
+  CHECK_FALSE(c.norm_pre);
+  CHECK(c.final_norm);
+  CHECK(c.proj_dim == 0);
+  CHECK(c.out_dim() == 384);
+  CHECK(kDinov2Size == 518);
+  CHECK(kDinov2Size == c.grid_h * c.patch);  // the stored pos_embed is used as is
+  CHECK(kDinov2Mean[0] == 0.485f);
+  CHECK(kDinov2Mean[1] == 0.456f);
+  CHECK(kDinov2Mean[2] == 0.406f);
+  CHECK(kDinov2Std[0] == 0.229f);
+  CHECK(kDinov2Std[1] == 0.224f);
+  CHECK(kDinov2Std[2] == 0.225f);
+  // The timm state_dict names and shapes, hand-listed: the loader asks for exactly these.
+  std::map<std::string, std::vector<int64_t>> want = {{"cls_token", {1, 1, 384}},
+                                                      {"pos_embed", {1, 1370, 384}},
+                                                      {"patch_embed.proj.weight", {384, 3, 14, 14}},
+                                                      {"patch_embed.proj.bias", {384}},
+                                                      {"norm.weight", {384}},
+                                                      {"norm.bias", {384}}};
+  for (int i = 0; i < 12; ++i) {
+    const std::string b = "blocks." + std::to_string(i) + ".";
+    for (const char* n : {"norm1.weight", "norm1.bias", "norm2.weight", "norm2.bias", "ls1.gamma",
+                          "ls2.gamma", "attn.proj.bias", "mlp.fc2.bias"})
+      want[b + n] = {384};
+    want[b + "attn.qkv.weight"] = {1152, 384};
+    want[b + "attn.qkv.bias"] = {1152};
+    want[b + "attn.proj.weight"] = {384, 384};
+    want[b + "mlp.fc1.weight"] = {1536, 384};
+    want[b + "mlp.fc1.bias"] = {1536};
+    want[b + "mlp.fc2.weight"] = {384, 1536};
+  }
+  REQUIRE(want.size() == 174u);
+  const Weights got = nets::vit_random_weights(c, 1);
+  std::map<std::string, std::vector<int64_t>> got_shapes;
+  for (const auto& [n, t] : got) got_shapes[n] = t.shape;
+  CHECK(got_shapes == want);
+}
+
 TEST_CASE("dinov2: full-size synthetic weights give finite and self-zero and symmetric distances",
           "[dinov2]") {
   test::TempDir dir("dinov2-full");
@@ -159,6 +218,11 @@ TEST_CASE("dinov2: full-size synthetic weights give finite and self-zero and sym
   REQUIRE(eb.is_ok());
   REQUIRE(ea->size() == 384u);
   CHECK(*ea == *ea2);
+  // The embedding is the ViT's pooled CLS of the 518x518 normalised input, nothing else.
+  const std::vector<float> xa = dinov2_input(a);
+  auto direct = (*model)->forward(xa.data(), kDinov2Size, kDinov2Size, &ThreadPool::global());
+  REQUIRE(direct.is_ok());
+  CHECK(direct->cls == *ea);
   CHECK(cosine_distance(*ea, *ea2) == Approx(0.0).margin(1e-12));
   CHECK(cosine_distance(*ea, *eb) == cosine_distance(*eb, *ea));
   CHECK(std::abs(cosine_distance(*ea, *eb) - d_ab.value) <= 1e-12);
