@@ -55,7 +55,8 @@ inline constexpr float kDinov2Std[3] = {0.229f, 0.224f, 0.225f};
 // torch F.interpolate(mode="bilinear", align_corners=False, antialias=False) of an RGB image to
 // [3, oh, ow] planar: source x = (o + 0.5) * in / out - 0.5 clamped at 0, the two neighbours
 // (the right one clamped to the edge), float arithmetic like torch's CPU kernel. No antialiasing
-// when shrinking (torch's default, what timm's DINOv2 evaluation transform uses).
+// when shrinking (F.interpolate's default). This is the evaluation's tensor-side resize
+// (macro-method.md §7), not timm's own eval transform for this model (PIL bicubic, crop_pct 1).
 std::vector<float> resize_bilinear_chw(const gs::Image& image, int oh, int ow);
 // The DINOv2 input: 518x518 bilinear, then (x - mean) / std per channel -> [3, 518, 518].
 std::vector<float> dinov2_input(const gs::Image& image);

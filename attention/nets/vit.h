@@ -31,8 +31,9 @@
 // the grid part of pos_embed is resampled like timm's `resample_abs_pos_embed` (torch bicubic,
 // align_corners=False) and the CLS entry kept. timm's own default is antialias=True (kept as
 // kBicubicAntialias: Keys a = -0.5 kernel, support scaled when shrinking, weights renormalised at
-// the borders); kBicubic is antialias=False (a = -0.75, clamped borders), which is what timm's
-// deprecated `resize_pos_embed` and DINO/DINOv2's own `interpolate_pos_encoding` use; kRefuse
+// the borders); kBicubic is antialias=False (a = -0.75, clamped borders) at scale in / out, which
+// is what timm's deprecated `resize_pos_embed` uses (DINO/DINOv2's own `interpolate_pos_encoding`
+// passes scale_factor = (n + 0.1) / n0 instead, so its sampling positions differ slightly); kRefuse
 // makes a grid mismatch an error. DINOv2 at 518 and the DreamSim towers at 224 use the stored grid.
 //
 // Loading: build(cfg) makes the module tree, visit(v) asks a ParamVisitor for every tensor by
