@@ -26,7 +26,7 @@ namespace {
 constexpr const char* kUsage =
     "usage: macro bench run --root DIR --results FILE.jsonl [--methods 3dgs,...]\n"
     "                       [--K 1,3] [--P 4] [--mask on,off] [--precision bf16,f32]\n"
-    "                       [--crop full,tight] [--upsampler lanczos,pft-sr]\n"
+    "                       [--crop full,tight,composite] [--upsampler lanczos,pft-sr]\n"
     "                       [--shard i/N] [--limit N] [--weights DIFIX_DIR] [--ctx "
     "CTX.safetensors]\n"
     "                       [--lpips-backbone F] [--lpips-heads F]\n"

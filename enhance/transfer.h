@@ -109,7 +109,7 @@ Result<TransferResult> transfer_detail(const gs::Image& render, const std::vecto
 
 // The sources of a plan: for kCrops every crop (cut from its reference, Lanczos-resized to the
 // close-up size, padding black and invalid); for kWhole every selected reference, whole.
-// Tight crops (CropMode::kTight) are refused with an error naming --crop.
+// Tight and composite crops (CropMode::kTight, kComposite) are refused with an error naming --crop.
 Result<std::vector<TransferSourceImage>> plan_transfer_sources(
     const MacroPlan& plan, const SceneInputs& inputs, TransferSource source,
     ThreadPool& pool = ThreadPool::global());
