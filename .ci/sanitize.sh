@@ -11,14 +11,17 @@
 # tensors / threads, [tokenizer] CLIP tokenizer, [config] diffusers configs, [weights] checkpoint
 # loading, [fuzz] the fuzz regressions, [bad_inputs] the bad-input corpus through the CLI (the
 # `macro` binary is built with the same sanitizers), [nn-run] the TAESD CLI; and the small
-# kernels behind them, [kernels] and [ops]. The networks' golden tests and the end-to-end
-# enhance/bench/render tests stay in the normal run (minutes each under ASan).
+# kernels behind them, [kernels] and [ops]; [vit] the ViT loader and small forwards (DINOv2 /
+# DreamSim), [mem] the VAE's banded full-resolution level (halo rows, in-place bands), [pairs]
+# points3D and pair construction, [composite] composite views and masks. The networks' golden
+# tests and the end-to-end enhance/bench/render tests stay in the normal run (minutes each under
+# ASan).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash .ci/install-deps.sh
 BUILD=${BUILD_DIR:-build-sanitize}
 JOBS=${JOBS:-$(nproc)}
-SUBSET=${SANITIZE_TESTS:-"[formats],[cameras],[image_io],[runtime],[tokenizer],[config],[weights],[fuzz],[bad_inputs],[nn-run],[kernels],[ops]"}
+SUBSET=${SANITIZE_TESTS:-"[formats],[cameras],[image_io],[runtime],[tokenizer],[config],[weights],[fuzz],[bad_inputs],[nn-run],[kernels],[ops],[vit],[mem],[pairs],[composite]"}
 t0=$(date +%s)
 cmake -S . -B "$BUILD" -DCMAKE_BUILD_TYPE=Release -DMACRO_SANITIZE=ON >/dev/null
 cmake --build "$BUILD" -j"$JOBS" --target macro macro_tests
