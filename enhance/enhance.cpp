@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 
 #include "attention/nets/difix.h"
@@ -292,26 +293,24 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
                          ": tensor 'ctx': expected width " + std::to_string(dc) +
                          " (the unet's cross_attention_dim), found " + std::to_string(ctx.dim(2)));
 
-  // 4. One Difix step, stage by stage (the same sequence as DifixPipeline::step).
-  t0 = Clock::now();
-  MACRO_ASSIGN_OR_RETURN(nets::VaeEncoding enc, pipe->vae().encode(batch, /*keep_skips=*/1, pool));
-  res.timings.ms_encode = ms_since(t0);
-  note("encode", res.timings.ms_encode);
-  t0 = Clock::now();
-  MACRO_ASSIGN_OR_RETURN(Tensor eps,
-                         pipe->unet().forward(enc.z, float(o.timestep), ctx, masks, pool));
-  Tensor z0 = Tensor::f32(enc.z.shape());
-  MACRO_TRY(nets::ddpm_x0(pipe->schedule(), o.timestep, enc.z.f32(), eps.f32(), z0.f32(),
-                          size_t(enc.z.numel())));
-  res.timings.ms_unet = ms_since(t0);
-  note("U-Net", res.timings.ms_unet,
-       std::to_string(res.masked_levels) + " masked levels, t=" + std::to_string(o.timestep));
-  t0 = Clock::now();
-  std::vector<TensorView> skips;
-  for (const Tensor& s : enc.skips) skips.push_back(s.view());
-  MACRO_ASSIGN_OR_RETURN(Tensor image, pipe->vae().decode(z0.view().slice(0, 0, 1), skips, pool));
-  res.timings.ms_decode = ms_since(t0);
-  note("decode", res.timings.ms_decode);
+  // 4. One Difix step (DifixPipeline::step: the pipeline's arena, bf16 skips for a bf16 model),
+  // timed stage by stage.
+  auto on_stage = [&](const char* stage, double ms) {
+    if (std::strcmp(stage, "encode") == 0) {
+      res.timings.ms_encode = ms;
+      note("encode", ms);
+    } else if (std::strcmp(stage, "unet") == 0) {
+      res.timings.ms_unet = ms;
+      note("U-Net", ms,
+           std::to_string(res.masked_levels) + " masked levels, t=" + std::to_string(o.timestep));
+    } else if (std::strcmp(stage, "decode") == 0) {
+      res.timings.ms_decode = ms;
+      note("decode", ms);
+    }
+  };
+  MACRO_ASSIGN_OR_RETURN(nets::DifixOutputs step_out,
+                         pipe->step(batch, ctx, masks, pool, o.timestep, on_stage));
+  Tensor image = std::move(step_out.image);
 
   // 5. [1,3,Hm,Wm] in [-1,1] -> 8-bit (x/2 + 1/2 clamped, x255 rounded, as the pipeline's PIL
   // output) -> Pillow 8-bit Lanczos to the render size.

@@ -2,9 +2,11 @@
 #include "attention/nets/difix.h"
 
 #include <algorithm>
+#include <chrono>
 #include <nlohmann/json.hpp>
 
 #include "attention/runtime/file_io.h"
+#include "attention/runtime/progress.h"
 
 namespace macro::nets {
 
@@ -74,7 +76,7 @@ size_t DifixPipeline::step_workspace_bytes(int64_t views, int64_t h, int64_t w,
 
 Result<DifixOutputs> DifixPipeline::step(const TensorView& images, const TensorView& ctx,
                                          const UNetMasks& masks, ThreadPool* pool,
-                                         int timestep) const {
+                                         int timestep, const StageObserver& on_stage) const {
   MACRO_ASSIGN_OR_RETURN(double abar, alpha_bar(schedule_, timestep));
   (void)abar;
   std::lock_guard<std::mutex> lock(mu_);
@@ -86,17 +88,25 @@ Result<DifixOutputs> DifixPipeline::step(const TensorView& images, const TensorV
   DifixOutputs o;
   // View 0's skips live from encode to decode: in bf16 for a bf16 model (the same decode bits).
   const bool bf16_skips = vae_->precision() == Precision::kBf16;
+  auto t0 = std::chrono::steady_clock::now();
+  auto stage_done = [&](const char* stage) {
+    if (on_stage) on_stage(stage, ms_since(t0));
+    t0 = std::chrono::steady_clock::now();
+  };
   MACRO_ASSIGN_OR_RETURN(VaeEncoding enc,
                          vae_->encode(images, /*keep_skips=*/1, pool, &arena_, bf16_skips));
   o.z = std::move(enc.z);
+  stage_done("encode");
   MACRO_ASSIGN_OR_RETURN(o.eps,
                          unet_->forward(o.z, float(timestep), ctx, masks, pool, {}, &arena_));
   o.z0 = Tensor::f32(o.z.shape());
   MACRO_TRY(ddpm_x0(schedule_, timestep, o.z.f32(), o.eps.f32(), o.z0.f32(), size_t(o.z.numel())));
+  stage_done("unet");
   const TensorView z0_view0 = o.z0.view().slice(0, 0, 1);
   std::vector<TensorView> skips;
   for (const Tensor& s : enc.skips) skips.push_back(s.view());
   MACRO_ASSIGN_OR_RETURN(o.image, vae_->decode(z0_view0, skips, pool, &arena_));
+  stage_done("decode");
   return o;
 }
 

@@ -16,9 +16,11 @@
 //   image = vae.decode(z0[0], skips of view 0)      [1, 3, H, W]   (not clamped)
 // t = 199 by default. Only view 0's encoder skips are kept (in bf16 for a bf16 model). Every
 // stage runs on one scratch arena owned by the pipeline, reserved once to the largest stage of the
-// input shape and reused by later steps (steps are serialised on it).
+// input shape and reused by later steps (steps are serialised on it). An optional observer hears
+// each stage's wall time ("encode", "unet" (with the scheduler), "decode") as it ends.
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -45,8 +47,11 @@ class DifixPipeline {
   static Result<std::unique_ptr<DifixPipeline>> load(const std::string& folder,
                                                      Precision precision);
 
+  // Called after each stage with its name and wall milliseconds.
+  using StageObserver = std::function<void(const char* stage, double ms)>;
   Result<DifixOutputs> step(const TensorView& images, const TensorView& ctx, const UNetMasks& masks,
-                            ThreadPool* pool, int timestep = kDefaultTimestep) const;
+                            ThreadPool* pool, int timestep = kDefaultTimestep,
+                            const StageObserver& on_stage = {}) const;
   // Scratch bytes of one step for V views at H x W pixels with Lc context tokens: the largest of
   // encode, U-Net and decode (what the shared arena is reserved to).
   size_t step_workspace_bytes(int64_t views, int64_t h, int64_t w, int64_t ctx_tokens = 77) const;
