@@ -132,32 +132,17 @@ void ClipTextModel::forward_impl(const Run& r, const int32_t* ids, int64_t l, fl
     layer.layer_norm1.forward(r, n, x, l);
     layer.qkv.forward(r, l, n, d, big, 3 * d);  // [L, 3D]
     round_if_bf16(r, big, l * 3 * d);
-    AttentionArgs a;
-    a.q = big;
-    a.k = big + d;
-    a.v = big + 2 * d;
-    a.q_stride = a.k_stride = a.v_stride = size_t(3 * d);
-    a.out = n;
-    a.out_stride = size_t(d);
-    a.nq = a.nk = int(l);
-    a.heads = heads;
-    a.head_dim = int(d / heads);
+    AttentionArgs a = packed_qkv_attention(big, n, l, d, heads);
     a.causal = true;
     run_attention(r, a);
     layer.out_proj.forward(r, l, n, d, x, d, /*residual=*/x);  // x += out_proj(attn)
     // MLP, pre-LN.
     layer.layer_norm2.forward(r, n, x, l);
     layer.fc1.forward(r, l, n, d, big, ff);  // [L, F]
-    if (!r.planning()) {
-      if (cfg_.hidden_act == "quick_gelu") {
-        // x * sigmoid(1.702 x) = SiLU(1.702 x) / 1.702
-        scale(big, big, 1.702f, l * ff, r.pool);
-        activation(big, big, l * ff, Act::kSilu, r.pool);
-        scale(big, big, float(1.0 / 1.702), l * ff, r.pool);
-      } else {
-        activation(big, big, l * ff, Act::kGelu, r.pool);
-      }
-    }
+    if (cfg_.hidden_act == "quick_gelu")
+      quick_gelu(r, big, l * ff);
+    else if (!r.planning())
+      activation(big, big, l * ff, Act::kGelu, r.pool);
     layer.fc2.forward(r, l, big, ff, x, d, /*residual=*/x);  // x += fc2(act)
   }
   final_layer_norm.forward(r, out, x, l);

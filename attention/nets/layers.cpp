@@ -147,6 +147,36 @@ void run_attention(const Run& r, const AttentionArgs& a) {
   }
 }
 
+AttentionArgs packed_qkv_attention(const float* qkv, float* out, int64_t tokens, int64_t d,
+                                   int heads) {
+  AttentionArgs a;
+  a.q = qkv;
+  a.k = qkv + d;
+  a.v = qkv + 2 * d;
+  a.q_stride = a.k_stride = a.v_stride = size_t(3 * d);
+  a.out = out;
+  a.out_stride = size_t(d);
+  a.nq = a.nk = int(tokens);
+  a.heads = heads;
+  a.head_dim = int(d / heads);
+  return a;
+}
+
+void quick_gelu(const Run& r, float* x, int64_t n) {
+  if (r.planning()) return;
+  // x * sigmoid(1.702 x) = SiLU(1.702 x) / 1.702
+  scale(x, x, 1.702f, n, r.pool);
+  activation(x, x, n, Act::kSilu, r.pool);
+  scale(x, x, float(1.0 / 1.702), n, r.pool);
+}
+
+void take_vector(Param& p, std::vector<float>& dst) {
+  dst.resize(size_t(p.numel()));
+  read_param_f32(p, dst.data());
+  release_param(p);
+  p = Param();
+}
+
 // ---- Linear ------------------------------------------------------------------------------------
 
 void Linear::init(int64_t in_features, int64_t out_features, bool with_bias) {
@@ -166,13 +196,6 @@ WeightType weight_type(Precision p) {
   return p == Precision::kBf16 ? WeightType::kBf16 : WeightType::kF32;
 }
 
-// Norm/bias vectors: a plain fp32 copy, then the file pages are dropped.
-void take_vector(Param& p, std::vector<float>& dst) {
-  dst.resize(size_t(p.numel()));
-  read_param_f32(p, dst.data());
-  release_param(p);
-  p = Param();
-}
 
 }  // namespace
 

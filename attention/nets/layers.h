@@ -304,5 +304,13 @@ void tokens_to_nchw_add(const Run& r, float* dst, const float* src, const float*
                         int64_t ldt, int64_t n, int64_t c, int64_t hw);
 // The fused attention kernel; masks/shapes are invariants here (MACRO_CHECK on failure).
 void run_attention(const Run& r, const AttentionArgs& a);
+// Self-attention over `tokens` rows of a packed q|k|v buffer [tokens, 3D] (FusedLinear output)
+// into out [tokens, D], `heads` heads of D / heads.
+AttentionArgs packed_qkv_attention(const float* qkv, float* out, int64_t tokens, int64_t d,
+                                   int heads);
+// x * sigmoid(1.702 x) in place (CLIP's quick_gelu).
+void quick_gelu(const Run& r, float* x, int64_t n);
+// Norm/bias vectors: a plain fp32 copy of the parameter, then its file pages are dropped.
+void take_vector(Param& p, std::vector<float>& dst);
 
 }  // namespace macro::nets

@@ -108,13 +108,6 @@ void pack_scaled(Linear& l, Param& gamma, Precision p) {
   }
 }
 
-void take_vector(Param& p, std::vector<float>& dst) {
-  dst.resize(size_t(p.numel()));
-  read_param_f32(p, dst.data());
-  release_param(p);
-  p = Param();
-}
-
 }  // namespace
 
 void VitBlock::pack(Precision p) {
@@ -357,30 +350,14 @@ void VitModel::forward_impl(const Run& r, const float* image, int64_t gh, int64_
     b.norm1.forward(r, n, x, t);
     b.qkv.forward(r, t, n, d, big, 3 * d);  // [T, 3D]
     round_if_bf16(r, big, t * 3 * d);
-    AttentionArgs a;
-    a.q = big;
-    a.k = big + d;
-    a.v = big + 2 * d;
-    a.q_stride = a.k_stride = a.v_stride = size_t(3 * d);
-    a.out = n;
-    a.out_stride = size_t(d);
-    a.nq = a.nk = int(t);
-    a.heads = b.heads;
-    a.head_dim = int(d / b.heads);
-    run_attention(r, a);
+    run_attention(r, packed_qkv_attention(big, n, t, d, b.heads));
     b.proj.forward(r, t, n, d, x, d, /*residual=*/x);  // x += ls1 * proj(attn)
     b.norm2.forward(r, n, x, t);
     b.fc1.forward(r, t, n, d, big, ff);  // [T, F]
-    if (!r.planning()) {
-      if (cfg_.act == VitAct::kQuickGelu) {
-        // x * sigmoid(1.702 x) = SiLU(1.702 x) / 1.702
-        scale(big, big, 1.702f, t * ff, r.pool);
-        activation(big, big, t * ff, Act::kSilu, r.pool);
-        scale(big, big, float(1.0 / 1.702), t * ff, r.pool);
-      } else {
-        activation(big, big, t * ff, Act::kGelu, r.pool);
-      }
-    }
+    if (cfg_.act == VitAct::kQuickGelu)
+      quick_gelu(r, big, t * ff);
+    else if (!r.planning())
+      activation(big, big, t * ff, Act::kGelu, r.pool);
     b.fc2.forward(r, t, big, ff, x, d, /*residual=*/x);  // x += ls2 * fc2(act)
   }
   // Final norm: every token when asked for, else the CLS row only.
