@@ -40,16 +40,7 @@ Status ParamOverrides::finish() const {
     if (!used_.count(kv.first)) unused.push_back(kv.first);
   if (misshaped_.empty() && unused.empty()) return Status::ok();
   std::string msg = "tensor overrides do not match the model:";
-  auto list = [&](const char* what, const std::vector<std::string>& items) {
-    if (items.empty()) return;
-    msg += std::string(" ") + std::to_string(items.size()) + " " + what + " (";
-    for (size_t i = 0; i < items.size() && i < 5; ++i) msg += (i ? "; " : "") + items[i];
-    if (items.size() > 5) msg += "; ...";
-    msg += ")";
-  };
-  list("mis-shaped", misshaped_);
-  list("unused", unused);
-  return Status::error(msg);
+  return Status::error(msg + name_list("mis-shaped", misshaped_) + name_list("unused", unused));
 }
 
 // ---- one block ---------------------------------------------------------------------------------

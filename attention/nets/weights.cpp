@@ -117,6 +117,14 @@ void read_param_f32(const Param& p, float* dst) {
   widen(*p.source, dst);
 }
 
+std::string name_list(const char* what, const std::vector<std::string>& items) {
+  if (items.empty()) return "";
+  std::string msg = std::string(" ") + std::to_string(items.size()) + " " + what + " (";
+  for (size_t i = 0; i < items.size() && i < 5; ++i) msg += (i ? "; " : "") + items[i];
+  if (items.size() > 5) msg += "; ...";
+  return msg + ")";
+}
+
 void release_param(const Param& p) {
   if (!p.source) return;
   static const uintptr_t page = uintptr_t(sysconf(_SC_PAGESIZE));
@@ -306,16 +314,8 @@ Status WeightStore::finish() const {
       unused.push_back(src.file_names.empty() ? name : src.file_names.front());
   if (missing_.empty() && misshaped_.empty() && unused.empty()) return Status::ok();
   std::string msg = file_.path() + ": checkpoint does not match the model config:";
-  auto list = [&](const char* what, const std::vector<std::string>& items) {
-    if (items.empty()) return;
-    msg += std::string(" ") + std::to_string(items.size()) + " " + what + " (";
-    for (size_t i = 0; i < items.size() && i < 5; ++i) msg += (i ? "; " : "") + items[i];
-    if (items.size() > 5) msg += "; ...";
-    msg += ")";
-  };
-  list("missing", missing_);
-  list("mis-shaped", misshaped_);
-  list("unused", unused);
+  msg += name_list("missing", missing_) + name_list("mis-shaped", misshaped_) +
+         name_list("unused", unused);
   return Status::error(msg);
 }
 

@@ -61,6 +61,10 @@ void read_param_f32(const Param& p, float* dst);
 // read faults them back in from the file. No-op for `data`-only parameters.
 void release_param(const Param& p);
 
+// " N <what> (a; b; c; d; e; ...)" — the first five names of a mismatch list, for load errors;
+// "" when items is empty.
+std::string name_list(const char* what, const std::vector<std::string>& items);
+
 // A transient fp32 copy of parameters while one module packs: the process-wide live and peak
 // bytes of these are what loading holds beyond the packed weights (tests check the peak stays at
 // one module's tensors, never a whole checkpoint).
