@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
-#include <functional>
 #include <map>
 
 #include "attention/nets/weights.h"
@@ -19,71 +18,7 @@
 namespace macro::enhance {
 namespace {
 
-constexpr double kBicubicSupport = 2.0;  // Pillow BICUBIC
-constexpr double kBicubicA = -0.5;       // Pillow's Keys parameter
-constexpr double kCosineEps = 1e-8;      // torch F.cosine_similarity default
-
-// Pillow's bicubic_filter (Resample.c): Keys cubic with a = -0.5.
-double bicubic(double x) {
-  x = std::fabs(x);
-  if (x < 1.0) return ((kBicubicA + 2.0) * x - (kBicubicA + 3.0)) * x * x + 1.0;
-  if (x < 2.0) return (((x - 5.0) * x + 8.0) * x - 4.0) * kBicubicA;
-  return 0.0;
-}
-
-// Pillow precompute_coeffs for the bicubic filter, then normalize_coeffs_8bpc (22-bit fixed
-// point, rounded half away from zero).
-struct FixedTaps {
-  int max_taps = 0;
-  std::vector<int> first, count;  // [out]
-  std::vector<int32_t> k;         // [out, max_taps]
-};
-FixedTaps bicubic_taps(int in_size, int out_size) {
-  FixedTaps t;
-  const double scale = double(in_size) / double(out_size);
-  const double filterscale = std::max(scale, 1.0);
-  const double support = kBicubicSupport * filterscale;
-  t.max_taps = int(std::ceil(support)) * 2 + 1;
-  t.first.resize(size_t(out_size));
-  t.count.resize(size_t(out_size));
-  t.k.assign(size_t(out_size) * size_t(t.max_taps), 0);
-  const double ss = 1.0 / filterscale;
-  const double one = double(1 << kPillowPrecisionBits);
-  std::vector<double> w(size_t(t.max_taps));
-  for (int x = 0; x < out_size; ++x) {
-    const double center = (x + 0.5) * scale;
-    int xmin = int(center - support + 0.5);
-    if (xmin < 0) xmin = 0;
-    int xmax = int(center + support + 0.5);
-    if (xmax > in_size) xmax = in_size;
-    const int n = std::max(xmax - xmin, 0);
-    double sum = 0.0;
-    for (int i = 0; i < n; ++i) {
-      w[size_t(i)] = bicubic((i + xmin - center + 0.5) * ss);
-      sum += w[size_t(i)];
-    }
-    int32_t* k = &t.k[size_t(x) * size_t(t.max_taps)];
-    for (int i = 0; i < n; ++i) {
-      const double v = (sum != 0.0 ? w[size_t(i)] / sum : w[size_t(i)]) * one;
-      k[i] = static_cast<int32_t>(v < 0 ? v - 0.5 : v + 0.5);
-    }
-    t.first[size_t(x)] = xmin;
-    t.count[size_t(x)] = n;
-  }
-  return t;
-}
-
-uint8_t clip8(int64_t v) {
-  v >>= kPillowPrecisionBits;  // arithmetic shift: floor, as Pillow's lookup index
-  return static_cast<uint8_t>(std::clamp<int64_t>(v, 0, 255));
-}
-
-void for_rows(ThreadPool* pool, size_t n, const std::function<void(size_t, size_t)>& fn) {
-  if (pool)
-    pool->parallel_for(n, [&](size_t a, size_t b, int) { fn(a, b); });
-  else
-    fn(0, n);
-}
+constexpr double kCosineEps = 1e-8;  // torch F.cosine_similarity default
 
 // The file's names for this engine's: CLIP's ln_pre is `pos_drop` in DreamSim's converted towers.
 class DreamSimNames final : public nets::ParamVisitor {
@@ -207,46 +142,8 @@ std::vector<DreamSimTensorSpec> dreamsim_tensor_specs(const DreamSimConfig& cfg)
 
 std::vector<uint8_t> resize_bicubic_u8(const uint8_t* src, int w, int h, int c, int out_w,
                                        int out_h, ThreadPool* pool) {
-  MACRO_CHECK(src && w > 0 && h > 0 && c > 0 && out_w > 0 && out_h > 0);
-  std::vector<uint8_t> cur(src, src + size_t(w) * h * c);
-  if (out_w != w) {  // horizontal pass
-    const FixedTaps t = bicubic_taps(w, out_w);
-    std::vector<uint8_t> mid(size_t(out_w) * h * c);
-    for_rows(pool, size_t(h), [&](size_t y0, size_t y1) {
-      for (size_t y = y0; y < y1; ++y) {
-        const uint8_t* in = cur.data() + y * size_t(w) * c;
-        uint8_t* o = mid.data() + y * size_t(out_w) * c;
-        for (int x = 0; x < out_w; ++x) {
-          const int32_t* k = &t.k[size_t(x) * size_t(t.max_taps)];
-          const int first = t.first[size_t(x)], n = t.count[size_t(x)];
-          for (int ch = 0; ch < c; ++ch) {
-            int64_t acc = int64_t(1) << (kPillowPrecisionBits - 1);
-            for (int i = 0; i < n; ++i) acc += int64_t(in[size_t(first + i) * c + ch]) * k[i];
-            o[size_t(x) * c + ch] = clip8(acc);
-          }
-        }
-      }
-    });
-    cur.swap(mid);
-  }
-  if (out_h != h) {  // vertical pass
-    const FixedTaps t = bicubic_taps(h, out_h);
-    const size_t row = size_t(out_w) * c;
-    std::vector<uint8_t> dst(size_t(out_h) * row);
-    for_rows(pool, size_t(out_h), [&](size_t y0, size_t y1) {
-      for (size_t y = y0; y < y1; ++y) {
-        const int32_t* k = &t.k[y * size_t(t.max_taps)];
-        const int first = t.first[y], n = t.count[y];
-        for (size_t j = 0; j < row; ++j) {
-          int64_t acc = int64_t(1) << (kPillowPrecisionBits - 1);
-          for (int i = 0; i < n; ++i) acc += int64_t(cur[size_t(first + i) * row + j]) * k[i];
-          dst[y * row + j] = clip8(acc);
-        }
-      }
-    });
-    cur.swap(dst);
-  }
-  return cur;
+  return resize_pillow_u8(src, w, h, c, out_w, out_h, PillowFilter::kBicubic,
+                          pool ? *pool : ThreadPool::global());
 }
 
 std::vector<uint8_t> quantize_u8(const gs::Image& image) {

@@ -86,7 +86,8 @@ std::vector<DreamSimTensorSpec> dreamsim_tensor_specs(const DreamSimConfig& cfg)
 // Pillow `Image.resize((out_w, out_h), BICUBIC)` on 8-bit data (no reducing_gap): Keys cubic
 // a = -0.5, support 2 widened by the shrink factor, taps normalised to sum 1, weights in 22-bit
 // fixed point, horizontal pass then vertical, each rounded and clipped to 8 bits; a pass whose size
-// does not change is skipped. src [H, W, C] uint8 -> [out_h, out_w, C] uint8.
+// does not change is skipped. src [H, W, C] uint8 -> [out_h, out_w, C] uint8. resample.h's
+// resize_pillow_u8 with PillowFilter::kBicubic (pool nullptr = ThreadPool::global()).
 std::vector<uint8_t> resize_bicubic_u8(const uint8_t* src, int w, int h, int c, int out_w,
                                        int out_h, ThreadPool* pool = nullptr);
 // [0, 1] float RGB -> uint8 (clamped, round half up), as PIL holds the harness's images.

@@ -15,6 +15,14 @@ double sinc(double x) {
 double lanczos(double x) {
   return (-kLanczosSupport <= x && x < kLanczosSupport) ? sinc(x) * sinc(x / kLanczosSupport) : 0.0;
 }
+// Pillow's bicubic_filter: Keys cubic with a = -0.5.
+double bicubic(double x) {
+  constexpr double a = -0.5;
+  x = std::fabs(x);
+  if (x < 1.0) return ((a + 2.0) * x - (a + 3.0)) * x * x + 1.0;
+  if (x < 2.0) return (((x - 5.0) * x + 8.0) * x - 4.0) * a;
+  return 0.0;
+}
 
 // Fixed-point weights of the 8-bit path: round half away from zero, truncate.
 std::vector<int32_t> fixed_weights(const ResampleTaps& t) {
@@ -35,14 +43,16 @@ uint8_t clip8(int64_t v) {
 
 }  // namespace
 
-ResampleTaps lanczos_taps(int in_size, int out_size) {
+ResampleTaps pillow_taps(int in_size, int out_size, PillowFilter filter) {
   MACRO_CHECK(in_size > 0 && out_size > 0);
+  const bool cubic = filter == PillowFilter::kBicubic;
+  double (*fn)(double) = cubic ? bicubic : lanczos;
   ResampleTaps t;
   t.in_size = in_size;
   t.out_size = out_size;
   const double scale = double(in_size) / double(out_size);
   const double filterscale = std::max(scale, 1.0);
-  const double support = kLanczosSupport * filterscale;
+  const double support = (cubic ? kBicubicSupport : kLanczosSupport) * filterscale;
   t.max_taps = int(std::ceil(support)) * 2 + 1;
   t.first.resize(size_t(out_size));
   t.count.resize(size_t(out_size));
@@ -58,7 +68,7 @@ ResampleTaps lanczos_taps(int in_size, int out_size) {
     double* k = &t.weights[size_t(x) * size_t(t.max_taps)];
     double sum = 0.0;
     for (int i = 0; i < n; ++i) {
-      k[i] = lanczos((i + xmin - center + 0.5) * ss);
+      k[i] = fn((i + xmin - center + 0.5) * ss);
       sum += k[i];
     }
     if (sum != 0.0)
@@ -117,11 +127,16 @@ gs::Image resize_lanczos(const gs::Image& src, int out_w, int out_h, ThreadPool&
 
 std::vector<uint8_t> resize_lanczos_u8(const uint8_t* src, int w, int h, int c, int out_w,
                                        int out_h, ThreadPool& pool) {
+  return resize_pillow_u8(src, w, h, c, out_w, out_h, PillowFilter::kLanczos, pool);
+}
+
+std::vector<uint8_t> resize_pillow_u8(const uint8_t* src, int w, int h, int c, int out_w,
+                                      int out_h, PillowFilter filter, ThreadPool& pool) {
   MACRO_CHECK(src && w > 0 && h > 0 && c > 0 && out_w > 0 && out_h > 0);
   std::vector<uint8_t> mid;
   const uint8_t* hsrc = src;
   if (out_w != w) {
-    const ResampleTaps tx = lanczos_taps(w, out_w);
+    const ResampleTaps tx = pillow_taps(w, out_w, filter);
     const std::vector<int32_t> k = fixed_weights(tx);
     mid.resize(size_t(out_w) * h * c);
     pool.parallel_for(size_t(h), [&](size_t y0, size_t y1, int) {
@@ -147,7 +162,7 @@ std::vector<uint8_t> resize_lanczos_u8(const uint8_t* src, int w, int h, int c, 
     if (hsrc == src) return std::vector<uint8_t>(src, src + row * h);
     return mid;
   }
-  const ResampleTaps ty = lanczos_taps(h, out_h);
+  const ResampleTaps ty = pillow_taps(h, out_h, filter);
   const std::vector<int32_t> k = fixed_weights(ty);
   std::vector<uint8_t> dst(row * out_h);
   pool.parallel_for(size_t(out_h), [&](size_t y0, size_t y1, int) {

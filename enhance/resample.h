@@ -14,7 +14,8 @@
 //    integer accumulation starting at half a unit, each pass clipped to [0, 255] after the shift,
 //    so the intermediate image is 8-bit too.
 // Facts from Pillow's libImaging/Resample.c, re-implemented; tested against Pillow outputs
-// (golden metrics/lanczos.safetensors).
+// (golden metrics/lanczos.safetensors). The 8-bit path also runs Pillow's BICUBIC (DreamSim's
+// preprocessing, tested against Pillow 9.4 in test_dreamsim.cpp).
 #pragma once
 
 #include <cstdint>
@@ -29,6 +30,7 @@
 namespace macro::enhance {
 
 inline constexpr double kLanczosSupport = 3.0;   // Pillow LANCZOS: a = 3
+inline constexpr double kBicubicSupport = 2.0;   // Pillow BICUBIC
 inline constexpr int kPillowPrecisionBits = 22;  // 32 - 8 - 2: fixed-point weight bits (8-bit mode)
 inline constexpr int kMaxModelSide = 960;        // MACRO _MAX_MODEL_SIDE (macro-method.md §5)
 inline constexpr int kModelMultiple = 8;         // VAE downsampling factor
@@ -40,7 +42,12 @@ struct ResampleTaps {
   std::vector<int> first, count;  // [out]
   std::vector<double> weights;    // [out, max_taps], normalised to sum 1 (if the sum is non-zero)
 };
-ResampleTaps lanczos_taps(int in_size, int out_size);
+// Pillow's filters: LANCZOS (a = 3, support 3) and BICUBIC (Keys cubic, a = -0.5, support 2).
+enum class PillowFilter { kLanczos, kBicubic };
+ResampleTaps pillow_taps(int in_size, int out_size, PillowFilter filter);
+inline ResampleTaps lanczos_taps(int in_size, int out_size) {
+  return pillow_taps(in_size, out_size, PillowFilter::kLanczos);
+}
 
 // Float mode per channel (Pillow "F"). out_w, out_h >= 1; src must be non-empty.
 gs::Image resize_lanczos(const gs::Image& src, int out_w, int out_h,
@@ -48,6 +55,10 @@ gs::Image resize_lanczos(const gs::Image& src, int out_w, int out_h,
 // 8-bit mode (Pillow "RGB"/"L"): src [H,W,C] uint8, returns [out_h, out_w, C] uint8.
 std::vector<uint8_t> resize_lanczos_u8(const uint8_t* src, int w, int h, int c, int out_w,
                                        int out_h, ThreadPool& pool = ThreadPool::global());
+// The same 8-bit path with any of Pillow's filters above.
+std::vector<uint8_t> resize_pillow_u8(const uint8_t* src, int w, int h, int c, int out_w,
+                                      int out_h, PillowFilter filter,
+                                      ThreadPool& pool = ThreadPool::global());
 
 // Nearest index of output i among `out` samples over `in` inputs: floor(i * in / out) (the
 // top-left sample of each cell; torch nearest for integer-ratio and most other sizes).
