@@ -655,16 +655,7 @@ void VaeAttention::forward(const Run& r, float* x, int64_t n, int64_t hw) const 
   for (int64_t i = 0; i < n; ++i) {
     qkv.forward(r, hw, g + i * c * hw, hw, q, 3 * c, /*trans_x=*/true);
     round_if_bf16(r, q, hw * 3 * c);
-    AttentionArgs args;
-    args.q = q;
-    args.k = q + c;
-    args.v = q + 2 * c;
-    args.q_stride = args.k_stride = args.v_stride = size_t(3 * c);
-    args.out = a;
-    args.out_stride = size_t(c);
-    args.nq = args.nk = int(hw);
-    args.heads = 1;
-    args.head_dim = int(c);
+    AttentionArgs args = packed_qkv_attention(q, a, hw, c, /*heads=*/1);
     args.scale = float(1.0 / std::sqrt(double(c)));
     run_attention(r, args);
     to_out.forward(r, hw, a, c, o, c);

@@ -100,16 +100,7 @@ void BasicTransformerBlock::forward(const Run& r, float* x, int64_t views, int64
   norm1.forward(r, n, x, m);
   attn1.qkv.forward(r, m, n, c, big, 3 * c);  // [M, 3C]
   round_if_bf16(r, big, m * 3 * c);
-  AttentionArgs a1;
-  a1.q = big;
-  a1.k = big + c;
-  a1.v = big + 2 * c;
-  a1.q_stride = a1.k_stride = a1.v_stride = size_t(3 * c);
-  a1.out = n;
-  a1.out_stride = size_t(c);
-  a1.nq = a1.nk = int(m);
-  a1.heads = heads;
-  a1.head_dim = int(c / heads);
+  AttentionArgs a1 = packed_qkv_attention(big, n, m, c, heads);
   a1.mask = mask;
   run_attention(r, a1);
   attn1.to_out.forward(r, m, n, c, x, c, /*residual=*/x);
