@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <functional>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -15,6 +16,7 @@
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/safetensors.h"
+#include "enhance/bench_harness.h"
 #include "enhance/feature_metrics.h"
 #include "test_support.h"
 
@@ -301,4 +303,45 @@ TEST_CASE("dinov2: macro metrics prints a number with --dinov2 and 'not computed
   REQUIRE(test::run_command(base + " --dinov2 " + dir.file("absent.safetensors") + " >" + out +
                             " 2>" + err) == 0);
   CHECK_THAT(slurp(out), Catch::Contains("dinov2: not computed: weights not supplied"));
+}
+
+TEST_CASE("dinov2: bench run records the distance per pair and the report shows it",
+          "[dinov2][cli]") {
+  test::TempDir dir("dinov2-bench");
+  const std::string weights = write_dinov2(dir, "dinov2.safetensors");
+  const std::string exe = test::macro_exe();
+  const auto sh = [&](const std::string& args) {
+    return std::system(
+        (exe + " bench " + args + " --quiet > " + dir.file("out.txt") + " 2>&1").c_str());
+  };
+  REQUIRE(sh("synth --size tiny --no-gt-ply --out " + dir.file("root")) == 0);
+  REQUIRE(sh("run --root " + dir.file("root") + " --methods 3dgs --limit 1 --dinov2 " + weights +
+             " --dreamsim " + dir.file("absent.safetensors") + " --results " +
+             dir.file("r.jsonl")) == 0);
+  auto records = read_records(dir.file("r.jsonl"));
+  REQUIRE(records.is_ok());
+  REQUIRE(records->size() == 1);
+  const BenchRecord& r = records->front();
+  REQUIRE(r.ok);
+  bool dino = false, dream = false;
+  for (const MetricValue& m : r.metrics) {
+    if (m.name == "dinov2") {
+      dino = true;
+      CHECK(m.computed);
+      CHECK(std::isfinite(m.value));
+      CHECK(m.value > 0.0);  // a blurry render is not its ground truth
+      CHECK(m.value <= 2.0);
+    }
+    if (m.name == "dreamsim") {
+      dream = true;
+      CHECK_FALSE(m.computed);
+      CHECK_THAT(m.reason, Catch::Contains("weights not supplied") &&
+                               Catch::Contains("absent.safetensors"));
+    }
+  }
+  CHECK(dino);
+  CHECK(dream);
+  REQUIRE(sh("report --results " + dir.file("r.jsonl") + " --out " + dir.file("report")) == 0);
+  const std::string md = slurp(dir.file("report/table.md"));
+  CHECK(md.find("DINOv2") != std::string::npos);
 }
