@@ -5,6 +5,12 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
+#include <utility>
+#include <vector>
+
+#include "attention/runtime/status.h"
+#include "enhance/depth_planes.h"
+#include "enhance/reference_selection.h"
 #include "gs/rasterizer.h"
 #include "gs/synth.h"
 
@@ -53,5 +59,24 @@ inline std::vector<int> planes_far_to_near(const gs::SynthGeometry& g, const gs:
   });
   return idx;
 }
+
+// The three-plane scene seen by a 320x180 close-up on the axis and two references (the second
+// with another size and focal), with the close-up's MACRO depth and its three planes.
+struct ThreePlaneCloseup {
+  gs::SynthScene scene = three_plane_scene();
+  gs::Camera cu = axis_camera("closeup", {0.0, 0.0, 0.0}, 0, 320, 180);
+  std::vector<gs::Camera> refs = {axis_camera("ref_a", {0.3, 0.1, -1.5}, 4, 320, 180),
+                                  axis_camera("ref_b", {-0.5, -0.1, -2.5}, -6, 400, 300, 0.7)};
+  enhance::DepthView cud;
+  enhance::PlaneResult planes;
+  ThreePlaneCloseup() {
+    auto r = gs::render(scene.cloud, cu);
+    MACRO_CHECK(r.is_ok());
+    cud = {cu, enhance::macro_depth(*r)};
+    auto p = enhance::compute_depth_planes(cud.depth, cu.width, cu.height, {3, false});
+    MACRO_CHECK(p.is_ok());
+    planes = std::move(p).value();
+  }
+};
 
 }  // namespace macro::test

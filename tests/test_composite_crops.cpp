@@ -25,24 +25,12 @@ using namespace macro::enhance;
 
 namespace {
 
-struct ThreePlanes {
-  gs::SynthScene scene = test::three_plane_scene();
-  gs::Camera cu = test::axis_camera("closeup", {0.0, 0.0, 0.0}, 0, 320, 180);
-  std::vector<gs::Camera> refs = {
-      test::axis_camera("ref_a", {0.3, 0.1, -1.5}, 4, 320, 180),
-      test::axis_camera("ref_b", {-0.5, -0.1, -2.5}, -6, 400, 300, 0.7)};
+// The planning tests' three-plane close-up plus the references' names, sizes and images.
+struct ThreePlanes : test::ThreePlaneCloseup {
   std::vector<std::string> names = {"ref_a", "ref_b"};
   std::vector<Size2> sizes = {{320, 180}, {400, 300}};
-  DepthView cud;
-  PlaneResult planes;
   std::vector<gs::Image> ref_images;
   ThreePlanes() {
-    auto r = gs::render(scene.cloud, cu);
-    MACRO_CHECK(r.is_ok());
-    cud = {cu, macro_depth(*r)};
-    auto p = compute_depth_planes(cud.depth, cu.width, cu.height, {3, false});
-    MACRO_CHECK(p.is_ok());
-    planes = std::move(p).value();
     for (const gs::Camera& c : refs) {
       auto rr = gs::render(scene.cloud, c);
       MACRO_CHECK(rr.is_ok());

@@ -10,23 +10,7 @@ using namespace macro::enhance;
 
 namespace {
 
-struct Fixture {
-  gs::SynthScene scene = test::three_plane_scene();
-  gs::Camera cu = test::axis_camera("closeup", {0.0, 0.0, 0.0}, 0, 320, 180);
-  std::vector<gs::Camera> refs = {
-      test::axis_camera("ref_a", {0.3, 0.1, -1.5}, 4, 320, 180),
-      test::axis_camera("ref_b", {-0.5, -0.1, -2.5}, -6, 400, 300, 0.7)};
-  DepthView cud;
-  PlaneResult planes;
-  Fixture() {
-    auto r = gs::render(scene.cloud, cu);
-    MACRO_CHECK(r.is_ok());
-    cud = {cu, macro_depth(*r)};
-    auto p = compute_depth_planes(cud.depth, cu.width, cu.height, {3, false});
-    MACRO_CHECK(p.is_ok());
-    planes = std::move(p).value();
-  }
-};
+using Fixture = test::ThreePlaneCloseup;
 
 }  // namespace
 
