@@ -17,6 +17,7 @@
 #include "enhance/dreamsim.h"
 #include "enhance/feature_metrics.h"
 #include "test_support.h"
+#include "vit_reference.h"
 
 using namespace macro;
 using namespace macro::enhance;
@@ -112,109 +113,24 @@ Weights to_unmerged(const Weights& merged, int r, double alpha, uint64_t seed, W
 // ---- double-precision reference -----------------------------------------------------------------
 using V = std::vector<double>;
 
-V get(const Weights& w, const std::string& name) {
-  auto it = w.find(name);
-  REQUIRE(it != w.end());
-  return V(it->second.v.begin(), it->second.v.end());
-}
-
-void layer_norm(V& x, int64_t rows, int64_t d, const V& g, const V& b, double eps) {
-  for (int64_t r = 0; r < rows; ++r) {
-    double* p = &x[size_t(r * d)];
-    double m = 0, var = 0;
-    for (int64_t i = 0; i < d; ++i) m += p[i];
-    m /= double(d);
-    for (int64_t i = 0; i < d; ++i) var += (p[i] - m) * (p[i] - m);
-    var /= double(d);
-    const double inv = 1.0 / std::sqrt(var + eps);
-    for (int64_t i = 0; i < d; ++i) p[i] = (p[i] - m) * inv * g[size_t(i)] + b[size_t(i)];
-  }
-}
-
-// y [rows, out] = x [rows, in] W^T + b
-V linear(const V& x, int64_t rows, int64_t in, const V& w, const V& b, int64_t out) {
-  V y(size_t(rows * out));
-  for (int64_t r = 0; r < rows; ++r)
-    for (int64_t o = 0; o < out; ++o) {
-      double acc = b.empty() ? 0.0 : b[size_t(o)];
-      for (int64_t i = 0; i < in; ++i) acc += x[size_t(r * in + i)] * w[size_t(o * in + i)];
-      y[size_t(r * out + o)] = acc;
-    }
-  return y;
-}
-
-// One backbone's feature from a [3, S, S] image in [0, 1] (normalised here).
+// One backbone's feature from a [3, S, S] image in [0, 1] (normalised here), through
+// vit_reference.h's double ViT; the file's `pos_drop` is the config's `norm_pre`.
 V reference_feature(const Weights& w, const DreamSimBackbone& bb, const V& img01, int64_t s) {
-  const nets::VitConfig& c = bb.vit;
-  const std::string pre = c.prefix;
-  const int64_t d = c.width, p = c.patch, g = s / p, n = g * g, t = n + 1, ff = c.mlp_hidden;
-  const int64_t hd = d / c.heads;
   V img(img01.size());
   for (int64_t ch = 0; ch < 3; ++ch)
     for (int64_t i = 0; i < s * s; ++i)
       img[size_t(ch * s * s + i)] =
           (img01[size_t(ch * s * s + i)] - bb.mean[size_t(ch)]) / bb.std[size_t(ch)];
-  const V pw = get(w, pre + "patch_embed.proj.weight"), pb = get(w, pre + "patch_embed.proj.bias");
-  const V cls = get(w, pre + "cls_token"), pos = get(w, pre + "pos_embed");
-  V x(size_t(t * d));
-  for (int64_t k = 0; k < d; ++k) x[size_t(k)] = cls[size_t(k)] + pos[size_t(k)];
-  for (int64_t py = 0; py < g; ++py)
-    for (int64_t px = 0; px < g; ++px)
-      for (int64_t k = 0; k < d; ++k) {
-        double acc = pb[size_t(k)];
-        for (int64_t ch = 0; ch < 3; ++ch)
-          for (int64_t ky = 0; ky < p; ++ky)
-            for (int64_t kx = 0; kx < p; ++kx)
-              acc += pw[size_t(((k * 3 + ch) * p + ky) * p + kx)] *
-                     img[size_t((ch * s + py * p + ky) * s + px * p + kx)];
-        const int64_t tok = 1 + py * g + px;
-        x[size_t(tok * d + k)] = acc + pos[size_t(tok * d + k)];
-      }
-  if (c.norm_pre) layer_norm(x, t, d, get(w, pre + "pos_drop.weight"), get(w, pre + "pos_drop.bias"), c.ln_eps);
-  for (int bi = 0; bi < c.depth; ++bi) {
-    const std::string b = pre + "blocks." + std::to_string(bi) + ".";
-    V h = x;
-    layer_norm(h, t, d, get(w, b + "norm1.weight"), get(w, b + "norm1.bias"), c.ln_eps);
-    const V qkv = linear(h, t, d, get(w, b + "attn.qkv.weight"), get(w, b + "attn.qkv.bias"), 3 * d);
-    V att(size_t(t * d));
-    for (int head = 0; head < c.heads; ++head)
-      for (int64_t i = 0; i < t; ++i) {
-        V sc(static_cast<size_t>(t));
-        double mx = -1e300;
-        for (int64_t j = 0; j < t; ++j) {
-          double acc = 0;
-          for (int64_t e = 0; e < hd; ++e)
-            acc += qkv[size_t(i * 3 * d + head * hd + e)] * qkv[size_t(j * 3 * d + d + head * hd + e)];
-          sc[size_t(j)] = acc / std::sqrt(double(hd));
-          mx = std::max(mx, sc[size_t(j)]);
-        }
-        double sum = 0;
-        for (double& v : sc) sum += (v = std::exp(v - mx));
-        for (int64_t e = 0; e < hd; ++e) {
-          double acc = 0;
-          for (int64_t j = 0; j < t; ++j) acc += sc[size_t(j)] * qkv[size_t(j * 3 * d + 2 * d + head * hd + e)];
-          att[size_t(i * d + head * hd + e)] = acc / sum;
-        }
-      }
-    const V o = linear(att, t, d, get(w, b + "attn.proj.weight"), get(w, b + "attn.proj.bias"), d);
-    for (size_t i = 0; i < x.size(); ++i) x[i] += o[i];
-    h = x;
-    layer_norm(h, t, d, get(w, b + "norm2.weight"), get(w, b + "norm2.bias"), c.ln_eps);
-    V f = linear(h, t, d, get(w, b + "mlp.fc1.weight"), get(w, b + "mlp.fc1.bias"), ff);
-    for (double& v : f)
-      v = c.act == nets::VitAct::kQuickGelu ? v / (1.0 + std::exp(-1.702 * v))
-                                            : 0.5 * v * (1.0 + std::erf(v / std::sqrt(2.0)));
-    const V m = linear(f, t, ff, get(w, b + "mlp.fc2.weight"), get(w, b + "mlp.fc2.bias"), d);
-    for (size_t i = 0; i < x.size(); ++i) x[i] += m[i];
-  }
-  V cl(x.begin(), x.begin() + d);  // token 0
-  if (c.final_norm) layer_norm(cl, 1, d, get(w, pre + "norm.weight"), get(w, pre + "norm.bias"), c.ln_eps);
-  if (c.proj_dim == 0) return cl;
-  const V pj = get(w, pre + "proj");  // [D, P]: cls @ proj
-  V out(size_t(c.proj_dim), 0.0);
-  for (int64_t k = 0; k < c.proj_dim; ++k)
-    for (int64_t i = 0; i < d; ++i) out[size_t(k)] += cl[size_t(i)] * pj[size_t(i * c.proj_dim + k)];
-  return out;
+  const auto tensor = [&](const std::string& name) -> const std::vector<float>& {
+    std::string file = name;
+    const size_t at = file.find(".norm_pre.");
+    if (at != std::string::npos) file.replace(at, 10, ".pos_drop.");
+    auto it = w.find(file);
+    if (it == w.end()) FAIL("reference: no tensor " << file);
+    return it->second.v;
+  };
+  return test::vit_reference_forward(bb.vit, tensor, img, s, s, tensor(bb.vit.prefix + "pos_embed"))
+      .cls;
 }
 
 V reference_embedding(const Weights& w, const DreamSimConfig& cfg, const V& img01) {

@@ -14,6 +14,7 @@
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/safetensors.h"
 #include "test_support.h"
+#include "vit_reference.h"
 
 using namespace macro;
 using namespace macro::nets;
@@ -28,121 +29,13 @@ const std::vector<float>& w(const Weights& ws, const std::string& name) {
   return it->second.values;
 }
 
-// y [M, out] = x [M, in] W^T (+ b); W [out, in].
-std::vector<double> linear(const std::vector<double>& x, int64_t m, int64_t in, int64_t out,
-                           const std::vector<float>& wt, const std::vector<float>* b) {
-  std::vector<double> y(size_t(m * out));
-  for (int64_t i = 0; i < m; ++i)
-    for (int64_t o = 0; o < out; ++o) {
-      double s = b ? double((*b)[size_t(o)]) : 0.0;
-      for (int64_t k = 0; k < in; ++k) s += x[size_t(i * in + k)] * double(wt[size_t(o * in + k)]);
-      y[size_t(i * out + o)] = s;
-    }
-  return y;
-}
-
-std::vector<double> layer_norm_ref(const std::vector<double>& x, int64_t m, int64_t d,
-                                   const std::vector<float>& g, const std::vector<float>& b,
-                                   double eps) {
-  std::vector<double> y(x.size());
-  for (int64_t i = 0; i < m; ++i) {
-    double mean = 0, var = 0;
-    for (int64_t k = 0; k < d; ++k) mean += x[size_t(i * d + k)];
-    mean /= double(d);
-    for (int64_t k = 0; k < d; ++k) var += std::pow(x[size_t(i * d + k)] - mean, 2);
-    var /= double(d);
-    const double inv = 1.0 / std::sqrt(var + eps);
-    for (int64_t k = 0; k < d; ++k)
-      y[size_t(i * d + k)] = (x[size_t(i * d + k)] - mean) * inv * g[size_t(k)] + b[size_t(k)];
-  }
-  return y;
-}
-
-struct RefOut {
-  std::vector<double> tokens;  // [T, D] after the final norm
-  std::vector<double> cls;     // [out_dim]
-};
-
-// The ViT of vit.h in double precision. pos: the (resampled) pos_embed [T, D] to add.
-RefOut reference_forward(const VitConfig& cfg, const Weights& ws, const std::vector<float>& image,
-                         int64_t h, int64_t wd, const std::vector<float>& pos) {
-  const std::string& pre = cfg.prefix;
-  const int64_t d = cfg.width, p = cfg.patch, gh = h / p, gw = wd / p, t = 1 + gh * gw;
-  const int64_t ff = cfg.mlp_hidden, dh = d / cfg.heads;
-  const double eps = cfg.ln_eps;
-  std::vector<double> x(size_t(t * d));
-  const auto& cls = w(ws, pre + "cls_token");
-  const auto& pw = w(ws, pre + "patch_embed.proj.weight");
-  for (int64_t c = 0; c < d; ++c) x[size_t(c)] = double(cls[size_t(c)]) + pos[size_t(c)];
-  for (int64_t py = 0; py < gh; ++py)
-    for (int64_t px = 0; px < gw; ++px)
-      for (int64_t o = 0; o < d; ++o) {
-        double s = cfg.patch_bias ? double(w(ws, pre + "patch_embed.proj.bias")[size_t(o)]) : 0.0;
-        for (int64_t ch = 0; ch < 3; ++ch)
-          for (int64_t ky = 0; ky < p; ++ky)
-            for (int64_t kx = 0; kx < p; ++kx)
-              s += double(pw[size_t(((o * 3 + ch) * p + ky) * p + kx)]) *
-                   double(image[size_t((ch * h + py * p + ky) * wd + px * p + kx)]);
-        const int64_t tok = 1 + py * gw + px;
-        x[size_t(tok * d + o)] = s + pos[size_t(tok * d + o)];
-      }
-  if (cfg.norm_pre)
-    x = layer_norm_ref(x, t, d, w(ws, pre + "norm_pre.weight"), w(ws, pre + "norm_pre.bias"), eps);
-  for (int i = 0; i < cfg.depth; ++i) {
-    const std::string b = pre + "blocks." + std::to_string(i) + ".";
-    auto n = layer_norm_ref(x, t, d, w(ws, b + "norm1.weight"), w(ws, b + "norm1.bias"), eps);
-    auto qkv = linear(n, t, d, 3 * d, w(ws, b + "attn.qkv.weight"),
-                      cfg.qkv_bias ? &w(ws, b + "attn.qkv.bias") : nullptr);
-    std::vector<double> att(size_t(t * d));
-    for (int hd = 0; hd < cfg.heads; ++hd)
-      for (int64_t qi = 0; qi < t; ++qi) {
-        std::vector<double> s(static_cast<size_t>(t));
-        double mx = -1e300;
-        for (int64_t kj = 0; kj < t; ++kj) {
-          double dot = 0;
-          for (int64_t c = 0; c < dh; ++c)
-            dot +=
-                qkv[size_t(qi * 3 * d + hd * dh + c)] * qkv[size_t(kj * 3 * d + d + hd * dh + c)];
-          s[size_t(kj)] = dot / std::sqrt(double(dh));
-          mx = std::max(mx, s[size_t(kj)]);
-        }
-        double sum = 0;
-        for (double& v : s) sum += (v = std::exp(v - mx));
-        for (int64_t c = 0; c < dh; ++c) {
-          double a = 0;
-          for (int64_t kj = 0; kj < t; ++kj)
-            a += s[size_t(kj)] * qkv[size_t(kj * 3 * d + 2 * d + hd * dh + c)];
-          att[size_t(qi * d + hd * dh + c)] = a / sum;
-        }
-      }
-    auto o = linear(att, t, d, d, w(ws, b + "attn.proj.weight"), &w(ws, b + "attn.proj.bias"));
-    for (int64_t k = 0; k < t * d; ++k)
-      x[size_t(k)] +=
-          (cfg.layer_scale ? double(w(ws, b + "ls1.gamma")[size_t(k % d)]) : 1.0) * o[size_t(k)];
-    n = layer_norm_ref(x, t, d, w(ws, b + "norm2.weight"), w(ws, b + "norm2.bias"), eps);
-    auto hid = linear(n, t, d, ff, w(ws, b + "mlp.fc1.weight"), &w(ws, b + "mlp.fc1.bias"));
-    for (double& v : hid)
-      v = cfg.act == VitAct::kQuickGelu ? v / (1.0 + std::exp(-1.702 * v))
-                                        : 0.5 * v * (1.0 + std::erf(v / std::sqrt(2.0)));
-    auto y = linear(hid, t, ff, d, w(ws, b + "mlp.fc2.weight"), &w(ws, b + "mlp.fc2.bias"));
-    for (int64_t k = 0; k < t * d; ++k)
-      x[size_t(k)] +=
-          (cfg.layer_scale ? double(w(ws, b + "ls2.gamma")[size_t(k % d)]) : 1.0) * y[size_t(k)];
-  }
-  RefOut r;
-  r.tokens = cfg.final_norm ? layer_norm_ref(x, t, d, w(ws, pre + "norm.weight"),
-                                             w(ws, pre + "norm.bias"), eps)
-                            : x;
-  if (cfg.proj_dim > 0) {
-    const auto& pj = w(ws, pre + "proj");  // [D, P]
-    r.cls.assign(size_t(cfg.proj_dim), 0.0);
-    for (int64_t j = 0; j < cfg.proj_dim; ++j)
-      for (int64_t k = 0; k < d; ++k)
-        r.cls[size_t(j)] += r.tokens[size_t(k)] * double(pj[size_t(k * cfg.proj_dim + j)]);
-  } else {
-    r.cls.assign(r.tokens.begin(), r.tokens.begin() + d);
-  }
-  return r;
+// vit_reference.h's double forward on a weight map. pos: the (resampled) pos_embed [T, D] to add.
+test::VitRefOut reference_forward(const VitConfig& cfg, const Weights& ws,
+                                  const std::vector<float>& image, int64_t h, int64_t wd,
+                                  const std::vector<float>& pos) {
+  return test::vit_reference_forward(
+      cfg, [&](const std::string& name) -> const std::vector<float>& { return w(ws, name); },
+      std::vector<double>(image.begin(), image.end()), h, wd, pos);
 }
 
 // Binds parameters straight from a weight map (no file).
@@ -240,7 +133,8 @@ TEST_CASE("vit: forward matches the double reference for every option and ISA pa
   const std::vector<float> image = random_image(h, wd, 7);
   for (const Variant& var : variants()) {
     const Weights ws = vit_random_weights(var.cfg, 11);
-    const RefOut ref = reference_forward(var.cfg, ws, image, h, wd, stored_pos(ws, var.cfg));
+    const test::VitRefOut ref =
+        reference_forward(var.cfg, ws, image, h, wd, stored_pos(ws, var.cfg));
     for (Isa isa : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512, Isa::kAvx512Bf16, Isa::kAmx}) {
       if (!isa_supported(isa)) {
         std::printf("vit %s: %s not supported here, skipped\n", var.name, isa_name(isa));
@@ -277,7 +171,7 @@ TEST_CASE("vit: bf16 precision stays near the fp32 reference", "[vit]") {
   const VitConfig cfg = variants()[0].cfg;
   const Weights ws = vit_random_weights(cfg, 5);
   const std::vector<float> image = random_image(12, 16, 3);
-  const RefOut ref = reference_forward(cfg, ws, image, 12, 16, stored_pos(ws, cfg));
+  const test::VitRefOut ref = reference_forward(cfg, ws, image, 12, 16, stored_pos(ws, cfg));
   auto model = VitModel::build(cfg);
   REQUIRE(model.is_ok());
   MapVisitor mv(ws);
@@ -361,7 +255,7 @@ TEST_CASE("vit: another token grid resamples pos_embed or is refused", "[vit]") 
     std::copy(stored.begin(), stored.begin() + cfg.width, pos.begin());
     resample_pos_grid(stored.data() + cfg.width, 3, 4, pos.data() + cfg.width, 5, 2, cfg.width,
                       mode == PosEmbedResample::kBicubicAntialias);
-    const RefOut ref = reference_forward(cfg, ws, image, h, wd, pos);
+    const test::VitRefOut ref = reference_forward(cfg, ws, image, h, wd, pos);
     auto model = VitModel::build(cfg);
     REQUIRE(model.is_ok());
     MapVisitor mv(ws);
@@ -417,7 +311,7 @@ TEST_CASE("vit: loads a safetensors file by name with prefix and ignored names a
   auto model = VitModel::load(good, cfg, opt);
   INFO((model.is_ok() ? "" : model.status().message()));
   REQUIRE(model.is_ok());
-  const RefOut ref = reference_forward(cfg, ws, image, 12, 16, stored_pos(ws, cfg));
+  const test::VitRefOut ref = reference_forward(cfg, ws, image, 12, 16, stored_pos(ws, cfg));
   auto out = (*model)->forward(image.data(), 12, 16, nullptr);
   REQUIRE(out.is_ok());
   CHECK(max_rel(out->cls, ref.cls) < 1e-5);
@@ -452,7 +346,7 @@ TEST_CASE("vit: loads a safetensors file by name with prefix and ignored names a
   auto m2 = VitModel::load(good, cfg, opt);
   INFO((m2.is_ok() ? "" : m2.status().message()));
   REQUIRE(m2.is_ok());
-  const RefOut ref2 = reference_forward(cfg, modified, image, 12, 16, stored_pos(ws, cfg));
+  const test::VitRefOut ref2 = reference_forward(cfg, modified, image, 12, 16, stored_pos(ws, cfg));
   auto out2 = (*m2)->forward(image.data(), 12, 16, nullptr);
   REQUIRE(out2.is_ok());
   CHECK(max_rel(out2->cls, ref2.cls) < 1e-5);
