@@ -1,8 +1,6 @@
 // DreamSim ensemble distance (contract and sources in dreamsim.h, docs/dreamsim.md).
 #include "enhance/dreamsim.h"
 
-#include <sys/stat.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -299,18 +297,6 @@ Result<double> DreamSimModel::distance(const gs::Image& pred, const gs::Image& g
 }
 
 namespace {
-struct FileStamp {
-  int64_t size = -1, mtime_ns = -1;
-  bool operator==(const FileStamp& o) const { return size == o.size && mtime_ns == o.mtime_ns; }
-};
-// Size and modification time; size -1 when the file cannot be stat'ed.
-FileStamp file_stamp(const std::string& path) {
-  struct stat st {};
-  if (::stat(path.c_str(), &st) != 0) return {};
-  return {int64_t(st.st_size),
-          int64_t(st.st_mtim.tv_sec) * 1000000000 + int64_t(st.st_mtim.tv_nsec)};
-}
-
 std::mutex g_cache_mutex;
 std::shared_ptr<const DreamSimModel> g_cached;  // under g_cache_mutex
 FileStamp g_cached_stamp;                       // of the file g_cached was loaded from

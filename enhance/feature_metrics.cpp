@@ -1,7 +1,6 @@
 // DINOv2 / DreamSim entries of the metric suite (contract in feature_metrics.h).
 #include "enhance/feature_metrics.h"
 
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include <climits>
@@ -109,7 +108,7 @@ nets::VitConfig dinov2_config() {
 namespace {
 
 struct CachedModel {
-  int64_t size = -1, mtime_ns = -1;
+  FileStamp stamp;
   std::shared_ptr<const nets::VitModel> model;
 };
 
@@ -128,22 +127,19 @@ std::mutex& dinov2_forward_mutex() {
 }  // namespace
 
 Result<std::shared_ptr<const nets::VitModel>> load_dinov2(const std::string& path) {
-  struct stat st {};
-  if (::stat(path.c_str(), &st) != 0)
+  const FileStamp stamp = file_stamp(path);
+  if (stamp.size < 0)
     return Status::error(path + ": cannot read the DINOv2 weights (no such file)");
-  const int64_t size = int64_t(st.st_size);
-  const int64_t mtime = int64_t(st.st_mtim.tv_sec) * 1000000000 + int64_t(st.st_mtim.tv_nsec);
   std::lock_guard<std::mutex> lock(dinov2_cache_mutex());
   static std::map<std::string, CachedModel> cache;
   CachedModel& c = cache[path];
-  if (c.model && c.size == size && c.mtime_ns == mtime) return c.model;
+  if (c.model && c.stamp == stamp) return c.model;
   c = CachedModel();
   nets::VitLoadOptions opt;
   opt.ignored_prefixes = {"head.", "mask_token"};  // classifier (num_classes=0), torch.hub buffer
   auto model = nets::VitModel::load(path, dinov2_config(), opt);
   if (!model) return model.status().with_context("DINOv2 ViT-S/14");
-  c.size = size;
-  c.mtime_ns = mtime;
+  c.stamp = stamp;
   c.model = std::shared_ptr<const nets::VitModel>(std::move(*model));
   return c.model;
 }

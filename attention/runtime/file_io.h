@@ -21,6 +21,13 @@ Result<std::string> read_text_file(const std::string& path, uint64_t max_bytes =
 Result<uint64_t> file_size(const std::string& path);
 bool file_exists(const std::string& path);
 bool is_directory(const std::string& path);
+// A file's size and modification time: what caches of loaded files compare to notice a replaced
+// file. size -1 when the file cannot be stat'ed.
+struct FileStamp {
+  int64_t size = -1, mtime_ns = -1;
+  bool operator==(const FileStamp& o) const { return size == o.size && mtime_ns == o.mtime_ns; }
+};
+FileStamp file_stamp(const std::string& path);
 
 // Streamed atomic writer. write() calls accumulate; commit() renames into place. If the object is
 // destroyed without commit() the temporary is removed.
