@@ -15,6 +15,7 @@
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/half.h"
 #include "attention/runtime/limits.h"
+#include "attention/runtime/torch_checkpoint.h"
 
 namespace macro {
 
@@ -319,7 +320,26 @@ Result<SafeTensors> SafeTensors::open(const std::string& path) {
   return st_out;
 }
 
+Result<SafeTensors> SafeTensors::open_torch(const std::string& path, const std::string& key) {
+  MACRO_ASSIGN_OR_RETURN(TorchCheckpoint ck, read_torch_checkpoint(path, key));
+  SafeTensors out;
+  out.path_ = path;
+  out.metadata_["format"] = "pt";
+  out.metadata_["torch.archive"] = ck.archive_prefix;
+  out.metadata_["torch.key"] = ck.selected_key;
+  for (TensorEntry& e : ck.tensors) {
+    std::string name = e.name;
+    if (!out.tensors_.emplace(name, std::move(e)).second)
+      return Status::error(path + ": tensor '" + name + "' appears twice after flattening");
+  }
+  out.owner_ = std::move(ck.owner);
+  return out;
+}
+
 Result<SafeTensors> SafeTensors::open_checkpoint(const std::string& path) {
+  if (!ends_with(path, ".safetensors") && !ends_with(path, ".index.json") &&
+      file_has_zip_magic(path))
+    return open_torch(path);
   if (!ends_with(path, ".index.json")) return open(path);
   MACRO_ASSIGN_OR_RETURN(std::string text, read_text_file(path, kMaxIndexBytes));
   auto parsed = parse_json_strict(text);

@@ -6,6 +6,8 @@
 // section and not overlapping, no duplicate names. A lying header is an error naming the file and
 // the tensor, never a huge allocation or an out-of-bounds read.
 // Sharded checkpoints: open_checkpoint() accepts "*.safetensors.index.json" (weight_map) too.
+// PyTorch checkpoints (torch.save zip: .pth, .pt, .bin) open as a SafeTensors through open_torch(),
+// and through open_checkpoint() when the file starts with the zip magic (torch_checkpoint.h).
 #pragma once
 
 #include <cstdint>
@@ -41,8 +43,13 @@ struct TensorEntry {
 class SafeTensors {
  public:
   static Result<SafeTensors> open(const std::string& path);
-  // A single file, or an index JSON whose shards are opened together.
+  // A single file, or an index JSON whose shards are opened together, or a PyTorch zip checkpoint
+  // (a file starting with "PK\3\4" whose name does not end in .safetensors; as open_torch(path)).
   static Result<SafeTensors> open_checkpoint(const std::string& path);
+  // A torch.save zip checkpoint. key picks the state dict inside it ("params_ema", "params");
+  // "" selects automatically (attention/runtime/torch_checkpoint.h). Names are the flattened
+  // state-dict names; metadata() holds "format" = "pt", "torch.archive" and "torch.key".
+  static Result<SafeTensors> open_torch(const std::string& path, const std::string& key = "");
 
   SafeTensors();
   ~SafeTensors();
@@ -66,6 +73,7 @@ class SafeTensors {
   std::vector<std::shared_ptr<Mapping>> mappings_;
   std::map<std::string, TensorEntry> tensors_;
   std::map<std::string, std::string> metadata_;
+  std::shared_ptr<const void> owner_;  // torch checkpoints: the mapping and the owned copies
 };
 
 // Convert a mapped tensor's elements to float32 into dst (n must equal its element count).
