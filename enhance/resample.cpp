@@ -2,7 +2,13 @@
 #include "enhance/resample.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <filesystem>
+
+#include "attention/nets/pft.h"
+#include "attention/runtime/progress.h"
+#include "attention/runtime/safetensors.h"
 
 namespace macro::enhance {
 namespace {
@@ -208,17 +214,136 @@ Result<gs::Image> LanczosUpsampler::resize(const gs::Image& src, int out_w, int 
   return resize_lanczos(src, out_w, out_h);
 }
 
-Result<gs::Image> PftSrUpsampler::resize(const gs::Image&, int, int) const {
-  MACRO_TRY(ready());
-  return Status::error("upsampler pft-sr: unreachable");
+// ---- PFT-SR ------------------------------------------------------------------------------------
+
+std::vector<int> pft_pass_scales(int w, int h, int target_w, int target_h) {
+  std::vector<int> scales;
+  while (w < target_w || h < target_h) {
+    if (std::max(w, h) > kPftMaxSrSide) break;
+    const int s = (h <= kPftMaxSideForX4 && w <= kPftMaxSideForX4) ? 4 : 2;
+    scales.push_back(s);
+    w *= s, h *= s;
+  }
+  return scales;
 }
 
-Status PftSrUpsampler::ready() const {
-  return Status::error(
-      "upsampler pft-sr: the PFT-SR network is not available in this build and its weights "
-      "are not supplied (expected 103_PFT_light_SRx4_finetune.pth and "
-      "101_PFT_light_SRx2_scratch.pth, converted to safetensors, under " +
-      weights_dir_ + "); use --upsampler lanczos");
+Result<gs::Image> pft_upsample(const gs::Image& src, int out_w, int out_h, const SrPass& pass,
+                               gs::Image* before_lanczos) {
+  if (src.width <= 0 || src.height <= 0 || src.channels != 3)
+    return Status::error("pft-sr: expected a non-empty RGB image, found " +
+                         std::to_string(src.width) + "x" + std::to_string(src.height) + "x" +
+                         std::to_string(src.channels));
+  if (out_w <= 0 || out_h <= 0)
+    return Status::error("pft-sr: output size " + std::to_string(out_w) + "x" +
+                         std::to_string(out_h) + " must be positive");
+  // valid = RGB sum > 0 at the canvas resolution.
+  const int w0 = src.width, h0 = src.height;
+  std::vector<uint8_t> valid(src.pixels());
+  for (size_t p = 0; p < valid.size(); ++p)
+    valid[p] = src.data[p * 3] + src.data[p * 3 + 1] + src.data[p * 3 + 2] > 0.f;
+  gs::Image img = src;
+  for (int s : pft_pass_scales(w0, h0, out_w, out_h)) {
+    MACRO_ASSIGN_OR_RETURN(gs::Image up, pass(img, s));
+    if (up.width != img.width * s || up.height != img.height * s || up.channels != 3)
+      return Status::error("pft-sr: a x" + std::to_string(s) + " pass of " +
+                           std::to_string(img.width) + "x" + std::to_string(img.height) +
+                           " returned " + std::to_string(up.width) + "x" +
+                           std::to_string(up.height));
+    for (float& v : up.data) v = std::clamp(v, 0.f, 1.f);  // NaN stays NaN: handled below
+    img = std::move(up);
+  }
+  // Mask (nearest from the canvas: every pass is an integer factor), then to_pil_image's
+  // float -> uint8: x * 255 in float, truncated.
+  const int w = img.width, h = img.height;
+  std::vector<uint8_t> u8(size_t(w) * h * 3);
+  for (int y = 0; y < h; ++y) {
+    const int sy = nearest_index(y, h0, h);
+    for (int x = 0; x < w; ++x) {
+      const bool keep = valid[size_t(sy) * w0 + nearest_index(x, w0, w)] != 0;
+      for (int c = 0; c < 3; ++c) {
+        const float v = keep ? img.data[(size_t(y) * w + x) * 3 + c] : 0.f;
+        const float b = v * 255.f;
+        u8[(size_t(y) * w + x) * 3 + c] = b >= 0.f && b <= 255.f ? uint8_t(b) : uint8_t(0);
+      }
+    }
+  }
+  if (before_lanczos) {
+    *before_lanczos = gs::Image(w, h, 3);
+    for (size_t i = 0; i < u8.size(); ++i) before_lanczos->data[i] = float(u8[i]) / 255.f;
+  }
+  const std::vector<uint8_t> res = resize_lanczos_u8(u8.data(), w, h, 3, out_w, out_h);
+  gs::Image out(out_w, out_h, 3);
+  for (size_t i = 0; i < res.size(); ++i) out.data[i] = float(res[i]) / 255.f;
+  return out;
+}
+
+struct PftSrUpsampler::Models {
+  std::unique_ptr<nets::PftNet> x4, x2;
+};
+
+PftSrUpsampler::PftSrUpsampler(std::string weights_dir) : weights_dir_(std::move(weights_dir)) {}
+PftSrUpsampler::~PftSrUpsampler() = default;
+
+std::string PftSrUpsampler::weights_file(const char* stem) const {
+  const std::string base = weights_dir_ + "/" + stem;
+  std::error_code ec;
+  if (std::filesystem::is_regular_file(base + ".safetensors", ec)) return base + ".safetensors";
+  return "";
+}
+
+Result<std::shared_ptr<const PftSrUpsampler::Models>> PftSrUpsampler::models() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (models_) return models_;
+  std::vector<std::string> missing;
+  const char* stems[2] = {kPftX4Stem, kPftX2Stem};
+  std::string files[2];
+  for (int i = 0; i < 2; ++i) {
+    files[i] = weights_file(stems[i]);
+    if (files[i].empty()) missing.push_back(std::string(stems[i]) + ".safetensors");
+  }
+  if (!missing.empty()) {
+    std::string list;
+    for (size_t i = 0; i < missing.size(); ++i) list += (i ? " and " : "") + missing[i];
+    return Status::error("upsampler pft-sr: weights not available: " + list + " not found in " +
+                         weights_dir_ +
+                         " (the released 103_PFT_light_SRx4_finetune.pth and "
+                         "101_PFT_light_SRx2_scratch.pth, key params_ema, saved as safetensors "
+                         "with the same names; see docs/pft.md); or use --upsampler lanczos");
+  }
+  auto m = std::make_shared<Models>();
+  const int scales[2] = {4, 2};
+  for (int i = 0; i < 2; ++i) {
+    MACRO_ASSIGN_OR_RETURN(SafeTensors st, SafeTensors::open(files[i]));
+    MACRO_ASSIGN_OR_RETURN(std::unique_ptr<nets::PftNet> net,
+                           nets::PftNet::load(st, nets::PftConfig::light(scales[i])));
+    (i == 0 ? m->x4 : m->x2) = std::move(net);
+  }
+  models_ = m;
+  return models_;
+}
+
+Status PftSrUpsampler::ready() const { return models().status(); }
+
+Result<gs::Image> PftSrUpsampler::resize(const gs::Image& src, int out_w, int out_h) const {
+  MACRO_ASSIGN_OR_RETURN(std::shared_ptr<const Models> m, models());
+  const SrPass pass = [&](const gs::Image& in, int scale) -> Result<gs::Image> {
+    const nets::PftNet& net = scale == 4 ? *m->x4 : *m->x2;
+    const auto t0 = std::chrono::steady_clock::now();
+    std::unique_ptr<Progress> progress;
+    const std::string stage = "pft-sr x" + std::to_string(scale) + " " +
+                              std::to_string(in.width) + "x" + std::to_string(in.height);
+    auto on_layer = [&](int done, int total) {
+      if (!progress && ms_since(t0) > 1000.0) progress = std::make_unique<Progress>(stage, total);
+      if (progress) progress->set(size_t(done));
+    };
+    MACRO_ASSIGN_OR_RETURN(std::vector<float> y,
+                           net.forward(in.data.data(), in.height, in.width,
+                                       &ThreadPool::global(), on_layer));
+    gs::Image out(in.width * scale, in.height * scale, 3);
+    out.data = std::move(y);
+    return out;
+  };
+  return pft_upsample(src, out_w, out_h, pass);
 }
 
 Result<std::unique_ptr<Upsampler>> make_upsampler(const std::string& name,

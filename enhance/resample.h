@@ -19,7 +19,9 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -93,18 +95,48 @@ class LanczosUpsampler final : public Upsampler {
   Result<gs::Image> resize(const gs::Image& src, int out_w, int out_h) const override;
 };
 
-// PFT-SR light (the released pipeline's super-resolution, macro-method.md §3). The network is not
-// part of this engine yet: resize() fails, naming the weight files and where they would go.
+// ---- PFT-SR upsampling (MACRO sr_worker.py superres_pft, macro-method.md §3, docs/pft.md) ------
+inline constexpr int kPftMaxSideForX4 = 512;  // x4 while both sides are <= 512, else x2
+inline constexpr int kPftMaxSrSide = 1500;    // no further pass once the longer side is above
+inline constexpr const char* kPftX4Stem = "103_PFT_light_SRx4_finetune";
+inline constexpr const char* kPftX2Stem = "101_PFT_light_SRx2_scratch";
+
+// The scale of each pass (4 or 2) taking a w x h canvas to at least target_w x target_h.
+std::vector<int> pft_pass_scales(int w, int h, int target_w, int target_h);
+
+// One super-resolution pass: src [H,W,3] -> [H*scale, W*scale, 3] (scale 4 or 2).
+using SrPass = std::function<Result<gs::Image>(const gs::Image& src, int scale)>;
+
+// The loop around the passes: valid = RGB sum > 0 of src; each pass then clamp to [0, 1]; the
+// valid mask nearest-resized to the result and multiplied in (padding exactly black); the float
+// image to 8 bits as torchvision's to_pil_image does (x * 255 truncated); Pillow 8-bit LANCZOS to
+// out_w x out_h; back to float (/255). `before_lanczos` (optional) receives the 8-bit-valued SR
+// image before the final resize.
+Result<gs::Image> pft_upsample(const gs::Image& src, int out_w, int out_h, const SrPass& pass,
+                               gs::Image* before_lanczos = nullptr);
+
+// PFT-SR light (the released pipeline's super-resolution). Its weights_dir holds
+// 103_PFT_light_SRx4_finetune and 101_PFT_light_SRx2_scratch as .safetensors (state-dict names of
+// params_ema); ready() names the files it misses and where. The two networks are loaded once, on
+// the first ready() or resize(), and kept.
 class PftSrUpsampler final : public Upsampler {
  public:
-  explicit PftSrUpsampler(std::string weights_dir) : weights_dir_(std::move(weights_dir)) {}
+  explicit PftSrUpsampler(std::string weights_dir);
+  ~PftSrUpsampler() override;
   const char* name() const override { return "pft-sr"; }
   Result<gs::Image> resize(const gs::Image& src, int out_w, int out_h) const override;
   Status ready() const override;
   const std::string& weights_dir() const { return weights_dir_; }
+  // The file used for a stem: <dir>/<stem>.safetensors, or <dir>/<stem>.pth when this build reads
+  // torch checkpoints; "" when neither exists.
+  std::string weights_file(const char* stem) const;
 
  private:
+  struct Models;
+  Result<std::shared_ptr<const Models>> models() const;
   std::string weights_dir_;
+  mutable std::mutex mutex_;
+  mutable std::shared_ptr<const Models> models_;
 };
 
 // "lanczos" or "pft-sr" (weights_dir: where the PFT-SR weights would be; "" = data/weights/pft-sr).

@@ -1,4 +1,5 @@
-// A double-precision PFT-SR forward written literally from the PyTorch module's maths (pad by
+// Synthetic PFT-SR checkpoints (random weights under the state-dict names, written as
+// safetensors) and a double-precision PFT-SR forward written literally from the PyTorch module's maths (pad by
 // cat/flip, roll, window partition, dense attention maps kept whole, mask built from region
 // slices), for tests/test_pft.cpp. Slow and simple: small configs only.
 //
@@ -12,14 +13,76 @@
 #include <cmath>
 #include <map>
 #include <numeric>
+#include <random>
 #include <string>
 #include <vector>
 
 #include "attention/nets/pft.h"
+#include "attention/runtime/safetensors.h"
+#include "attention/runtime/status.h"
 
 namespace macro::test {
 
 using PftWeights = std::map<std::string, std::vector<float>>;
+
+// ---- synthetic checkpoints ---------------------------------------------------------------------
+
+// Random weights for every tensor of `cfg`, scaled so activations stay O(1) and attention maps
+// are far from uniform (the bias tables are wide), so top-k has clear winners.
+inline PftWeights random_pft_weights(const nets::PftConfig& cfg, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  PftWeights ws;
+  for (const nets::PftTensorSpec& s : nets::pft_tensor_specs(cfg)) {
+    if (s.name == "relative_position_index_SA") continue;
+    int64_t numel = 1;
+    for (int64_t v : s.shape) numel *= v;
+    std::vector<float> v(static_cast<size_t>(numel));
+    const auto ends = [&](const char* suf) {
+      const std::string x(suf);
+      return s.name.size() >= x.size() && s.name.compare(s.name.size() - x.size(), x.size(), x) == 0;
+    };
+    const bool norm = s.name.find("norm") != std::string::npos;
+    float scale = 0.1f;
+    if (ends("relative_position_bias_table")) scale = 2.0f;
+    else if (norm && ends(".weight")) scale = 0.2f;
+    else if (ends(".weight") && s.shape.size() >= 2) {
+      int64_t fan_in = 1;
+      for (size_t i = 1; i < s.shape.size(); ++i) fan_in *= s.shape[i];
+      scale = float(1.5 / std::sqrt(double(fan_in)));
+    }
+    for (float& x : v) x = u(rng) * scale + (norm && ends(".weight") ? 1.f : 0.f);
+    ws[s.name] = std::move(v);
+  }
+  return ws;
+}
+
+// Writes `ws` (+ the I64 index buffer) as a safetensors file; `drop`, `extra`, `reshape` make it
+// wrong on purpose.
+inline void write_pft_file(const std::string& path, const nets::PftConfig& cfg, const PftWeights& ws,
+                    const std::string& drop = "", bool extra = false,
+                    const std::string& reshape = "", bool bad_index = false) {
+  std::vector<TensorToWrite> t;
+  std::vector<int64_t> rpi = nets::pft_relative_position_index(cfg.window);
+  if (bad_index) rpi[5] += 1;
+  const int64_t n = int64_t(cfg.window) * cfg.window;
+  std::vector<std::vector<int64_t>> shapes;
+  shapes.reserve(ws.size() + 2);
+  for (const nets::PftTensorSpec& s : nets::pft_tensor_specs(cfg)) {
+    if (s.name == drop) continue;
+    if (s.name == "relative_position_index_SA") {
+      t.push_back({s.name, DType::kI64, {n, n}, rpi.data()});
+      continue;
+    }
+    shapes.push_back(s.shape);
+    if (s.name == reshape) shapes.back() = {int64_t(ws.at(s.name).size())};
+    t.push_back({s.name, DType::kF32, shapes.back(), ws.at(s.name).data()});
+  }
+  static const float one = 1.f;
+  if (extra) t.push_back({"layers.0.residual_group.layers.0.attn_win.logit_scale", DType::kF32, {1}, &one});
+  MACRO_CHECK(write_safetensors(path, t).is_ok());
+}
+
 
 namespace pft_ref {
 

@@ -20,63 +20,10 @@
 using namespace macro;
 using namespace macro::nets;
 
+using test::random_pft_weights;
+using test::write_pft_file;
+
 namespace {
-
-// Random weights for every tensor of `cfg`, scaled so activations stay O(1) and attention maps
-// are far from uniform (the bias tables are wide), so top-k has clear winners.
-test::PftWeights random_pft_weights(const PftConfig& cfg, uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> u(-1.f, 1.f);
-  test::PftWeights ws;
-  for (const PftTensorSpec& s : pft_tensor_specs(cfg)) {
-    if (s.name == "relative_position_index_SA") continue;
-    int64_t numel = 1;
-    for (int64_t v : s.shape) numel *= v;
-    std::vector<float> v(static_cast<size_t>(numel));
-    const auto ends = [&](const char* suf) {
-      const std::string x(suf);
-      return s.name.size() >= x.size() && s.name.compare(s.name.size() - x.size(), x.size(), x) == 0;
-    };
-    const bool norm = s.name.find("norm") != std::string::npos;
-    float scale = 0.1f;
-    if (ends("relative_position_bias_table")) scale = 2.0f;
-    else if (norm && ends(".weight")) scale = 0.2f;
-    else if (ends(".weight") && s.shape.size() >= 2) {
-      int64_t fan_in = 1;
-      for (size_t i = 1; i < s.shape.size(); ++i) fan_in *= s.shape[i];
-      scale = float(1.5 / std::sqrt(double(fan_in)));
-    }
-    for (float& x : v) x = u(rng) * scale + (norm && ends(".weight") ? 1.f : 0.f);
-    ws[s.name] = std::move(v);
-  }
-  return ws;
-}
-
-// Writes `ws` (+ the I64 index buffer) as a safetensors file; `drop`, `extra`, `reshape` make it
-// wrong on purpose.
-void write_pft_file(const std::string& path, const PftConfig& cfg, const test::PftWeights& ws,
-                    const std::string& drop = "", bool extra = false,
-                    const std::string& reshape = "", bool bad_index = false) {
-  std::vector<TensorToWrite> t;
-  std::vector<int64_t> rpi = pft_relative_position_index(cfg.window);
-  if (bad_index) rpi[5] += 1;
-  const int64_t n = int64_t(cfg.window) * cfg.window;
-  std::vector<std::vector<int64_t>> shapes;
-  shapes.reserve(ws.size() + 2);
-  for (const PftTensorSpec& s : pft_tensor_specs(cfg)) {
-    if (s.name == drop) continue;
-    if (s.name == "relative_position_index_SA") {
-      t.push_back({s.name, DType::kI64, {n, n}, rpi.data()});
-      continue;
-    }
-    shapes.push_back(s.shape);
-    if (s.name == reshape) shapes.back() = {int64_t(ws.at(s.name).size())};
-    t.push_back({s.name, DType::kF32, shapes.back(), ws.at(s.name).data()});
-  }
-  static const float one = 1.f;
-  if (extra) t.push_back({"layers.0.residual_group.layers.0.attn_win.logit_scale", DType::kF32, {1}, &one});
-  REQUIRE(write_safetensors(path, t).is_ok());
-}
 
 Result<std::unique_ptr<PftNet>> load_pft(const std::string& path, const PftConfig& cfg) {
   MACRO_ASSIGN_OR_RETURN(SafeTensors st, SafeTensors::open(path));
@@ -141,7 +88,9 @@ TEST_CASE("pft: small configs match the double reference on every ISA path", "[p
   for (const SmallCase& sc : small_cases()) {
     REQUIRE(sc.cfg.validate().is_ok());
     const test::PftWeights ws = random_pft_weights(sc.cfg, 7);
-    const std::string path = tmp.file(std::string("w") + std::to_string(sc.cfg.embed) + ".safetensors");
+    std::string name = std::to_string(sc.cfg.embed);
+    name += ".safetensors";
+    const std::string path = tmp.file(name);
     write_pft_file(path, sc.cfg, ws);
     const std::vector<float> img = random_image(sc.h, sc.w, 3);
     const std::vector<double> ref = test::pft_reference_forward(sc.cfg, ws, img, sc.h, sc.w);
@@ -282,4 +231,117 @@ TEST_CASE("pft: the released light x4 / x2 names and shapes, synthetic weights r
     for (float v : *out) finite &= std::isfinite(v);
     CHECK(finite);
   }
+}
+
+// ---- the MACRO upsampling loop (enhance/resample.h) ---------------------------------------------
+
+TEST_CASE("pft upsampling: pass scales and the stop rule", "[pft]") {
+  using enhance::pft_pass_scales;
+  using V = std::vector<int>;
+  CHECK(pft_pass_scales(100, 60, 960, 536) == V{4, 4});        // 400x240 -> 1600x960
+  CHECK(pft_pass_scales(10, 10, 960, 540) == V{4, 4, 4, 2});    // 640 > 512: then x2
+  CHECK(pft_pass_scales(600, 300, 960, 536) == V{2});           // a side > 512: x2
+  CHECK(pft_pass_scales(512, 512, 960, 960) == V{4});           // both <= 512: x4
+  CHECK(pft_pass_scales(800, 200, 960, 900) == V{2});           // 1600 > 1500: stop short
+  CHECK(pft_pass_scales(960, 536, 960, 536).empty());           // already there
+  CHECK(pft_pass_scales(1000, 100, 960, 200) == V{2});          // one side short is enough
+  CHECK(pft_pass_scales(1501, 10, 4000, 4000).empty());         // longer side already > 1500
+}
+
+TEST_CASE("pft upsampling: mask keeps padding black, 8-bit truncation, Lanczos to size", "[pft]") {
+  // A canvas with a black band (padding) on the right; a stand-in pass that brightens everything.
+  gs::Image canvas(10, 7, 3);
+  for (int y = 0; y < 7; ++y)
+    for (int x = 0; x < 6; ++x)
+      for (int c = 0; c < 3; ++c) canvas.at(y, x, c) = float((y * 7 + x * 3 + c) % 200 + 20) / 255.f;
+  canvas.at(3, 2, 0) = canvas.at(3, 2, 1) = canvas.at(3, 2, 2) = 0.f;  // a black pixel inside
+  std::vector<std::pair<int, int>> seen;
+  const enhance::SrPass pass = [&](const gs::Image& in, int s) -> Result<gs::Image> {
+    seen.push_back({in.width, s});
+    gs::Image out(in.width * s, in.height * s, 3);
+    for (int y = 0; y < out.height; ++y)
+      for (int x = 0; x < out.width; ++x)
+        for (int c = 0; c < 3; ++c) out.at(y, x, c) = in.at(y / s, x / s, c) * 1.1f + 0.3f;
+    return out;
+  };
+  gs::Image sr;
+  auto out = enhance::pft_upsample(canvas, 96, 64, pass, &sr);
+  REQUIRE(out.is_ok());
+  CHECK(out->width == 96);
+  CHECK(out->height == 64);
+  REQUIRE(seen.size() == 2);  // 10x7 -> 40x28 -> 160x112
+  CHECK(seen[0] == std::pair<int, int>{10, 4});
+  CHECK(seen[1] == std::pair<int, int>{40, 4});
+  REQUIRE(sr.width == 160);
+  REQUIRE(sr.height == 112);
+  for (int y = 0; y < 112; ++y)
+    for (int x = 0; x < 160; ++x) {
+      const bool pad = x / 16 >= 6 || (y / 16 == 3 && x / 16 == 2);
+      for (int c = 0; c < 3; ++c) {
+        const float v = canvas.at(y / 16, x / 16, c);
+        float e = std::min(1.f, std::min(1.f, v * 1.1f + 0.3f) * 1.1f + 0.3f) * 255.f;
+        e = pad ? 0.f : std::floor(e) / 255.f;  // truncation, not rounding
+        if (sr.at(y, x, c) != e) FAIL("pixel " << x << "," << y << " c" << c);
+      }
+    }
+  // The final image is Pillow's 8-bit Lanczos of that SR image.
+  std::vector<uint8_t> u8(sr.data.size());
+  for (size_t i = 0; i < u8.size(); ++i) u8[i] = uint8_t(std::lround(sr.data[i] * 255.f));
+  const std::vector<uint8_t> want = enhance::resize_lanczos_u8(u8.data(), 160, 112, 3, 96, 64);
+  for (size_t i = 0; i < want.size(); ++i) REQUIRE(out->data[i] == float(want[i]) / 255.f);
+  // Far from the content the padding is still exactly black after Lanczos.
+  for (int y = 0; y < 64; ++y)
+    for (int x = 70; x < 96; ++x) CHECK(out->at(y, x, 0) == 0.f);
+  // Already large enough: no pass, only the mask and the resize.
+  seen.clear();
+  auto down = enhance::pft_upsample(canvas, 8, 6, pass);
+  REQUIRE(down.is_ok());
+  CHECK(seen.empty());
+  CHECK(down->width == 8);
+  // Bad sizes are errors.
+  CHECK_FALSE(enhance::pft_upsample(canvas, 0, 6, pass).is_ok());
+  CHECK_FALSE(enhance::pft_upsample(gs::Image(), 8, 6, pass).is_ok());
+}
+
+TEST_CASE("pft upsampling: small networks in the loop, x4 then x2", "[pft]") {
+  PftConfig c4 = small_cases()[1].cfg, c2 = small_cases()[0].cfg;  // x4 ws4, x2 ws8
+  test::TempDir tmp("pft-loop");
+  write_pft_file(tmp.file("x4.safetensors"), c4, random_pft_weights(c4, 3));
+  write_pft_file(tmp.file("x2.safetensors"), c2, random_pft_weights(c2, 4));
+  auto n4 = load_pft(tmp.file("x4.safetensors"), c4);
+  auto n2 = load_pft(tmp.file("x2.safetensors"), c2);
+  REQUIRE(n4.is_ok());
+  REQUIRE(n2.is_ok());
+  std::vector<std::pair<int, int>> seen;
+  const enhance::SrPass pass = [&](const gs::Image& in, int s) -> Result<gs::Image> {
+    seen.push_back({in.width, in.height});
+    const PftNet& net = s == 4 ? **n4 : **n2;
+    MACRO_ASSIGN_OR_RETURN(std::vector<float> y, net.forward(in.data.data(), in.height, in.width));
+    gs::Image out(in.width * s, in.height * s, 3);
+    out.data = std::move(y);
+    return out;
+  };
+  // 9x6 canvas, right third black. Target 600x300: 36x24 -> 144x96 -> 576x384 -> (x2) 1152x768.
+  gs::Image canvas(9, 6, 3);
+  const std::vector<float> img = random_image(6, 9, 8);
+  for (int y = 0; y < 6; ++y)
+    for (int x = 0; x < 6; ++x)
+      for (int ch = 0; ch < 3; ++ch) canvas.at(y, x, ch) = img[size_t((y * 9 + x) * 3 + ch)];
+  gs::Image sr;
+  auto out = enhance::pft_upsample(canvas, 600, 300, pass, &sr);
+  REQUIRE(out.is_ok());
+  const std::vector<std::pair<int, int>> want = {{9, 6}, {36, 24}, {144, 96}, {576, 384}};
+  CHECK(seen == want);
+  CHECK(sr.width == 1152);
+  CHECK(out->width == 600);
+  CHECK(out->height == 300);
+  float in_max = 0.f, pad_max = 0.f;
+  for (int y = 0; y < sr.height; ++y)
+    for (int x = 0; x < sr.width; ++x)
+      for (int ch = 0; ch < 3; ++ch) {
+        float& m = x >= 6 * 128 ? pad_max : in_max;  // the canvas's black columns, x 128
+        m = std::max(m, sr.at(y, x, ch));
+      }
+  CHECK(pad_max == 0.f);
+  CHECK(in_max > 0.f);
 }

@@ -8,6 +8,7 @@
 
 #include "attention/runtime/safetensors.h"
 #include "enhance/resample.h"
+#include "pft_reference.h"
 #include "test_support.h"
 
 using namespace macro;
@@ -76,7 +77,8 @@ TEST_CASE("model size follows the released rule", "[macro][resample]") {
   CHECK_FALSE(model_size(7, 100).is_ok());
 }
 
-TEST_CASE("upsampler choice: lanczos works, pft-sr fails clearly", "[macro][resample]") {
+TEST_CASE("upsampler choice: lanczos works, pft-sr without weights fails clearly",
+          "[macro][resample]") {
   auto l = make_upsampler("lanczos");
   REQUIRE(l.is_ok());
   CHECK(std::string((*l)->name()) == "lanczos");
@@ -88,11 +90,58 @@ TEST_CASE("upsampler choice: lanczos works, pft-sr fails clearly", "[macro][resa
   CHECK(r->height == 24);
   auto p = make_upsampler("pft-sr", "/nowhere/pft");
   REQUIRE(p.is_ok());
+  CHECK_FALSE((*p)->ready().is_ok());
   auto pr = (*p)->resize(img, 40, 24);
   REQUIRE_FALSE(pr.is_ok());
   CHECK(pr.status().message().find("/nowhere/pft") != std::string::npos);
-  CHECK(pr.status().message().find("PFT_light_SRx4") != std::string::npos);
+  CHECK(pr.status().message().find("103_PFT_light_SRx4_finetune.safetensors") != std::string::npos);
+  CHECK(pr.status().message().find("101_PFT_light_SRx2_scratch.safetensors") != std::string::npos);
   CHECK_FALSE(make_upsampler("bicubic").is_ok());
+}
+
+TEST_CASE("upsampler pft-sr: names the one missing file, loads both, resizes", "[macro][resample][pft]") {
+  test::TempDir tmp("pft-upsampler");
+  const nets::PftConfig c4 = nets::PftConfig::light(4), c2 = nets::PftConfig::light(2);
+  test::write_pft_file(tmp.file("103_PFT_light_SRx4_finetune.safetensors"), c4,
+                       test::random_pft_weights(c4, 1));
+  PftSrUpsampler up(tmp.path);
+  Status st = up.ready();
+  REQUIRE_FALSE(st.is_ok());
+  CHECK(st.message().find("101_PFT_light_SRx2_scratch.safetensors not found in " + tmp.path) !=
+        std::string::npos);
+  CHECK(st.message().find("SRx4_finetune.safetensors not found") == std::string::npos);
+  // A wrong file (the x4 weights under the x2 name) is named with its mis-shaped tensor.
+  test::write_pft_file(tmp.file("101_PFT_light_SRx2_scratch.safetensors"), c4,
+                       test::random_pft_weights(c4, 2));
+  PftSrUpsampler wrong(tmp.path);
+  st = wrong.ready();
+  REQUIRE_FALSE(st.is_ok());
+  CHECK(st.message().find("101_PFT_light_SRx2_scratch.safetensors") != std::string::npos);
+  CHECK(st.message().find("upsample.0.weight: expected [12,52,3,3], found [48,52,3,3]") !=
+        std::string::npos);
+  // Both right: ready, and a 20x12 canvas (black right quarter) reaches 64x40 in one x4 pass.
+  test::write_pft_file(tmp.file("101_PFT_light_SRx2_scratch.safetensors"), c2,
+                       test::random_pft_weights(c2, 3));
+  auto made = make_upsampler("pft-sr", tmp.path);
+  REQUIRE(made.is_ok());
+  REQUIRE((*made)->ready().is_ok());
+  gs::Image canvas(20, 12, 3);
+  for (int y = 0; y < 12; ++y)
+    for (int x = 0; x < 15; ++x)
+      for (int c = 0; c < 3; ++c) canvas.at(y, x, c) = float((x * 13 + y * 7 + c * 5) % 255) / 255.f;
+  auto out = (*made)->resize(canvas, 64, 40);
+  REQUIRE(out.is_ok());
+  CHECK(out->width == 64);
+  CHECK(out->height == 40);
+  for (float v : out->data) {
+    REQUIRE(v >= 0.f);
+    REQUIRE(v <= 1.f);
+  }
+  for (int y = 0; y < 40; ++y) CHECK(out->at(y, 63, 1) == 0.f);  // padding stays black
+  // Loaded once: a second resize gives the same bytes.
+  auto again = (*made)->resize(canvas, 64, 40);
+  REQUIRE(again.is_ok());
+  CHECK(again->data == out->data);
 }
 
 TEST_CASE("macro enhance --upsampler: pft-sr fails before rendering, names the weights, no output",
