@@ -231,7 +231,8 @@ enum class Kind : uint8_t {
 
 enum class Global : uint8_t {
   kOrderedDict, kRebuildTensorV2, kRebuildTensor, kRebuildParameter, kRebuildParameterWithState,
-  kRebuildFromTypeV2, kTensorType, kParameterType, kStorageType, kUntypedStorage, kDtype
+  kRebuildFromTypeV2, kTensorType, kParameterType, kStorageType, kUntypedStorage, kDtype,
+  kUnsupportedStorage  // a storage class we know but whose dtype has no DType (int16, complex)
 };
 
 using ObjId = uint32_t;
@@ -276,6 +277,12 @@ const GlobalInfo kGlobals[] = {
     {"torch", "CharStorage", Global::kStorageType, DType::kI8},
     {"torch", "BoolStorage", Global::kStorageType, DType::kBool},
     {"torch", "UntypedStorage", Global::kUntypedStorage, DType::kU8},
+    {"torch", "ShortStorage", Global::kUnsupportedStorage, DType::kU8},
+    {"torch", "ComplexFloatStorage", Global::kUnsupportedStorage, DType::kU8},
+    {"torch", "ComplexDoubleStorage", Global::kUnsupportedStorage, DType::kU8},
+    {"torch", "QInt8Storage", Global::kUnsupportedStorage, DType::kU8},
+    {"torch", "QUInt8Storage", Global::kUnsupportedStorage, DType::kU8},
+    {"torch", "QInt32Storage", Global::kUnsupportedStorage, DType::kU8},
     {"torch.storage", "UntypedStorage", Global::kUntypedStorage, DType::kU8},
     {"torch", "float32", Global::kDtype, DType::kF32},
     {"torch", "float", Global::kDtype, DType::kF32},
@@ -379,6 +386,8 @@ class Unpickler {
   std::vector<ObjId> stack_;
   std::vector<size_t> marks_;
   std::unordered_map<uint64_t, ObjId> memo_;
+  // Per dict: string key -> index of its value in items (SETITEM replaces without a scan).
+  std::unordered_map<ObjId, std::unordered_map<std::string, size_t>> dict_index_;
   const uint8_t* data_ = nullptr;
   uint64_t size_ = 0, pos_ = 0;
 };
@@ -408,6 +417,10 @@ Result<ObjId> Unpickler::persistent_load(ObjId pid) {
   const Obj& type = objs_[t.items[1]];
   const Obj& key = objs_[t.items[2]];
   const Obj& count = objs_[t.items[4]];
+  if (type.kind == Kind::kGlobal && type.global == Global::kUnsupportedStorage)
+    return fail("storage class '" + type.s +
+                "' is not supported (supported element types: F32, F16, BF16, F64, I64, I32, U8, "
+                "I8, BOOL)");
   if (type.kind != Kind::kGlobal ||
       (type.global != Global::kStorageType && type.global != Global::kUntypedStorage &&
        type.global != Global::kDtype))
@@ -496,25 +509,19 @@ Status Unpickler::set_items(ObjId dict, const std::vector<ObjId>& kv) {
   if (objs_[dict].kind != Kind::kDict) return fail("SETITEM(S) on an object that is not a dict");
   if (kv.size() % 2) return fail("SETITEMS with an odd number of items");
   for (size_t k = 0; k < kv.size(); k += 2) {
-    // A repeated key replaces the earlier value (as in Python).
+    // A repeated string key replaces the earlier value in place (as in Python).
+    auto& items = objs_[dict].items;
     const Obj& key = objs_[kv[k]];
-    bool replaced = false;
     if (key.kind == Kind::kStr) {
-      auto& items = objs_[dict].items;
-      for (size_t j = 0; j + 1 < items.size(); j += 2) {
-        const Obj& old = objs_[items[j]];
-        if (old.kind == Kind::kStr && old.s == key.s) {
-          items[j + 1] = kv[k + 1];
-          replaced = true;
-          break;
-        }
+      auto ins = dict_index_[dict].emplace(key.s, items.size() + 1);
+      if (!ins.second) {
+        items[ins.first->second] = kv[k + 1];
+        continue;
       }
     }
-    if (!replaced) {
-      if (objs_[dict].items.size() >= kMaxObjects) return fail("dict too large");
-      objs_[dict].items.push_back(kv[k]);
-      objs_[dict].items.push_back(kv[k + 1]);
-    }
+    if (items.size() >= kMaxObjects) return fail("dict too large");
+    items.push_back(kv[k]);
+    items.push_back(kv[k + 1]);
   }
   return Status::ok();
 }

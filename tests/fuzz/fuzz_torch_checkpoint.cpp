@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "attention/runtime/limits.h"
 #include "attention/runtime/torch_checkpoint.h"
 
 namespace {
@@ -22,6 +23,14 @@ void read_all(const uint8_t* data, size_t size, const char* key) {
 }
 
 }  // namespace
+
+// A small per-tensor cap keeps expanded (stride 0) views from spending the run on copies.
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  macro::ResourceLimits limits = macro::resource_limits();
+  limits.max_tensor_bytes = 1u << 24;
+  macro::set_resource_limits(limits);
+  return 0;
+}
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   read_all(data, size, "");
