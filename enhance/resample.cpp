@@ -287,7 +287,8 @@ PftSrUpsampler::~PftSrUpsampler() = default;
 std::string PftSrUpsampler::weights_file(const char* stem) const {
   const std::string base = weights_dir_ + "/" + stem;
   std::error_code ec;
-  if (std::filesystem::is_regular_file(base + ".safetensors", ec)) return base + ".safetensors";
+  for (const char* ext : {".safetensors", ".pth"})
+    if (std::filesystem::is_regular_file(base + ext, ec)) return base + ext;
   return "";
 }
 
@@ -299,21 +300,23 @@ Result<std::shared_ptr<const PftSrUpsampler::Models>> PftSrUpsampler::models() c
   std::string files[2];
   for (int i = 0; i < 2; ++i) {
     files[i] = weights_file(stems[i]);
-    if (files[i].empty()) missing.push_back(std::string(stems[i]) + ".safetensors");
+    if (files[i].empty()) missing.push_back(std::string(stems[i]) + ".pth (or .safetensors)");
   }
   if (!missing.empty()) {
     std::string list;
     for (size_t i = 0; i < missing.size(); ++i) list += (i ? " and " : "") + missing[i];
     return Status::error("upsampler pft-sr: weights not available: " + list + " not found in " +
                          weights_dir_ +
-                         " (the released 103_PFT_light_SRx4_finetune.pth and "
-                         "101_PFT_light_SRx2_scratch.pth, key params_ema, saved as safetensors "
-                         "with the same names; see docs/pft.md); or use --upsampler lanczos");
+                         " (the released PFT-SR light weights, read from params_ema; a "
+                         ".safetensors with the same tensor names also works; see docs/pft.md); "
+                         "or use --upsampler lanczos");
   }
   auto m = std::make_shared<Models>();
   const int scales[2] = {4, 2};
   for (int i = 0; i < 2; ++i) {
-    MACRO_ASSIGN_OR_RETURN(SafeTensors st, SafeTensors::open(files[i]));
+    const bool torch = files[i].size() > 4 && files[i].compare(files[i].size() - 4, 4, ".pth") == 0;
+    MACRO_ASSIGN_OR_RETURN(SafeTensors st, torch ? SafeTensors::open_torch(files[i], "params_ema")
+                                                 : SafeTensors::open(files[i]));
     MACRO_ASSIGN_OR_RETURN(std::unique_ptr<nets::PftNet> net,
                            nets::PftNet::load(st, nets::PftConfig::light(scales[i])));
     (i == 0 ? m->x4 : m->x2) = std::move(net);

@@ -116,7 +116,8 @@ Result<gs::Image> pft_upsample(const gs::Image& src, int out_w, int out_h, const
                                gs::Image* before_lanczos = nullptr);
 
 // PFT-SR light (the released pipeline's super-resolution). Its weights_dir holds
-// 103_PFT_light_SRx4_finetune and 101_PFT_light_SRx2_scratch as .safetensors (state-dict names of
+// 103_PFT_light_SRx4_finetune and 101_PFT_light_SRx2_scratch, each as .safetensors (the state-dict
+// names of params_ema) or as the released .pth (read through SafeTensors::open_torch, key
 // params_ema); ready() names the files it misses and where. The two networks are loaded once, on
 // the first ready() or resize(), and kept.
 class PftSrUpsampler final : public Upsampler {
@@ -127,8 +128,7 @@ class PftSrUpsampler final : public Upsampler {
   Result<gs::Image> resize(const gs::Image& src, int out_w, int out_h) const override;
   Status ready() const override;
   const std::string& weights_dir() const { return weights_dir_; }
-  // The file used for a stem: <dir>/<stem>.safetensors, or <dir>/<stem>.pth when this build reads
-  // torch checkpoints; "" when neither exists.
+  // The file used for a stem: <dir>/<stem>.safetensors, else <dir>/<stem>.pth; "" when neither.
   std::string weights_file(const char* stem) const;
 
  private:

@@ -94,8 +94,8 @@ TEST_CASE("upsampler choice: lanczos works, pft-sr without weights fails clearly
   auto pr = (*p)->resize(img, 40, 24);
   REQUIRE_FALSE(pr.is_ok());
   CHECK(pr.status().message().find("/nowhere/pft") != std::string::npos);
-  CHECK(pr.status().message().find("103_PFT_light_SRx4_finetune.safetensors") != std::string::npos);
-  CHECK(pr.status().message().find("101_PFT_light_SRx2_scratch.safetensors") != std::string::npos);
+  CHECK(pr.status().message().find("103_PFT_light_SRx4_finetune.pth") != std::string::npos);
+  CHECK(pr.status().message().find("101_PFT_light_SRx2_scratch.pth") != std::string::npos);
   CHECK_FALSE(make_upsampler("bicubic").is_ok());
 }
 
@@ -107,10 +107,23 @@ TEST_CASE("upsampler pft-sr: names the one missing file, loads both, resizes", "
   PftSrUpsampler up(tmp.path);
   Status st = up.ready();
   REQUIRE_FALSE(st.is_ok());
-  CHECK(st.message().find("101_PFT_light_SRx2_scratch.safetensors not found in " + tmp.path) !=
-        std::string::npos);
-  CHECK(st.message().find("SRx4_finetune.safetensors not found") == std::string::npos);
-  // A wrong file (the x4 weights under the x2 name) is named with its mis-shaped tensor.
+  CHECK(st.message().find("101_PFT_light_SRx2_scratch.pth (or .safetensors) not found in " +
+                          tmp.path) != std::string::npos);
+  CHECK(st.message().find("SRx4_finetune.pth") == std::string::npos);
+  // A .pth goes to the torch checkpoint reader; a broken one is an error naming it.
+  {
+    std::FILE* f = std::fopen(tmp.file("101_PFT_light_SRx2_scratch.pth").c_str(), "wb");
+    REQUIRE(f);
+    std::fputs("not a zip", f);
+    std::fclose(f);
+    PftSrUpsampler broken(tmp.path);
+    CHECK(broken.weights_file(kPftX2Stem) == tmp.file("101_PFT_light_SRx2_scratch.pth"));
+    st = broken.ready();
+    REQUIRE_FALSE(st.is_ok());
+    CHECK(st.message().find(tmp.file("101_PFT_light_SRx2_scratch.pth")) != std::string::npos);
+  }
+  // A wrong file (the x4 weights under the x2 name) is named with its mis-shaped tensor; the
+  // .safetensors is preferred over the .pth.
   test::write_pft_file(tmp.file("101_PFT_light_SRx2_scratch.safetensors"), c4,
                        test::random_pft_weights(c4, 2));
   PftSrUpsampler wrong(tmp.path);
