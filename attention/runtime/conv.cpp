@@ -18,6 +18,7 @@
 #include <algorithm>
 #include <cstring>
 
+#include "attention/runtime/conv_winograd.h"
 #include "attention/runtime/status.h"
 
 namespace macro {
@@ -187,8 +188,19 @@ ConvWeights ConvWeights::pack(const float* w, const float* bias, int64_t c_out, 
                 w[((co * c_in + ci) * kh + dy) * kw + dx];
     cw.packed_ = PackedWeights::pack_as_a(wr.data(), c_out, K, K, type, isa);
   }
+  if (type == WeightType::kBf16 && kh == 3 && kw == 3 &&
+      (conv2d_winograd_mode() == ConvWinograd::kAlways ||
+       (conv2d_winograd_mode() == ConvWinograd::kAuto &&
+        detail::winograd_pack_qualifies(c_out, c_in))))
+    cw.wino_ = detail::winograd_pack(w, c_out, c_in, isa);
   if (bias) cw.bias_.assign(bias, bias + c_out);
   return cw;
+}
+
+size_t ConvWeights::bytes() const {
+  size_t b = packed_.bytes() + bias_.size() * sizeof(float);
+  for (const PackedWeights& u : wino_) b += u.bytes();
+  return b;
 }
 
 // bf16 channel-pair planes: grown once per calling thread to at most one band, reused by every
@@ -198,6 +210,7 @@ size_t g_pair_band_words = size_t(4) << 20;  // 16 MB of pair words per band (co
 
 void conv2d_release_scratch() {
   std::vector<uint32_t>().swap(t_pair_planes);
+  detail::winograd_release_scratch();
 }
 
 size_t conv2d_set_pair_band(size_t words) {
@@ -291,6 +304,10 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
   const int64_t oh = s.out_h(), ow = s.out_w();
   if (oh <= 0 || ow <= 0 || s.n <= 0 || s.c_out <= 0) return;
   const bool bf16 = w.type() == WeightType::kBf16;
+  if (bf16 && detail::winograd_applies(s, w)) {
+    detail::conv2d_winograd(s, x, w, residual, y, act, pool);
+    return;
+  }
   const int64_t cin2 = (s.c_in + 1) / 2 * 2;
   const int64_t HW = s.h * s.w;
   for (int64_t b = 0; b < s.n; ++b) {

@@ -17,6 +17,7 @@
 #pragma once
 
 #include <cstdint>
+#include <vector>
 
 #include "attention/runtime/gemm.h"
 
@@ -29,6 +30,10 @@ struct Conv2dShape {
   int kh = 3, kw = 3;
   int stride = 1;
   int pad_top = 0, pad_left = 0, pad_bottom = 0, pad_right = 0;
+  // Index of output row 0 in the whole image when a conv is computed by row bands (0 otherwise).
+  // Only the Winograd path reads it: its 2x2 tiles start on even whole-image rows, so bands give
+  // the whole image's bits.
+  int64_t row_origin = 0;
 
   int64_t out_h() const { return (h + pad_top + pad_bottom - kh) / stride + 1; }
   int64_t out_w() const { return (w + pad_left + pad_right - kw) / stride + 1; }
@@ -59,11 +64,18 @@ class ConvWeights {
   WeightType type() const { return packed_.type(); }
   const PackedWeights& packed() const { return packed_; }
   const float* bias() const { return bias_.empty() ? nullptr : bias_.data(); }
+  // bf16 3x3 weights packed while the Winograd rule held (conv2d_set_winograd below): the 16
+  // transformed packs U_xi [Cout, Cin2] (conv_winograd.h), 16/9 of the direct pack's bytes,
+  // kept beside it (the same layer may be called with stride 2). Empty otherwise.
+  const std::vector<PackedWeights>& winograd() const { return wino_; }
+  // All packs and the bias.
+  size_t bytes() const;
 
  private:
   int64_t c_out_ = 0, c_in_ = 0;
   int kh_ = 0, kw_ = 0;
   PackedWeights packed_;  // rows = Cout, K = Cin*KH*KW, packed as A panels
+  std::vector<PackedWeights> wino_;
   std::vector<float> bias_;
 };
 
@@ -83,10 +95,31 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
 // words) held in a per-thread buffer that grows to the largest band seen and is then reused
 // (no allocation per call). An image whose planes exceed the band budget (4 Mi words = 16 MB by
 // default) is convolved by bands of output rows, each converting only its input rows (halo rows
-// twice); results are bit-identical to one band. This frees the calling thread's buffer.
+// twice); results are bit-identical to one band. This frees the calling thread's buffer (and its
+// Winograd chunk buffers).
 void conv2d_release_scratch();
 // Sets the band budget in pair words (>= 1; tests force banding on small images); returns the old.
 size_t conv2d_set_pair_band(size_t words);
+
+// Winograd F(2x2, 3x3) for bf16 3x3 stride-1 convs (any padding, batch, bias, residual, ReLU):
+// 16 products per 2x2 output tile and input channel instead of 36. The input and the weights are
+// rounded to bf16 after their transforms, so the error is a few times the direct bf16 path's
+// (conv_winograd.h states it). Modes:
+//   kOff     every conv takes the direct path; no Winograd packs are built.
+//   kAuto    (default) where it was measured faster on AVX512-BF16 (docs/PERFORMANCE.md, "Winograd
+//            bf16 conv"): the bf16 kernel path is avx512bf16 or amx, 64 <= Cin, Cout <= 512 (packs
+//            are built for those channel counts only) and at least 64 output tiles per image.
+//   kAlways  every bf16 3x3 stride-1 conv whose weights carry Winograd packs, on any path
+//            (packs are then built for every bf16 3x3 conv; tests, benchmarks).
+// The packs are built by ConvWeights::pack under the mode of that moment; the choice per call is
+// made under the current mode. Start-up mode from the environment: MACRO_CONV_WINOGRAD=0 (kOff),
+// =1 or unset (kAuto), =always (kAlways).
+enum class ConvWinograd { kOff, kAuto, kAlways };
+ConvWinograd conv2d_set_winograd(ConvWinograd mode);  // returns the previous mode
+ConvWinograd conv2d_winograd_mode();
+// Tiles per Winograd work chunk (a multiple of the kernel's NR; 0 = sized for L2 from Cin);
+// results never depend on it. Returns the old value.
+size_t conv2d_set_winograd_chunk(size_t tiles);
 
 // Convenience for tests and one-off calls: packs the weights on each call.
 void conv2d(const Conv2dShape& s, const float* x, const float* weight, const float* bias,

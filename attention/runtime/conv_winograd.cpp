@@ -1,0 +1,390 @@
+// Winograd F(2x2, 3x3) bf16 convs (conv_winograd.h): the weight transform and packing, the mode
+// switch, the chunk driver over the GEMM driver, and the scalar transforms (the twins of
+// conv_winograd_avx512bf16.cpp, bit for bit).
+//
+// Per chunk of tiles (one image, T tiles in raster order, split into runs on one tile row):
+//   V [16][T/NR panels][Kp/2][NR]  pair words, the prepacked B operand of the bf16 kernel
+//   for each block of output channels (a multiple of MR):
+//     M_xi [co_blk][T] = U_xi[co block] . V_xi       16 run_gemm calls, prepacked A and B
+//     y[co block, the chunk's pixels] = A^T M A + bias (+ residual) (ReLU)
+// Work items are (image, chunk, part of the channel blocks) on the pool; each worker has its own
+// V/M/runs slot, owned by the calling thread and grown once.
+#include "attention/runtime/conv_winograd.h"
+
+#include <algorithm>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <string>
+
+#include "attention/runtime/conv.h"
+#include "attention/runtime/status.h"
+
+namespace macro {
+namespace {
+
+// ---- mode ---------------------------------------------------------------------------------------
+
+ConvWinograd mode_from_env() {
+  const char* v = std::getenv("MACRO_CONV_WINOGRAD");
+  if (!v || !*v) return ConvWinograd::kAuto;
+  const std::string s(v);
+  if (s == "0" || s == "off") return ConvWinograd::kOff;
+  if (s == "always" || s == "2") return ConvWinograd::kAlways;
+  return ConvWinograd::kAuto;
+}
+
+ConvWinograd& mode_ref() {
+  static ConvWinograd m = mode_from_env();
+  return m;
+}
+size_t g_chunk_tiles = 0;  // 0: auto
+
+// Auto rule (measured, docs/PERFORMANCE.md "Winograd bf16 conv").
+constexpr int64_t kAutoMinChannels = 64, kAutoMaxChannels = 512;
+constexpr int64_t kAutoMinTiles = 64;  // per image
+// Chunk sizing: V of a chunk (16 x T x Cin2 bf16) about kVBytes, M of a channel block
+// (16 x co_blk x T fp32) about kMBytes. MACRO_WINO_V_KB / MACRO_WINO_M_KB override them (tuning).
+constexpr int64_t kVBytes = 512 * 1024, kMBytes = 256 * 1024;
+struct Budgets {
+  int64_t v = kVBytes, m = kMBytes;
+};
+const Budgets& budgets() {
+  static const Budgets b = [] {
+    Budgets r;
+    if (const char* e = std::getenv("MACRO_WINO_V_KB")) r.v = std::max<int64_t>(1, std::atoll(e)) * 1024;
+    if (const char* e = std::getenv("MACRO_WINO_M_KB")) r.m = std::max<int64_t>(1, std::atoll(e)) * 1024;
+    return r;
+  }();
+  return b;
+}
+
+// Nearest-even bf16 bits of f (NaN quiet), as conv.cpp's pair planes round.
+inline uint32_t bf16_bits(float f) {
+  uint32_t u;
+  std::memcpy(&u, &f, 4);
+  const uint32_t r = (u + 0x7fffu + ((u >> 16) & 1u)) >> 16;
+  return (u & 0x7fffffffu) > 0x7f800000u ? ((u >> 16) | 0x40u) : r;
+}
+
+// ---- scalar transforms -----------------------------------------------------------------------
+
+// V = B^T d B for one 4x4 patch d[i * 4 + j]; the vector code does the same adds in this order.
+inline void input_tile(const float* d, float* v) {
+  float r[16];
+  for (int j = 0; j < 4; ++j) {
+    r[0 * 4 + j] = d[0 * 4 + j] - d[2 * 4 + j];
+    r[1 * 4 + j] = d[1 * 4 + j] + d[2 * 4 + j];
+    r[2 * 4 + j] = d[2 * 4 + j] - d[1 * 4 + j];
+    r[3 * 4 + j] = d[1 * 4 + j] - d[3 * 4 + j];
+  }
+  for (int i = 0; i < 4; ++i) {
+    const float* ri = r + i * 4;
+    v[i * 4 + 0] = ri[0] - ri[2];
+    v[i * 4 + 1] = ri[1] + ri[2];
+    v[i * 4 + 2] = ri[2] - ri[1];
+    v[i * 4 + 3] = ri[1] - ri[3];
+  }
+}
+
+// The 4x4 patch of plane p (H x W) at input row iy0, column ix0 (zeros outside).
+inline void load_patch(const float* p, int64_t h, int64_t w, int64_t iy0, int64_t ix0, float* d) {
+  for (int i = 0; i < 4; ++i) {
+    const int64_t iy = iy0 + i;
+    for (int j = 0; j < 4; ++j) {
+      const int64_t ix = ix0 + j;
+      d[i * 4 + j] = p && iy >= 0 && iy < h && ix >= 0 && ix < w ? p[iy * w + ix] : 0.0f;
+    }
+  }
+}
+
+void input_scalar(const detail::WinoInput& a) {
+  const int64_t hw = a.h * a.w;
+  for (int64_t q = a.q0; q < a.q1; ++q) {
+    const int64_t c0 = 2 * q, c1 = c0 + 1;
+    const float* p0 = c0 < a.c_in ? a.x + c0 * hw : nullptr;
+    const float* p1 = c1 < a.c_in ? a.x + c1 * hw : nullptr;
+    for (int r = 0; r < a.nruns; ++r) {
+      const detail::WinoRun& run = a.runs[r];
+      const int64_t iy0 = 2 * run.ty - a.row_phase - a.pad_top;
+      for (int l = 0; l < run.len; ++l) {
+        const int64_t ix0 = 2 * (run.tx0 + l) - a.pad_left;
+        const int col = run.col + l;
+        float d0[16], d1[16], v0[16], v1[16];
+        load_patch(p0, a.h, a.w, iy0, ix0, d0);
+        load_patch(p1, a.h, a.w, iy0, ix0, d1);
+        input_tile(d0, v0);
+        input_tile(d1, v1);
+        uint32_t* dst = a.v + (col / a.nr) * a.kp2 * a.nr + q * a.nr + col % a.nr;
+        for (int xi = 0; xi < 16; ++xi)
+          dst[xi * a.xi_stride] = bf16_bits(v0[xi]) | (bf16_bits(v1[xi]) << 16);
+      }
+    }
+  }
+}
+
+void output_scalar(const detail::WinoOutput& a) {
+  for (int64_t c = a.co0; c < a.co0 + a.nco; ++c) {
+    const float* mc = a.m + (c - a.co0) * a.ldm;
+    float* yc = a.y + c * a.oh * a.ow;
+    const float* rc = a.residual ? a.residual + c * a.oh * a.ow : nullptr;
+    for (int r = 0; r < a.nruns; ++r) {
+      const detail::WinoRun& run = a.runs[r];
+      for (int l = 0; l < run.len; ++l) {
+        const int col = run.col + l;
+        float m[16], t[8], y[4];
+        for (int xi = 0; xi < 16; ++xi) m[xi] = mc[xi * a.xi_stride + col];
+        for (int j = 0; j < 4; ++j) {
+          t[0 * 4 + j] = (m[0 * 4 + j] + m[1 * 4 + j]) + m[2 * 4 + j];
+          t[1 * 4 + j] = (m[1 * 4 + j] - m[2 * 4 + j]) - m[3 * 4 + j];
+        }
+        for (int i = 0; i < 2; ++i) {
+          const float* ti = t + i * 4;
+          y[i * 2 + 0] = (ti[0] + ti[1]) + ti[2];
+          y[i * 2 + 1] = (ti[1] - ti[2]) - ti[3];
+        }
+        for (int i = 0; i < 2; ++i) {
+          const int64_t oy = 2 * run.ty - a.row_phase + i;
+          if (oy < 0 || oy >= a.oh) continue;
+          for (int j = 0; j < 2; ++j) {
+            const int64_t ox = 2 * (run.tx0 + l) + j;
+            if (ox >= a.ow) continue;
+            float v = y[i * 2 + j];
+            if (a.bias) v += a.bias[c];
+            if (rc) v += rc[oy * a.ow + ox];
+            if (a.relu) v = v > 0.0f ? v : 0.0f;
+            yc[oy * a.ow + ox] = v;
+          }
+        }
+      }
+    }
+  }
+}
+
+// ---- chunk driver ------------------------------------------------------------------------------
+
+// Tiles [t0, t0 + nt) of a TW-wide tile grid as runs (WinoRun's contract).
+int make_runs(int64_t t0, int64_t nt, int64_t tw, detail::WinoRun* runs) {
+  int n = 0;
+  for (int64_t col = 0; col < nt;) {
+    const int64_t t = t0 + col, ty = t / tw, tx = t % tw;
+    const int64_t len = std::min({nt - col, tw - tx, 16 - col % 16});
+    runs[n++] = detail::WinoRun{ty, tx, int(col), int(len)};
+    col += len;
+  }
+  return n;
+}
+
+// 64-byte aligned storage, grown only.
+template <typename T>
+struct Buffer {
+  std::unique_ptr<unsigned char[]> mem;
+  size_t cap = 0;  // elements
+  T* data = nullptr;
+  void reserve(size_t n) {
+    if (n <= cap) return;
+    mem.reset(new unsigned char[n * sizeof(T) + 64]);
+    cap = n;
+    data = reinterpret_cast<T*>((reinterpret_cast<uintptr_t>(mem.get()) + 63) & ~uintptr_t(63));
+  }
+};
+
+struct Slot {
+  Buffer<uint32_t> v;
+  Buffer<float> m;
+  Buffer<detail::WinoRun> runs;
+};
+thread_local std::vector<Slot> t_slots;  // one per pool worker, owned by the calling thread
+
+}  // namespace
+
+ConvWinograd conv2d_set_winograd(ConvWinograd mode) {
+  const ConvWinograd old = mode_ref();
+  mode_ref() = mode;
+  return old;
+}
+
+ConvWinograd conv2d_winograd_mode() {
+  return mode_ref();
+}
+
+size_t conv2d_set_winograd_chunk(size_t tiles) {
+  const size_t old = g_chunk_tiles;
+  g_chunk_tiles = tiles;
+  return old;
+}
+
+namespace detail {
+
+const WinogradTransforms& winograd_scalar_transforms() {
+  static const WinogradTransforms t{input_scalar, output_scalar, "scalar"};
+  return t;
+}
+
+const WinogradTransforms& winograd_transforms(Isa isa) {
+  if (isa == Isa::kAvx512Bf16 || isa == Isa::kAmx) {
+    if (const WinogradTransforms* t = winograd_avx512bf16_transforms()) return *t;
+  }
+  return winograd_scalar_transforms();
+}
+
+std::vector<PackedWeights> winograd_pack(const float* w, int64_t c_out, int64_t c_in, Isa isa) {
+  const int64_t cin2 = (c_in + 1) / 2 * 2;
+  // u [xi][Cout][Cin2], zero for the pad channel.
+  std::vector<float> u(size_t(16 * c_out * cin2), 0.0f);
+  for (int64_t co = 0; co < c_out; ++co)
+    for (int64_t ci = 0; ci < c_in; ++ci) {
+      const float* g = w + (co * c_in + ci) * 9;  // [3][3]
+      double t[4][3];                             // G g
+      for (int k = 0; k < 3; ++k) {
+        const double g0 = g[0 * 3 + k], g1 = g[1 * 3 + k], g2 = g[2 * 3 + k];
+        t[0][k] = g0;
+        t[1][k] = 0.5 * (g0 + g1 + g2);
+        t[2][k] = 0.5 * (g0 - g1 + g2);
+        t[3][k] = g2;
+      }
+      for (int i = 0; i < 4; ++i) {  // (G g) G^T
+        const double uu[4] = {t[i][0], 0.5 * (t[i][0] + t[i][1] + t[i][2]),
+                              0.5 * (t[i][0] - t[i][1] + t[i][2]), t[i][2]};
+        for (int j = 0; j < 4; ++j) u[size_t(((i * 4 + j) * c_out + co) * cin2 + ci)] = float(uu[j]);
+      }
+    }
+  std::vector<PackedWeights> packs;
+  packs.reserve(16);
+  for (int xi = 0; xi < 16; ++xi)
+    packs.push_back(PackedWeights::pack_as_a(u.data() + size_t(xi * c_out * cin2), c_out, cin2,
+                                             cin2, WeightType::kBf16, isa));
+  return packs;
+}
+
+bool winograd_pack_qualifies(int64_t c_out, int64_t c_in) {
+  return c_out >= kAutoMinChannels && c_out <= kAutoMaxChannels && c_in >= kAutoMinChannels &&
+         c_in <= kAutoMaxChannels;
+}
+
+bool winograd_applies(const Conv2dShape& s, const ConvWeights& w) {
+  const ConvWinograd mode = mode_ref();
+  if (mode == ConvWinograd::kOff || w.winograd().size() != 16) return false;
+  if (s.kh != 3 || s.kw != 3 || s.stride != 1 || s.row_origin < 0) return false;
+  if (mode == ConvWinograd::kAlways) return true;
+  const Isa isa = w.winograd()[0].isa();
+  if (isa != Isa::kAvx512Bf16 && isa != Isa::kAmx) return false;
+  const int64_t tiles = (s.out_h() + 1) / 2 * ((s.out_w() + 1) / 2);
+  return winograd_pack_qualifies(s.c_out, s.c_in) && tiles >= kAutoMinTiles;
+}
+
+void conv2d_winograd(const Conv2dShape& s, const float* x, const ConvWeights& w,
+                     const float* residual, float* y, ConvAct act, ThreadPool* pool) {
+  const std::vector<PackedWeights>& U = w.winograd();
+  MACRO_CHECK(U.size() == 16 && s.kh == 3 && s.kw == 3 && s.stride == 1 && s.row_origin >= 0);
+  const GemmKernel& kern = U[0].kernel();
+  const WinogradTransforms& tr = winograd_transforms(U[0].isa());
+  const int nr = kern.nr, mr = kern.mr;
+  MACRO_CHECK(nr % 16 == 0);
+  const int64_t esz = packed_elem_bytes(kern.layout);
+  const int64_t kp = U[0].k_padded(), kp2 = kp / 2, cin2 = (s.c_in + 1) / 2 * 2;
+  const int64_t oh = s.out_h(), ow = s.out_w();
+  const int phase = int(s.row_origin & 1);
+  const int64_t th = (oh + phase + 1) / 2, tw = (ow + 1) / 2, tiles = th * tw;
+  // Chunk: T tiles (a multiple of NR), V about kVBytes; channel blocks: M about kMBytes.
+  int64_t T = g_chunk_tiles > 0 ? int64_t(g_chunk_tiles) : budgets().v / (16 * kp * 2);
+  T = std::clamp<int64_t>(T / nr * nr, nr, round_up(tiles, nr));
+  const int64_t chunks = (tiles + T - 1) / T;
+  const int64_t co_blk =
+      std::min(round_up(s.c_out, mr), std::max<int64_t>(mr, budgets().m / (16 * 4 * T) / mr * mr));
+  const int64_t co_blocks = (s.c_out + co_blk - 1) / co_blk;
+  const int threads = pool ? pool->size() : 1;
+  const int64_t items = s.n * chunks;
+  int64_t blocks_per_part = co_blocks;
+  if (threads > 1 && items < 2 * threads) {
+    const int64_t parts = std::min<int64_t>(co_blocks, (2 * threads + items - 1) / items);
+    blocks_per_part = (co_blocks + parts - 1) / parts;
+  }
+  const int64_t parts = (co_blocks + blocks_per_part - 1) / blocks_per_part;
+  const int64_t xs_v = T * kp2, xs_m = co_blk * T;
+  const size_t max_runs = size_t(T + T / 16 + 2);
+  // The calling thread's slots (a thread_local named inside the job would be the worker's own).
+  std::vector<Slot>& slots = t_slots;
+  if (slots.size() < size_t(threads)) slots.resize(size_t(threads));
+  for (int i = 0; i < threads; ++i) {
+    slots[size_t(i)].v.reserve(size_t(16 * xs_v));
+    slots[size_t(i)].m.reserve(size_t(16 * xs_m));
+    slots[size_t(i)].runs.reserve(max_runs);
+  }
+  const int64_t hw = s.h * s.w, ohw = oh * ow;
+
+  auto item = [&](int64_t it, int worker) {
+    const int64_t part = it % parts, chunk = (it / parts) % chunks, b = it / (parts * chunks);
+    Slot& sl = slots[size_t(worker)];
+    const int64_t t0 = chunk * T, nt = std::min(T, tiles - t0);
+    WinoRun* runs = sl.runs.data;
+    const int nruns = make_runs(t0, nt, tw, runs);
+    uint32_t* v = sl.v.data;
+    // Zero what the transform does not write and the kernel reads: pad pair rows (AMX pads K
+    // to 32) and the last panel's columns past the chunk.
+    const int64_t panels = (nt + nr - 1) / nr, tail = nt - (panels - 1) * nr;
+    for (int xi = 0; xi < 16; ++xi)
+      for (int64_t p = 0; p < panels; ++p) {
+        uint32_t* vp = v + xi * xs_v + p * kp2 * nr;
+        if (kp2 > cin2 / 2) std::memset(vp + cin2 / 2 * nr, 0, size_t((kp2 - cin2 / 2) * nr) * 4);
+        if (p == panels - 1 && tail < nr)
+          for (int64_t q = 0; q < cin2 / 2; ++q)
+            std::memset(vp + q * nr + tail, 0, size_t(nr - tail) * 4);
+      }
+    WinoInput in;
+    in.x = x + b * s.c_in * hw;
+    in.c_in = s.c_in, in.h = s.h, in.w = s.w;
+    in.pad_top = s.pad_top, in.pad_left = s.pad_left, in.row_phase = phase;
+    in.q0 = 0, in.q1 = cin2 / 2;
+    in.runs = runs, in.nruns = nruns;
+    in.nr = nr, in.kp2 = kp2, in.xi_stride = xs_v;
+    in.v = v;
+    tr.input(in);
+    const int64_t cb1 = std::min(co_blocks, (part + 1) * blocks_per_part);
+    for (int64_t cb = part * blocks_per_part; cb < cb1; ++cb) {
+      const int64_t co0 = cb * co_blk, nco = std::min(co_blk, s.c_out - co0);
+      for (int xi = 0; xi < 16; ++xi) {
+        Operand oa{nullptr, nullptr,
+                   static_cast<const unsigned char*>(U[size_t(xi)].panels()) +
+                       (co0 / mr) * kp * mr * esz,
+                   kp};
+        Operand ob{nullptr, nullptr, v + xi * xs_v, kp};
+        DriverShape ds;
+        ds.M = nco, ds.N = nt, ds.K = cin2;
+        ds.C = sl.m.data + xi * xs_m;
+        ds.ldc = T;
+        ds.mc = round_up(nco, mr);
+        ds.nc = round_up(nt, nr);
+        run_gemm(kern, ds, oa, ob, GemmParams{}, nullptr);
+      }
+      WinoOutput out;
+      out.m = sl.m.data, out.ldm = T, out.xi_stride = xs_m;
+      out.co0 = co0, out.nco = nco;
+      out.bias = w.bias();
+      out.residual = residual ? residual + b * s.c_out * ohw : nullptr;
+      out.y = y + b * s.c_out * ohw;
+      out.oh = oh, out.ow = ow, out.row_phase = phase;
+      out.relu = act == ConvAct::kRelu;
+      out.runs = runs, out.nruns = nruns;
+      tr.output(out);
+    }
+  };
+  const int64_t total = items * parts;
+  if (!pool || threads == 1 || total == 1) {
+    for (int64_t it = 0; it < total; ++it) item(it, 0);
+  } else {
+    pool->parallel_for(
+        size_t(total),
+        [&](size_t b0, size_t b1, int worker) {
+          for (size_t it = b0; it < b1; ++it) item(int64_t(it), worker);
+        },
+        1);
+  }
+}
+
+void winograd_release_scratch() {
+  std::vector<Slot>().swap(t_slots);
+}
+
+}  // namespace detail
+}  // namespace macro

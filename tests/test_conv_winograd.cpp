@@ -1,0 +1,410 @@
+// Winograd F(2x2, 3x3) bf16 convs (attention/runtime/conv_winograd.h, conv.h's ConvWinograd).
+//
+// Bound, per output (b, co, oy, ox) in tile (ty, tx) at position (i, j):
+//   |y - ref| <= (2^-8 + 2^-16 + (Cin + 10) 2^-24) S + 2^-22 (|ref| + |bias| + |residual|)
+//   S = sum_ci sum_xi |A^T|[i][xi/4] |A^T|[j][xi%4] (|G| |g| |G|^T)_xi (|B|^T |d| |B|)_xi
+// with ref the double loop nest (conv2d_reference), d the tile's 4x4 input patch and g the 3x3
+// kernel: U and V are each rounded to bf16 once (2^-9 relative each, to the magnitudes above,
+// which also bound their fp32 sums), the products are exact, fp32 accumulation over Cin and the
+// output transform add at most (Cin + 8) roundings, bias and residual two more. This worst case is
+// loose (max error / bound ~0.03-0.09 here), so the typical error is also checked: rms error at
+// most 3x the direct bf16 path's on the same weights (measured 1.6-2.0x).
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <vector>
+
+#include "attention/runtime/conv.h"
+#include "attention/runtime/conv_winograd.h"
+#include "attention/runtime/cpu.h"
+#include "attention/runtime/half.h"
+#include "test_support.h"
+
+namespace macro {
+namespace {
+
+std::vector<Isa> supported_isas() {
+  std::vector<Isa> v;
+  for (Isa isa : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512, Isa::kAvx512Bf16, Isa::kAmx})
+    if (isa_supported(isa)) v.push_back(isa);
+  return v;
+}
+
+struct ModeGuard {
+  Isa isa = active_isa();
+  ConvWinograd mode;
+  size_t chunk;
+  explicit ModeGuard(ConvWinograd m)
+      : mode(conv2d_set_winograd(m)), chunk(conv2d_set_winograd_chunk(0)) {}
+  ~ModeGuard() {
+    (void)set_isa(isa);
+    conv2d_set_winograd(mode);
+    conv2d_set_winograd_chunk(chunk);
+  }
+};
+
+std::vector<float> random_vec(size_t n, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> d(-1.0f, 1.0f);
+  std::vector<float> v(n);
+  for (float& x : v) x = d(rng);
+  return v;
+}
+
+Conv2dShape shape(int64_t n, int64_t ci, int64_t h, int64_t w, int64_t co, int pad) {
+  return Conv2dShape::make(n, ci, h, w, co, 3, 1, pad);
+}
+
+// The bound above for every output of s (row_origin honoured).
+std::vector<double> winograd_bound(const Conv2dShape& s, const float* x, const float* w,
+                                   const float* bias, const float* res, const float* ref,
+                                   double* s_over_direct) {
+  const int64_t oh = s.out_h(), ow = s.out_w();
+  const int phase = int(s.row_origin & 1);
+  const double at[2][4] = {{1, 1, 1, 0}, {0, 1, 1, 1}};  // |A^T|
+  // |G| |g| |G|^T per (co, ci).
+  std::vector<double> ua(size_t(s.c_out * s.c_in * 16));
+  for (int64_t k = 0; k < s.c_out * s.c_in; ++k) {
+    const float* g = w + k * 9;
+    double t[4][3];
+    for (int c = 0; c < 3; ++c) {
+      const double g0 = std::abs(g[c]), g1 = std::abs(g[3 + c]), g2 = std::abs(g[6 + c]);
+      t[0][c] = g0, t[1][c] = t[2][c] = 0.5 * (g0 + g1 + g2), t[3][c] = g2;
+    }
+    for (int i = 0; i < 4; ++i) {
+      const double r = 0.5 * (t[i][0] + t[i][1] + t[i][2]);
+      const double u[4] = {t[i][0], r, r, t[i][2]};
+      for (int j = 0; j < 4; ++j) ua[size_t(k * 16 + i * 4 + j)] = u[j];
+    }
+  }
+  std::vector<double> bound(size_t(s.n * s.c_out * oh * ow));
+  double ratio_sum = 0;
+  int64_t ratio_n = 0;
+  for (int64_t b = 0; b < s.n; ++b)
+    for (int64_t oy = 0; oy < oh; ++oy)
+      for (int64_t ox = 0; ox < ow; ++ox) {
+        const int64_t ty = (oy + phase) / 2, tx = ox / 2;
+        const int ti = int((oy + phase) % 2), tj = int(ox % 2);
+        const int64_t iy0 = 2 * ty - phase - s.pad_top, ix0 = 2 * tx - s.pad_left;
+        // |B|^T |d| |B| per input channel (|B^T| rows: 1010, 0110, 0110, 0101).
+        std::vector<double> va(size_t(s.c_in * 16));
+        std::vector<double> wx(size_t(s.c_in));  // sum over the 3x3 window of |x| (for the ratio)
+        for (int64_t ci = 0; ci < s.c_in; ++ci) {
+          double d[4][4];
+          for (int i = 0; i < 4; ++i)
+            for (int j = 0; j < 4; ++j) {
+              const int64_t iy = iy0 + i, ix = ix0 + j;
+              d[i][j] = iy >= 0 && iy < s.h && ix >= 0 && ix < s.w
+                            ? std::abs(x[((b * s.c_in + ci) * s.h + iy) * s.w + ix])
+                            : 0.0;
+            }
+          double r[4][4];
+          for (int j = 0; j < 4; ++j) {
+            r[0][j] = d[0][j] + d[2][j];
+            r[1][j] = r[2][j] = d[1][j] + d[2][j];
+            r[3][j] = d[1][j] + d[3][j];
+          }
+          for (int i = 0; i < 4; ++i) {
+            va[size_t(ci * 16 + i * 4 + 0)] = r[i][0] + r[i][2];
+            va[size_t(ci * 16 + i * 4 + 1)] = r[i][1] + r[i][2];
+            va[size_t(ci * 16 + i * 4 + 2)] = r[i][1] + r[i][2];
+            va[size_t(ci * 16 + i * 4 + 3)] = r[i][1] + r[i][3];
+          }
+        }
+        for (int64_t co = 0; co < s.c_out; ++co) {
+          double S = 0, direct = 0;
+          for (int64_t ci = 0; ci < s.c_in; ++ci) {
+            for (int xi = 0; xi < 16; ++xi)
+              S += at[ti][xi / 4] * at[tj][xi % 4] * ua[size_t((co * s.c_in + ci) * 16 + xi)] *
+                   va[size_t(ci * 16 + xi)];
+            for (int dy = 0; dy < 3; ++dy)
+              for (int dx = 0; dx < 3; ++dx) {
+                const int64_t iy = oy + dy - s.pad_top, ix = ox + dx - s.pad_left;
+                if (iy < 0 || iy >= s.h || ix < 0 || ix >= s.w) continue;
+                direct += std::abs(double(w[((co * s.c_in + ci) * 3 + dy) * 3 + dx]) *
+                                   double(x[((b * s.c_in + ci) * s.h + iy) * s.w + ix]));
+              }
+          }
+          const int64_t o = ((b * s.c_out + co) * oh + oy) * ow + ox;
+          const double extra = std::abs(double(ref[o])) + (bias ? std::abs(bias[co]) : 0.0) +
+                               (res ? std::abs(res[o]) : 0.0);
+          bound[size_t(o)] =
+              (std::ldexp(1.0, -8) + std::ldexp(1.0, -16) + double(s.c_in + 10) * std::ldexp(1.0, -24)) *
+                  S +
+              std::ldexp(1.0, -22) * extra;
+          if (direct > 0) ratio_sum += S / direct, ++ratio_n;
+        }
+      }
+  if (s_over_direct) *s_over_direct = ratio_n ? ratio_sum / double(ratio_n) : 0.0;
+  return bound;
+}
+
+struct Case {
+  Conv2dShape s;
+  bool bias = true, residual = false, alias = false, relu = false;
+};
+
+// Runs the conv on the active path (Winograd forced) and checks it against the bound; returns y.
+std::vector<float> check_case(const Case& c, ThreadPool* pool) {
+  const Conv2dShape& s = c.s;
+  auto x = random_vec(size_t(s.n * s.c_in * s.h * s.w), 21);
+  auto w = random_vec(size_t(s.c_out * s.c_in * 9), 22);
+  auto bias = random_vec(size_t(s.c_out), 23);
+  const size_t ny = size_t(s.n * s.c_out * s.out_h() * s.out_w());
+  auto res = random_vec(ny, 24);
+  std::vector<float> ref(ny);
+  conv2d_reference(s, x.data(), w.data(), c.bias ? bias.data() : nullptr,
+                   c.residual ? res.data() : nullptr, ref.data());
+  ConvWeights cw = ConvWeights::pack(w.data(), c.bias ? bias.data() : nullptr, s.c_out, s.c_in, 3,
+                                     3, WeightType::kBf16);
+  REQUIRE(cw.winograd().size() == 16);
+  REQUIRE(detail::winograd_applies(s, cw));
+  std::vector<float> y(ny, NAN);
+  if (c.alias) y = res;
+  conv2d(s, x.data(), cw, c.residual ? (c.alias ? y.data() : res.data()) : nullptr, y.data(),
+         c.relu ? ConvAct::kRelu : ConvAct::kNone, pool);
+  double ratio = 0;
+  const std::vector<double> bound = winograd_bound(
+      s, x.data(), w.data(), c.bias ? bias.data() : nullptr, c.residual ? res.data() : nullptr,
+      ref.data(), &ratio);
+  size_t bad = 0, first = 0, clamped = 0;
+  double worst = 0;  // max err / bound
+  for (size_t i = 0; i < ny; ++i) {
+    const double r = c.relu ? std::max(0.0, double(ref[i])) : double(ref[i]);
+    const double err = std::abs(double(y[i]) - r);
+    clamped += c.relu && y[i] == 0.0f;
+    if (!(err <= bound[i])) {
+      if (!bad) first = i;
+      ++bad;
+    }
+    worst = std::max(worst, err / bound[i]);
+  }
+  INFO(isa_name(active_isa()) << " N=" << s.n << " Cin=" << s.c_in << " " << s.h << "x" << s.w
+                              << " Cout=" << s.c_out << " pad=" << s.pad_top << " origin="
+                              << s.row_origin << " res=" << c.residual << " alias=" << c.alias
+                              << " relu=" << c.relu << " mean S/sum|w||x|=" << ratio
+                              << " max err/bound=" << worst << " first bad " << first << ": y "
+                              << y[first] << " ref " << ref[first] << " bound " << bound[first]);
+  CHECK(bad == 0);
+  if (c.relu) CHECK(clamped > ny / 4);
+  // The typical error against the direct bf16 path's on the same weights (mode off).
+  std::vector<float> yd(ny, NAN);
+  if (c.alias) yd = res;
+  const ConvWinograd mode = conv2d_set_winograd(ConvWinograd::kOff);
+  conv2d(s, x.data(), cw, c.residual ? (c.alias ? yd.data() : res.data()) : nullptr, yd.data(),
+         c.relu ? ConvAct::kRelu : ConvAct::kNone, pool);
+  conv2d_set_winograd(mode);
+  double ew = 0, ed = 0;
+  for (size_t i = 0; i < ny; ++i) {
+    const double r = c.relu ? std::max(0.0, double(ref[i])) : double(ref[i]);
+    ew += (y[i] - r) * (y[i] - r);
+    ed += (yd[i] - r) * (yd[i] - r);
+  }
+  INFO("rms error winograd / direct bf16 = " << std::sqrt(ew / ed));
+  CHECK(std::sqrt(ew) <= 3.0 * std::sqrt(ed));
+  CHECK(std::memcmp(y.data(), yd.data(), ny * 4) != 0);
+  return y;
+}
+
+const Case kCases[] = {
+    {shape(1, 5, 7, 9, 3, 1)},                             // odd H, W, Cin
+    {shape(1, 8, 1, 20, 16, 1), true, true},               // a 1-row image
+    {shape(2, 33, 11, 13, 29, 1), true, true, true},       // batch 2, Cout % MR != 0, alias y
+    {shape(1, 16, 9, 10, 20, 0), false, true, false, true},  // pad 0, relu
+    {shape(1, 70, 6, 70, 24, 1), true, true, true, true},  // runs across rows and 16-tile groups
+};
+
+}  // namespace
+
+TEST_CASE("winograd: the scalar twin and every path against the double loop nest",
+          "[winograd]") {
+  ModeGuard guard(ConvWinograd::kAlways);
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    for (const Case& c : kCases) check_case(c, nullptr);
+  }
+}
+
+TEST_CASE("winograd: the vector transforms equal the scalar twins bit for bit", "[winograd]") {
+  if (!isa_supported(Isa::kAvx512Bf16)) {
+    WARN("no AVX512-BF16 on this machine: only the scalar transforms exist here");
+    return;
+  }
+  const detail::WinogradTransforms& sc = detail::winograd_scalar_transforms();
+  const detail::WinogradTransforms& vx = detail::winograd_transforms(Isa::kAvx512Bf16);
+  REQUIRE(vx.input != sc.input);
+  // A chunk of 45 tiles from tile 5 of a 17 x 13 output (TW = 7: runs cut by rows and 16-groups).
+  for (int pad : {0, 1})
+    for (int phase : {0, 1}) {
+      const int64_t cin = 7, h = 19, w = 13 + 2 * (1 - pad), oh = h + 2 * pad - 2,
+                    ow = w + 2 * pad - 2;
+      const int64_t tw = (ow + 1) / 2, th = (oh + phase + 1) / 2, tiles = th * tw;
+      const int64_t t0 = 5, nt = std::min<int64_t>(45, tiles - t0);
+      std::vector<detail::WinoRun> runs;
+      for (int64_t col = 0; col < nt;) {
+        const int64_t t = t0 + col, len = std::min({nt - col, tw - t % tw, 16 - col % 16});
+        runs.push_back({t / tw, t % tw, int(col), int(len)});
+        col += len;
+      }
+      auto x = random_vec(size_t(cin * h * w), 31);
+      x[3] = NAN;  // a NaN rounds to the same quiet NaN in both
+      const int nr = 32;
+      const int64_t kp2 = 5, T = 64, xs = T * kp2;
+      std::vector<uint32_t> v1(size_t(16 * xs), 0xdeadbeef), v2 = v1;
+      detail::WinoInput in;
+      in.x = x.data(), in.c_in = cin, in.h = h, in.w = w;
+      in.pad_top = in.pad_left = pad, in.row_phase = phase;
+      in.q0 = 0, in.q1 = 4, in.runs = runs.data(), in.nruns = int(runs.size());
+      in.nr = nr, in.kp2 = kp2, in.xi_stride = xs;
+      in.v = v1.data();
+      sc.input(in);
+      in.v = v2.data();
+      vx.input(in);
+      CHECK(std::memcmp(v1.data(), v2.data(), v1.size() * 4) == 0);
+      // Output: M for 3 channels from 1, bias, residual aliasing y, ReLU.
+      const int64_t cout = 4, co0 = 1, nco = 3;
+      auto m = random_vec(size_t(16 * nco * T), 32);
+      auto bias = random_vec(size_t(cout), 33);
+      for (bool relu : {false, true})
+        for (bool with_res : {false, true}) {
+          auto y1 = random_vec(size_t(cout * oh * ow), 34), y2 = y1;
+          detail::WinoOutput out;
+          out.m = m.data(), out.ldm = T, out.xi_stride = nco * T, out.co0 = co0, out.nco = nco;
+          out.bias = bias.data(), out.oh = oh, out.ow = ow, out.row_phase = phase;
+          out.relu = relu, out.runs = runs.data(), out.nruns = int(runs.size());
+          out.y = y1.data(), out.residual = with_res ? y1.data() : nullptr;
+          sc.output(out);
+          out.y = y2.data(), out.residual = with_res ? y2.data() : nullptr;
+          vx.output(out);
+          INFO("pad " << pad << " phase " << phase << " relu " << relu << " res " << with_res);
+          CHECK(std::memcmp(y1.data(), y2.data(), y1.size() * 4) == 0);
+        }
+    }
+}
+
+TEST_CASE("winograd: bit-identical for 1 and 2 threads, any chunk size and row bands",
+          "[winograd]") {
+  ModeGuard guard(ConvWinograd::kAlways);
+  ThreadPool pool(2);
+  const Conv2dShape s = shape(2, 40, 23, 37, 30, 1);
+  auto x = random_vec(size_t(s.n * s.c_in * s.h * s.w), 41);
+  auto w = random_vec(size_t(s.c_out * s.c_in * 9), 42);
+  auto b = random_vec(size_t(s.c_out), 43);
+  const int64_t oh = s.out_h(), ow = s.out_w();
+  const size_t ny = size_t(s.n * s.c_out * oh * ow);
+  auto r = random_vec(ny, 44);
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3, WeightType::kBf16);
+    std::vector<float> base(ny);
+    conv2d_set_winograd_chunk(0);
+    conv2d(s, x.data(), cw, r.data(), base.data(), nullptr);
+    for (size_t chunk : {size_t(16), size_t(32), size_t(64), size_t(1000)})
+      for (ThreadPool* p : {static_cast<ThreadPool*>(nullptr), &pool}) {
+        conv2d_set_winograd_chunk(chunk);
+        std::vector<float> y(ny, NAN);
+        conv2d(s, x.data(), cw, r.data(), y.data(), p);
+        INFO(isa_name(isa) << " chunk " << chunk << " threads " << (p ? 2 : 1));
+        CHECK(std::memcmp(y.data(), base.data(), ny * 4) == 0);
+      }
+    conv2d_set_winograd_chunk(0);
+    conv2d_release_scratch();  // regrown by the next call
+    // Row bands of 3 (odd starts) and 4 rows of image 1, each re-cut like Conv2d::forward_rows
+    // with row_origin = its first row, give the whole image's rows.
+    for (int64_t rows : {3, 4}) {
+      for (int64_t y0 = 0; y0 < oh; y0 += rows) {
+        const int64_t y1 = std::min(oh, y0 + rows);
+        const int64_t iy0 = std::max<int64_t>(0, y0 - 1), iy1 = std::min(s.h, y1 + 1);
+        Conv2dShape bs = s;
+        bs.n = 1, bs.h = iy1 - iy0;
+        bs.pad_top = int(1 - (y0 - iy0)), bs.pad_bottom = int(1 - (iy1 - y1));
+        bs.row_origin = y0;
+        REQUIRE(bs.out_h() == y1 - y0);
+        std::vector<float> xb(size_t(s.c_in * bs.h * s.w)), rb(size_t(s.c_out * (y1 - y0) * ow));
+        for (int64_t c = 0; c < s.c_in; ++c)
+          std::memcpy(xb.data() + c * bs.h * s.w, x.data() + ((s.c_in + c) * s.h + iy0) * s.w,
+                      size_t(bs.h * s.w) * 4);
+        for (int64_t c = 0; c < s.c_out; ++c)
+          std::memcpy(rb.data() + c * (y1 - y0) * ow, r.data() + ((s.c_out + c) * oh + y0) * ow,
+                      size_t((y1 - y0) * ow) * 4);
+        std::vector<float> yb(rb.size(), NAN);
+        conv2d(bs, xb.data(), cw, rb.data(), yb.data(), &pool);
+        bool same = true;
+        for (int64_t c = 0; c < s.c_out; ++c)
+          same = same && std::memcmp(yb.data() + c * (y1 - y0) * ow,
+                                     base.data() + ((s.c_out + c) * oh + y0) * ow,
+                                     size_t((y1 - y0) * ow) * 4) == 0;
+        INFO(isa_name(isa) << " band rows " << rows << " from " << y0);
+        CHECK(same);
+      }
+    }
+  }
+}
+
+TEST_CASE("winograd: modes, pack rule, and the direct path when forced", "[winograd]") {
+  ModeGuard guard(ConvWinograd::kAuto);
+  const Conv2dShape s = shape(1, 64, 12, 20, 64, 1);
+  auto x = random_vec(size_t(s.c_in * s.h * s.w), 51);
+  auto w = random_vec(size_t(s.c_out * s.c_in * 9), 52);
+  auto b = random_vec(size_t(s.c_out), 53);
+  const size_t ny = size_t(s.c_out * s.out_h() * s.out_w());
+  // The direct bf16 path: the loop nest on bf16-rounded inputs and weights to fp32 rounding.
+  auto round = [](std::vector<float> v) {
+    for (float& f : v) f = bf16_to_f32(f32_to_bf16(f));
+    return v;
+  };
+  auto x16 = round(x), w16 = round(w);
+  std::vector<float> ref16(ny);
+  conv2d_reference(s, x16.data(), w16.data(), b.data(), nullptr, ref16.data());
+  auto max_err = [&](const std::vector<float>& y) {
+    double e = 0, m = 1e-30;
+    for (size_t i = 0; i < ny; ++i) {
+      e = std::max(e, std::abs(double(y[i]) - ref16[i]));
+      m = std::max(m, std::abs(double(ref16[i])));
+    }
+    return e / m;
+  };
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    INFO(isa_name(isa));
+    conv2d_set_winograd(ConvWinograd::kAuto);
+    ConvWeights auto_w =
+        ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3, WeightType::kBf16);
+    CHECK(auto_w.winograd().size() == 16);  // 64 channels qualify
+    CHECK(auto_w.bytes() > auto_w.packed().bytes() * 2);
+    ConvWeights small =
+        ConvWeights::pack(w.data(), b.data(), 16, 16 * 4, 3, 3, WeightType::kBf16);  // Cout 16
+    CHECK(small.winograd().empty());
+    ConvWeights f32 = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3);
+    CHECK(f32.winograd().empty());
+    // Auto: only on the bf16 hardware paths, and only with enough tiles (60 here: too few).
+    CHECK_FALSE(detail::winograd_applies(s, auto_w));
+    Conv2dShape big = s;
+    big.h = 16, big.w = 16;  // 64 tiles
+    CHECK(detail::winograd_applies(big, auto_w) ==
+          (isa == Isa::kAvx512Bf16 || isa == Isa::kAmx));
+    Conv2dShape s2 = big;
+    s2.stride = 2;
+    CHECK_FALSE(detail::winograd_applies(s2, auto_w));
+    // Forced off: no packs are built, and the direct path runs (exact bf16 inputs and weights).
+    conv2d_set_winograd(ConvWinograd::kOff);
+    ConvWeights off_w =
+        ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3, WeightType::kBf16);
+    CHECK(off_w.winograd().empty());
+    std::vector<float> y_direct(ny, NAN), y_off(ny, NAN), y_wino(ny, NAN);
+    conv2d(s, x.data(), off_w, nullptr, y_direct.data(), nullptr);
+    conv2d(s, x.data(), auto_w, nullptr, y_off.data(), nullptr);  // packs present, mode off
+    CHECK(max_err(y_direct) <= 1e-5);
+    CHECK(std::memcmp(y_off.data(), y_direct.data(), ny * 4) == 0);
+    // Always: the same weights take the Winograd path (a different rounding: not the direct bits).
+    conv2d_set_winograd(ConvWinograd::kAlways);
+    conv2d(s, x.data(), auto_w, nullptr, y_wino.data(), nullptr);
+    CHECK(std::memcmp(y_wino.data(), y_direct.data(), ny * 4) != 0);
+    CHECK(max_err(y_wino) > 1e-5);
+    CHECK(test::compare(y_wino, ref16).rel_l2 <= 1e-2);
+  }
+}
+
+}  // namespace macro
