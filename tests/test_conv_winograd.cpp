@@ -250,6 +250,9 @@ TEST_CASE("winograd: the vector transforms equal the scalar twins bit for bit", 
       }
       auto x = random_vec(size_t(cin * h * w), 31);
       x[3] = NAN;  // a NaN rounds to the same quiet NaN in both
+      // A patch of fp32 denormals (V denormal too: flushed to zero by both).
+      for (int64_t i = 0; i < 4; ++i)
+        for (int64_t j = 0; j < 4; ++j) x[size_t(2 * w * h + (6 + i) * w + 4 + j)] = 3e-39f * float(i - j);
       const int nr = 32;
       const int64_t kp2 = 5, T = 64, xs = T * kp2;
       std::vector<uint32_t> v1(size_t(16 * xs), 0xdeadbeef), v2 = v1;
@@ -377,6 +380,9 @@ TEST_CASE("winograd: modes, pack rule, and the direct path when forced", "[winog
     ConvWeights small =
         ConvWeights::pack(w.data(), b.data(), 16, 16 * 4, 3, 3, WeightType::kBf16);  // Cout 16
     CHECK(small.winograd().empty());
+    const std::vector<float> w_wide(size_t(64 * 1280 * 9), 0.25f);
+    ConvWeights wide = ConvWeights::pack(w_wide.data(), nullptr, 64, 1280, 3, 3, WeightType::kBf16);
+    CHECK(wide.winograd().empty());  // Cin 1280: no packs under kAuto
     ConvWeights f32 = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3);
     CHECK(f32.winograd().empty());
     // Auto: only on the bf16 hardware paths, and only with enough tiles (60 here: too few).

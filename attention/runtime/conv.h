@@ -107,8 +107,9 @@ size_t conv2d_set_pair_band(size_t words);
 // (conv_winograd.h states it). Modes:
 //   kOff     every conv takes the direct path; no Winograd packs are built.
 //   kAuto    (default) where it was measured faster on AVX512-BF16 (docs/PERFORMANCE.md, "Winograd
-//            bf16 conv"): the bf16 kernel path is avx512bf16 or amx, 64 <= Cin, Cout <= 512 (packs
-//            are built for those channel counts only) and at least 64 output tiles per image.
+//            bf16 conv"): the bf16 kernel path is avx512bf16 or amx, 64 <= Cin, Cout <= 640 (packs
+//            are built for those channel counts only: 1280 channels gain 1.5x but their packs
+//            would add ~1.6 GB to the U-Net) and at least 64 2x2 output tiles per image.
 //   kAlways  every bf16 3x3 stride-1 conv whose weights carry Winograd packs, on any path
 //            (packs are then built for every bf16 3x3 conv; tests, benchmarks).
 // The packs are built by ConvWeights::pack under the mode of that moment; the choice per call is

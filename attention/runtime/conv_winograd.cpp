@@ -41,11 +41,14 @@ ConvWinograd& mode_ref() {
 size_t g_chunk_tiles = 0;  // 0: auto
 
 // Auto rule (measured, docs/PERFORMANCE.md "Winograd bf16 conv").
-constexpr int64_t kAutoMinChannels = 64, kAutoMaxChannels = 512;
+// 1280 channels is faster too (1.5x) but its packs would add ~1.6 GB to the SD-Turbo U-Net.
+constexpr int64_t kAutoMinChannels = 64, kAutoMaxChannels = 640;
 constexpr int64_t kAutoMinTiles = 64;  // per image
 // Chunk sizing: V of a chunk (16 x T x Cin2 bf16) about kVBytes, M of a channel block
 // (16 x co_blk x T fp32) about kMBytes. MACRO_WINO_V_KB / MACRO_WINO_M_KB override them (tuning).
-constexpr int64_t kVBytes = 512 * 1024, kMBytes = 256 * 1024;
+// Measured (bench winograd, 2026-11-22): V 2-4 MB with M 128 KB (so one MR block of channels
+// for T >= 128) beats V 512 KB / M 256 KB by 5-25% on every VAE and U-Net shape.
+constexpr int64_t kVBytes = 2048 * 1024, kMBytes = 128 * 1024;
 struct Budgets {
   int64_t v = kVBytes, m = kMBytes;
 };
@@ -59,10 +62,12 @@ const Budgets& budgets() {
   return b;
 }
 
-// Nearest-even bf16 bits of f (NaN quiet), as conv.cpp's pair planes round.
-inline uint32_t bf16_bits(float f) {
+// bf16 bits of f as vcvtne2ps2bf16 rounds: nearest even, NaN quiet, fp32 denormals to (signed)
+// zero (the instruction treats denormal inputs as zero).
+inline uint32_t bf16_bits_daz(float f) {
   uint32_t u;
   std::memcpy(&u, &f, 4);
+  if ((u & 0x7f800000u) == 0) return (u >> 16) & 0x8000u;
   const uint32_t r = (u + 0x7fffu + ((u >> 16) & 1u)) >> 16;
   return (u & 0x7fffffffu) > 0x7f800000u ? ((u >> 16) | 0x40u) : r;
 }
@@ -117,7 +122,7 @@ void input_scalar(const detail::WinoInput& a) {
         input_tile(d1, v1);
         uint32_t* dst = a.v + (col / a.nr) * a.kp2 * a.nr + q * a.nr + col % a.nr;
         for (int xi = 0; xi < 16; ++xi)
-          dst[xi * a.xi_stride] = bf16_bits(v0[xi]) | (bf16_bits(v1[xi]) << 16);
+          dst[xi * a.xi_stride] = bf16_bits_daz(v0[xi]) | (bf16_bits_daz(v1[xi]) << 16);
       }
     }
   }
@@ -296,8 +301,8 @@ void conv2d_winograd(const Conv2dShape& s, const float* x, const ConvWeights& w,
   const int threads = pool ? pool->size() : 1;
   const int64_t items = s.n * chunks;
   int64_t blocks_per_part = co_blocks;
-  if (threads > 1 && items < 2 * threads) {
-    const int64_t parts = std::min<int64_t>(co_blocks, (2 * threads + items - 1) / items);
+  if (threads > 1 && items < 4 * threads) {  // few chunks: split the channel blocks too
+    const int64_t parts = std::min<int64_t>(co_blocks, (4 * threads + items - 1) / items);
     blocks_per_part = (co_blocks + parts - 1) / parts;
   }
   const int64_t parts = (co_blocks + blocks_per_part - 1) / blocks_per_part;

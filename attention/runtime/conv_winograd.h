@@ -12,7 +12,7 @@
 //
 // Numerics: U is computed in double at pack time, rounded to fp32, then bf16 by the packer. V is
 // computed in fp32 (adds only, in the order written in conv_winograd.cpp) and rounded to bf16
-// (nearest even, the integer rounding of conv.cpp's pair planes, no denormal flush). The 16 GEMMs
+// as vcvtne2ps2bf16 does (nearest even, NaN quiet, fp32 denormals to zero). The 16 GEMMs
 // are the bf16 kernel's (fp32 accumulation over Cin, in the kernel's order); the output transform
 // is fp32 adds, then + bias, + residual, ReLU, in that order. Error against the exact conv:
 // about 2^-8 * sum_ci sum_xi |A_xi| |U_xi| |V_xi| per output (tests/test_conv_winograd.cpp), a few

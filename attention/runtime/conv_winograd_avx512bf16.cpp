@@ -3,8 +3,9 @@
 // order as the scalar twins in conv_winograd.cpp, so the results are bit-identical to them.
 //   input:  per input row, four masked loads (offsets 0, 16, 2, 18 from the run's first column)
 //           split into even/odd columns give d[i][0..3] for 16 tiles; V in 16 registers per
-//           channel; two channels rounded to bf16 (integer nearest-even, as the scalar code) and
-//           stored as pair words, one masked store per xi.
+//           channel; two channels rounded to bf16 by one vcvtne2ps2bf16 (nearest even, denormals
+//           to zero, NaN quiet: the scalar bf16_bits_daz) and interleaved into pair words, one
+//           masked store per xi.
 //   output: 16 masked loads of M, A^T M A, then each output row's two columns interleaved back
 //           into 32 consecutive pixels (masked at the right edge), + bias, + residual, ReLU.
 // GCC 12's AVX-512 headers trip -W(maybe-)uninitialized on their own _mm512_undefined_*() idiom.
@@ -26,18 +27,6 @@ inline __mmask16 range_mask(int64_t start, int64_t limit) {
   if (lo >= hi) return 0;
   const uint32_t bits = ((hi >= 16 ? 0x10000u : (1u << hi)) - 1u) & ~((1u << lo) - 1u);
   return __mmask16(bits);
-}
-
-// Nearest-even bf16 bits in the low half of each lane (NaN quiet), the scalar bf16_bits.
-inline __m512i bf16_bits(__m512 v) {
-  const __m512i u = _mm512_castps_si512(v);
-  const __m512i hi = _mm512_srli_epi32(u, 16);
-  const __m512i lsb = _mm512_and_si512(hi, _mm512_set1_epi32(1));
-  const __m512i r =
-      _mm512_srli_epi32(_mm512_add_epi32(_mm512_add_epi32(u, _mm512_set1_epi32(0x7fff)), lsb), 16);
-  const __mmask16 nan = _mm512_cmpgt_epu32_mask(
-      _mm512_and_si512(u, _mm512_set1_epi32(0x7fffffff)), _mm512_set1_epi32(0x7f800000));
-  return _mm512_mask_mov_epi32(r, nan, _mm512_or_si512(hi, _mm512_set1_epi32(0x40)));
 }
 
 // V = B^T d B for 16 tiles of one channel (plane p, null = zeros): v[xi], xi = 4 i + j.
@@ -81,6 +70,9 @@ inline void input_tiles(const float* p, int64_t h, int64_t w, int64_t iy0, int64
 
 void input_avx512(const detail::WinoInput& a) {
   const int64_t hw = a.h * a.w;
+  const __m512i pair_idx = _mm512_set_epi16(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9,
+                                            24, 8, 23, 7, 22, 6, 21, 5, 20, 4, 19, 3, 18, 2, 17,
+                                            1, 16, 0);
   for (int64_t q = a.q0; q < a.q1; ++q) {
     const int64_t c0 = 2 * q, c1 = c0 + 1;
     const float* p0 = c0 < a.c_in ? a.x + c0 * hw : nullptr;
@@ -96,9 +88,10 @@ void input_avx512(const detail::WinoInput& a) {
       uint32_t* dst = a.v + (run.col / a.nr) * a.kp2 * a.nr + q * a.nr + run.col % a.nr;
 #pragma GCC unroll 16
       for (int xi = 0; xi < 16; ++xi) {
-        const __m512i word =
-            _mm512_or_si512(bf16_bits(v0[xi]), _mm512_slli_epi32(bf16_bits(v1[xi]), 16));
-        _mm512_mask_storeu_epi32(dst + xi * a.xi_stride, keep, word);
+        // [c0 lanes 0..15 | c1 lanes 0..15] as bf16, interleaved into pair words.
+        const __m512i both = (__m512i)_mm512_cvtne2ps_pbh(v1[xi], v0[xi]);
+        _mm512_mask_storeu_epi32(dst + xi * a.xi_stride, keep,
+                                 _mm512_permutexvar_epi16(pair_idx, both));
       }
     }
   }
