@@ -205,6 +205,9 @@ TEST_CASE("torch checkpoint: lying records, offsets and directories are errors",
                  Catch::Contains("runs past the central directory"));
   CHECK_THAT(open_error(fixture("cyclic.pth")),
              Catch::Contains("cyclic.pth") && Catch::Contains("nested deeper than 64 levels"));
+  CHECK_THAT(open_error(fixture("shared_lists.pth")),
+             Catch::Contains("shared_lists.pth") &&
+                 Catch::Contains("shared references expand to more entries than it has objects"));
   CHECK_THAT(open_error(fixture("int16.pth")),
              Catch::Contains("int16.pth") &&
                  Catch::Contains("storage class 'torch.ShortStorage' is not supported"));

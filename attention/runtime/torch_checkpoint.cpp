@@ -1,8 +1,8 @@
 // PyTorch zip checkpoint reader (format and rules: torch_checkpoint.h).
 //
 // Three stages, each bounds-checked against the bytes it was given:
-//   1. zip directory: end-of-central-directory (zip64 locator and record when present), central
-//      entries (zip64 extra fields), local headers; every record's data range inside the file;
+//   1. the zip directory (zip_reader.h): every record's data range inside the file; stored records
+//      are used in place, deflated ones inflated on first use;
 //   2. the pickle machine over <prefix>/data.pkl: plain data objects in an arena (so a cyclic memo
 //      reference cannot leak or recurse forever), whitelisted globals resolved to tags, storages
 //      resolved to records at BINPERSID;
@@ -14,7 +14,6 @@
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
-#include <zlib.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -23,6 +22,7 @@
 #include <unordered_map>
 
 #include "attention/runtime/limits.h"
+#include "attention/runtime/zip_reader.h"
 
 namespace macro {
 
@@ -39,20 +39,12 @@ constexpr int kMaxDims = 64;
 // Owned copies (strided tensors, inflated records) may total at most this much beyond four times
 // the file size; a strided view with stride 0 could otherwise ask for far more than the file holds.
 constexpr uint64_t kCopyAllowanceBytes = 256ull << 20;
-// Deflate cannot expand data by more than about 1032:1; a larger claimed size is a lie.
-constexpr uint64_t kMaxDeflateRatio = 1032;
-
-constexpr uint32_t kLocalSig = 0x04034b50, kCentralSig = 0x02014b50, kEocdSig = 0x06054b50,
-                   kZip64EocdSig = 0x06064b50, kZip64LocatorSig = 0x07064b50;
-
-uint16_t le16(const uint8_t* p) { return uint16_t(p[0] | p[1] << 8); }
-uint32_t le32(const uint8_t* p) {
-  return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
+bool add_overflow(uint64_t a, uint64_t b, uint64_t* out) {
+  return __builtin_add_overflow(a, b, out);
 }
-uint64_t le64(const uint8_t* p) { return uint64_t(le32(p)) | uint64_t(le32(p + 4)) << 32; }
-
-bool add_overflow(uint64_t a, uint64_t b, uint64_t* out) { return __builtin_add_overflow(a, b, out); }
-bool mul_overflow(uint64_t a, uint64_t b, uint64_t* out) { return __builtin_mul_overflow(a, b, out); }
+bool mul_overflow(uint64_t a, uint64_t b, uint64_t* out) {
+  return __builtin_mul_overflow(a, b, out);
+}
 
 std::string num(uint64_t v) { return std::to_string(v); }
 
@@ -96,132 +88,6 @@ struct Owner {
 };
 
 // ---------------------------------------------------------------------------------------------
-// Zip directory
-
-struct ZipEntry {
-  std::string name;
-  uint16_t method = 0;  // 0 stored, 8 deflated
-  uint32_t crc = 0;
-  uint64_t comp_size = 0, size = 0, data_offset = 0;
-  const uint8_t* bytes = nullptr;  // the record's content once resolved (in place or inflated)
-};
-
-Result<std::vector<ZipEntry>> read_zip_directory(const uint8_t* base, uint64_t n,
-                                                 const std::string& file) {
-  const std::string where = file + ": zip";
-  if (n < 22)
-    return Status::error(where + ": file is " + num(n) +
-                         " bytes, too short for an end-of-central-directory record (22)");
-  // The end record is the last 22 bytes plus a comment of at most 65535 bytes.
-  uint64_t eocd = UINT64_MAX;
-  const uint64_t lowest = n - 22 > 65535 ? n - 22 - 65535 : 0;
-  for (uint64_t p = n - 22 + 1; p-- > lowest;) {
-    if (le32(base + p) == kEocdSig && p + 22 + le16(base + p + 20) <= n) {
-      eocd = p;
-      break;
-    }
-  }
-  if (eocd == UINT64_MAX)
-    return Status::error(where + ": no end-of-central-directory record (truncated or not a zip)");
-  const uint8_t* e = base + eocd;
-  uint64_t disk = le16(e + 4), cd_disk = le16(e + 6), count = le16(e + 10);
-  uint64_t cd_size = le32(e + 12), cd_offset = le32(e + 16);
-  uint64_t directory_end = eocd;  // the central directory must end before this
-  if (eocd >= 20 && le32(e - 20) == kZip64LocatorSig) {
-    const uint64_t z64 = le64(e - 20 + 8);
-    if (z64 > eocd - 20 || eocd - 20 - z64 < 56 || le32(base + z64) != kZip64EocdSig)
-      return Status::error(where + ": zip64 locator points to offset " + num(z64) +
-                           ", where no zip64 end-of-central-directory record is");
-    const uint8_t* z = base + z64;
-    disk = le32(z + 16);
-    cd_disk = le32(z + 20);
-    count = le64(z + 32);
-    cd_size = le64(z + 40);
-    cd_offset = le64(z + 48);
-    directory_end = z64;
-  }
-  if (disk != 0 || cd_disk != 0)
-    return Status::error(where + ": multi-disk archives are not supported");
-  uint64_t cd_end = 0;
-  if (add_overflow(cd_offset, cd_size, &cd_end) || cd_end > directory_end)
-    return Status::error(where + ": central directory [" + num(cd_offset) + ", +" + num(cd_size) +
-                         ") runs past its end record at " + num(directory_end));
-  if (count > cd_size / 46)
-    return Status::error(where + ": " + num(count) + " entries cannot fit in a central directory of " +
-                         num(cd_size) + " bytes");
-
-  std::vector<ZipEntry> entries;
-  entries.reserve(count);
-  std::set<std::string> names;
-  uint64_t p = cd_offset;
-  for (uint64_t i = 0; i < count; ++i) {
-    if (cd_end - p < 46 || le32(base + p) != kCentralSig)
-      return Status::error(where + ": central directory entry " + num(i) + " at offset " + num(p) +
-                           ": bad signature or truncated");
-    const uint8_t* c = base + p;
-    const uint16_t flags = le16(c + 8), method = le16(c + 10);
-    const uint32_t crc = le32(c + 16);
-    uint64_t comp = le32(c + 20), size = le32(c + 24);
-    const uint64_t name_len = le16(c + 28), extra_len = le16(c + 30), comment_len = le16(c + 32);
-    uint64_t local = le32(c + 42);
-    const uint64_t entry_len = 46 + name_len + extra_len + comment_len;
-    if (cd_end - p < entry_len)
-      return Status::error(where + ": central directory entry " + num(i) + " runs past the directory");
-    ZipEntry z;
-    z.name.assign(reinterpret_cast<const char*>(c + 46), name_len);
-    const std::string rec = where + ": record '" + printable(z.name) + "'";
-    // zip64 extra field: the 64-bit values of the fields saturated at 0xFFFFFFFF, in this order.
-    const uint8_t* x = c + 46 + name_len;
-    const uint8_t* x_end = x + extra_len;
-    while (x_end - x >= 4) {
-      const uint16_t id = le16(x), len = le16(x + 2);
-      if (size_t(x_end - x - 4) < len) return Status::error(rec + ": extra field runs past the entry");
-      if (id == 0x0001) {
-        const uint8_t* f = x + 4;
-        const uint8_t* f_end = f + len;
-        for (uint64_t* field : {&size, &comp, &local}) {
-          if (*field != 0xFFFFFFFFu) continue;
-          if (f_end - f < 8) return Status::error(rec + ": zip64 extra field too short");
-          *field = le64(f);
-          f += 8;
-        }
-      }
-      x += 4 + len;
-    }
-    if (flags & 0x41) return Status::error(rec + ": encrypted records are not supported");
-    if (method != 0 && method != 8)
-      return Status::error(rec + ": compression method " + num(method) +
-                           " is not supported (expected 0 stored or 8 deflate)");
-    if (method == 0 && comp != size)
-      return Status::error(rec + ": stored record with compressed size " + num(comp) +
-                           " != size " + num(size));
-    // The local header repeats the name; its extra field (torch's alignment padding) may differ.
-    if (local > cd_offset || cd_offset - local < 30 || le32(base + local) != kLocalSig)
-      return Status::error(rec + ": local header offset " + num(local) +
-                           " does not point to a local header before the central directory");
-    const uint8_t* l = base + local;
-    const uint64_t l_name = le16(l + 26), l_extra = le16(l + 28);
-    uint64_t data = local + 30 + l_name + l_extra, data_end = 0;
-    if (l_name != name_len || cd_offset - local - 30 < l_name ||
-        std::memcmp(l + 30, z.name.data(), name_len) != 0)
-      return Status::error(rec + ": local header at " + num(local) +
-                           " names a different record");
-    if (data > cd_offset || add_overflow(data, comp, &data_end) || data_end > cd_offset)
-      return Status::error(rec + ": data [" + num(data) + ", +" + num(comp) +
-                           ") runs past the central directory at " + num(cd_offset));
-    z.method = method;
-    z.crc = crc;
-    z.comp_size = comp;
-    z.size = size;
-    z.data_offset = data;
-    if (!names.insert(z.name).second) return Status::error(rec + ": appears twice");
-    entries.push_back(std::move(z));
-    p += entry_len;
-  }
-  return entries;
-}
-
-// ---------------------------------------------------------------------------------------------
 // Pickle objects
 
 enum class Kind : uint8_t {
@@ -236,6 +102,11 @@ enum class Global : uint8_t {
 };
 
 using ObjId = uint32_t;
+
+// A zip record and, once resolved, its content (in place or inflated).
+struct Record : ZipEntry {
+  const uint8_t* bytes = nullptr;
+};
 
 struct Obj {
   Kind kind = Kind::kNone;
@@ -303,13 +174,14 @@ const GlobalInfo kGlobals[] = {
 // The pickle machine and everything it refers to.
 class Unpickler {
  public:
-  Unpickler(const std::string& file, const std::string& prefix, std::vector<ZipEntry>* entries)
+  Unpickler(const std::string& file, const std::string& prefix, const std::vector<Record>* entries)
       : file_(file), prefix_(prefix), entries_(entries) {
     for (size_t i = 0; i < entries->size(); ++i) by_name_[(*entries)[i].name] = i;
   }
 
   Result<ObjId> run(const uint8_t* data, uint64_t size);
   const Obj& obj(ObjId id) const { return objs_[id]; }
+  size_t object_count() const { return objs_.size(); }
   size_t record_index(const std::string& name) const {
     auto it = by_name_.find(name);
     return it == by_name_.end() ? SIZE_MAX : it->second;
@@ -380,7 +252,7 @@ class Unpickler {
   Status memo_put(uint64_t index);
 
   std::string file_, prefix_;
-  std::vector<ZipEntry>* entries_;
+  const std::vector<Record>* entries_;
   std::unordered_map<std::string, size_t> by_name_;
   std::vector<Obj> objs_;
   std::vector<ObjId> stack_;
@@ -817,7 +689,7 @@ class Reader {
     owner_->buffers.emplace_back(new uint8_t[bytes ? bytes : 1]);
     return owner_->buffers.back().get();
   }
-  Status resolve_record(ZipEntry& e);
+  Status resolve_record(Record& e);
   Status flatten(const Unpickler& vm, ObjId id, const std::string& name, int depth,
                  TorchCheckpoint* out, std::set<std::string>* seen);
   Result<TensorEntry> make_tensor(const Unpickler& vm, const Obj& t, const std::string& name);
@@ -827,11 +699,14 @@ class Reader {
   std::string file_;
   std::shared_ptr<Owner> owner_;
   uint64_t copy_budget_ = 0;
-  std::vector<ZipEntry> entries_;
+  // Flattening visits each object of a tree once; shared containers (a list holding the same list
+  // twice, 40 levels deep) would expand exponentially, so visits are bounded by the object count.
+  uint64_t visits_left_ = 0;
+  std::vector<Record> entries_;
 };
 
 // Points e.bytes at the record's content: in place for stored records, inflated otherwise.
-Status Reader::resolve_record(ZipEntry& e) {
+Status Reader::resolve_record(Record& e) {
   if (e.bytes || e.size == 0) {
     if (!e.bytes) e.bytes = base_ + e.data_offset;
     return Status::ok();
@@ -841,59 +716,12 @@ Status Reader::resolve_record(ZipEntry& e) {
     e.bytes = base_ + e.data_offset;
     return Status::ok();
   }
-  uint64_t max_out = 0;
-  if (mul_overflow(e.comp_size, kMaxDeflateRatio, &max_out) || e.size > max_out + 1024)
-    return Status::error(rec + ": claims " + num(e.size) + " bytes inflated from " +
-                         num(e.comp_size) + " compressed, more than deflate can produce");
+  MACRO_TRY(check_inflated_size(e, file_));
   if (e.size > resource_limits().max_tensor_bytes)
     return Status::error(rec + ": " + num(e.size) + " bytes exceeds the limit of " +
                          num(resource_limits().max_tensor_bytes) + " (--max-tensor-bytes)");
   MACRO_ASSIGN_OR_RETURN(uint8_t * out, allocate(e.size, "record '" + printable(e.name) + "'"));
-  z_stream zs;
-  std::memset(&zs, 0, sizeof zs);
-  if (inflateInit2(&zs, -MAX_WBITS) != Z_OK) return Status::error(rec + ": zlib init failed");
-  // zlib counts in uInt: feed and drain in chunks below 4 GiB.
-  const uint8_t* in = base_ + e.data_offset;
-  uint64_t in_left = e.comp_size, out_done = 0;
-  int rc = Z_OK;
-  while (rc == Z_OK) {
-    if (zs.avail_in == 0 && in_left) {
-      zs.next_in = const_cast<Bytef*>(in);
-      zs.avail_in = uInt(std::min<uint64_t>(in_left, 1u << 30));
-      in += zs.avail_in;
-      in_left -= zs.avail_in;
-    }
-    if (zs.avail_out == 0) {
-      const uint64_t chunk = std::min<uint64_t>(e.size - out_done, 1u << 30);
-      if (chunk == 0) {  // output full: the stream must end here
-        uint8_t probe;
-        zs.next_out = &probe;
-        zs.avail_out = 1;
-        rc = inflate(&zs, Z_NO_FLUSH);
-        if (rc == Z_STREAM_END && zs.avail_out == 1) break;
-        rc = Z_DATA_ERROR;
-        break;
-      }
-      zs.next_out = out + out_done;
-      zs.avail_out = uInt(chunk);
-      out_done += chunk;
-    }
-    rc = inflate(&zs, Z_NO_FLUSH);
-    if (rc == Z_BUF_ERROR && zs.avail_in == 0 && in_left == 0) break;
-  }
-  const uint64_t produced = zs.total_out;
-  inflateEnd(&zs);
-  if (rc != Z_STREAM_END || produced != e.size)
-    return Status::error(rec + ": deflate data is corrupt or does not inflate to the " +
-                         num(e.size) + " bytes the directory claims");
-  uint64_t crc = 0;
-  for (uint64_t done = 0; done < e.size;) {
-    const uInt n = uInt(std::min<uint64_t>(e.size - done, 1u << 30));
-    crc = crc32(crc, out + done, n);
-    done += n;
-  }
-  if (crc != e.crc)
-    return Status::error(rec + ": CRC-32 mismatch after inflating (corrupt file)");
+  MACRO_TRY(inflate_zip_record(base_, e, out, file_));
   e.bytes = out;
   return Status::ok();
 }
@@ -960,7 +788,7 @@ Result<TensorEntry> Reader::make_tensor(const Unpickler& vm, const Obj& t,
                          shape_text(stride) + ", offset " + num(uint64_t(off.i)) +
                          " reach element " + num(last) + " of storage '" + printable(st.s) +
                          "', which holds " + num(storage_numel));
-  ZipEntry& rec = entries_[st.record];
+  Record& rec = entries_[st.record];
   MACRO_TRY(resolve_record(rec));
   const uint8_t* src = rec.bytes + uint64_t(off.i) * es;
   // Row-major contiguous (dims of size 1 may carry any stride, as in torch).
@@ -997,6 +825,10 @@ Result<TensorEntry> Reader::make_tensor(const Unpickler& vm, const Obj& t,
 Status Reader::flatten(const Unpickler& vm, ObjId id, const std::string& name, int depth,
                        TorchCheckpoint* out, std::set<std::string>* seen) {
   const Obj& o = vm.obj(id);
+  if (visits_left_-- == 0)
+    return Status::error(file_ + ": '" + printable(name, 200) +
+                         "': the pickle's shared references expand to more entries than it has "
+                         "objects (" + num(vm.object_count()) + "); not a state dict");
   if (depth > kMaxNesting)
     return Status::error(file_ + ": '" + printable(name, 200) + "': nested deeper than " +
                          num(kMaxNesting) + " levels");
@@ -1040,13 +872,18 @@ Result<TorchCheckpoint> Reader::read(const std::string& key) {
   if (size_ >= 2 && base_[0] == 0x80)
     return Status::error(file_ + ": a legacy (pre-1.6, non-zip) torch.save file; re-save it with "
                          "torch >= 1.6 or convert it to safetensors");
-  if (size_ < 4 || le32(base_) != kLocalSig)
+  if (size_ < 4 || le32(base_) != kZipLocalHeaderSig)
     return Status::error(file_ + ": not a zip archive (expected 'PK\\3\\4' at offset 0)");
-  MACRO_ASSIGN_OR_RETURN(entries_, read_zip_directory(base_, size_, file_));
+  MACRO_ASSIGN_OR_RETURN(std::vector<ZipEntry> zip, read_zip_directory(base_, size_, file_));
+  entries_.reserve(zip.size());
+  for (ZipEntry& z : zip) {
+    entries_.emplace_back();
+    static_cast<ZipEntry&>(entries_.back()) = std::move(z);
+  }
 
   // The prefix is the folder holding data.pkl (torch: the first record's folder).
   std::string prefix;
-  for (const ZipEntry& e : entries_) {
+  for (const Record& e : entries_) {
     const size_t slash = e.name.find('/');
     if (slash != std::string::npos && slash > 0 && e.name.compare(slash, std::string::npos,
                                                                   "/data.pkl") == 0) {
@@ -1075,13 +912,13 @@ Result<TorchCheckpoint> Reader::read(const std::string& key) {
       return Status::error(file_ + ": record '" + prefix + "/byteorder' is '" + printable(order) +
                            "', only little-endian checkpoints are supported");
   }
-  ZipEntry& pkl = entries_[vm.record_index(prefix + "/data.pkl")];
+  Record& pkl = entries_[vm.record_index(prefix + "/data.pkl")];
   if (pkl.size > kMaxPickleBytes)
     return Status::error(file_ + ": " + prefix + "/data.pkl is " + num(pkl.size) +
                          " bytes, more than the limit of " + num(kMaxPickleBytes));
   MACRO_TRY(resolve_record(pkl));
   if (pkl.method == 0 && pkl.crc != 0 && pkl.size > 0 &&
-      crc32(0, pkl.bytes, uInt(pkl.size)) != pkl.crc)
+      zip_crc32(pkl.bytes, pkl.size) != pkl.crc)
     return Status::error(file_ + ": " + prefix + "/data.pkl: CRC-32 mismatch (corrupt file)");
   MACRO_ASSIGN_OR_RETURN(ObjId root_id, vm.run(pkl.bytes ? pkl.bytes : base_, pkl.size));
 
@@ -1140,6 +977,7 @@ Result<TorchCheckpoint> Reader::read(const std::string& key) {
   // A key naming a single tensor gives that one tensor, named by the key.
   const std::string top = vm.obj(selected).kind == Kind::kTensor ? out.selected_key : "";
   std::set<std::string> seen;
+  visits_left_ = 2 * uint64_t(vm.object_count()) + 1024;
   MACRO_TRY(flatten(vm, selected, top, 0, &out, &seen));
   if (out.tensors.empty())
     return Status::error(file_ + ": no tensors found" +
@@ -1195,7 +1033,7 @@ bool file_has_zip_magic(const std::string& path) {
   unsigned char m[4] = {0, 0, 0, 0};
   ssize_t n = ::read(fd, m, 4);
   ::close(fd);
-  return n == 4 && le32(m) == kLocalSig;
+  return n == 4 && le32(m) == kZipLocalHeaderSig;
 }
 
 }  // namespace macro
