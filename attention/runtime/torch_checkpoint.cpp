@@ -28,8 +28,8 @@ namespace macro {
 
 namespace {
 
-// Bounds for what a file may make us hold. Real checkpoints stay far below: the data.pkl of a
-// 7B-parameter LLM is about 100 KB, a state dict nests 2-3 dicts deep.
+// Bounds for what a file may make us hold. Real checkpoints stay far below: data.pkl costs a few
+// hundred bytes per tensor (a thousand-tensor model: well under 1 MB), a state dict nests 2-3 deep.
 constexpr uint64_t kMaxPickleBytes = 256ull << 20;
 constexpr size_t kMaxStack = 1u << 20;     // values on the pickle stack (and marks)
 constexpr size_t kMaxObjects = 1u << 24;   // objects the pickle may build
@@ -39,6 +39,7 @@ constexpr int kMaxDims = 64;
 // Owned copies (strided tensors, inflated records) may total at most this much beyond four times
 // the file size; a strided view with stride 0 could otherwise ask for far more than the file holds.
 constexpr uint64_t kCopyAllowanceBytes = 256ull << 20;
+
 bool add_overflow(uint64_t a, uint64_t b, uint64_t* out) {
   return __builtin_add_overflow(a, b, out);
 }
