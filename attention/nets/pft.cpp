@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <map>
 #include <numeric>
@@ -18,6 +19,10 @@ namespace {
 
 constexpr float kPfaEps = 1e-20f;         // WindowAttention.eps: (a + eps) / (sum a + eps)
 constexpr float kShiftMaskValue = -100.f;  // calculate_mask: -100 between different regions
+// From this many kept keys per query on, sparse scores and A.V go through dense GEMMs (scores
+// gathered, weights scattered into zeros): the GEMM's n x n x d work is cheaper than K gathered
+// d-long dots at K >= 64 with d = 13 (bench pft).
+constexpr int kGemmMinKeys = 64;
 
 int64_t round_up(int64_t v, int64_t m) { return (v + m - 1) / m * m; }
 
@@ -101,21 +106,39 @@ void focus_row(float* a, const float* prev, int64_t len) {
   for (int64_t j = 0; j < len; ++j) a[j] = (a[j] + kPfaEps) / den;
 }
 
+// Order-preserving unsigned key of a float (NaN lowest).
+inline uint32_t order_key(float v) {
+  uint32_t b;
+  std::memcpy(&b, &v, 4);
+  if (v != v) return 0;
+  return (b & 0x80000000u) ? ~b : (b | 0x80000000u);
+}
+
 // The positions of the `keep` largest values of row[0, len) in ascending order. Ties: the smaller
-// position wins. NaN ranks below everything.
-void select_topk(const float* row, int len, int keep, int* pos) {
-  std::iota(pos, pos + len, 0);
-  if (keep < len) {
-    auto key = [&](int a) {
-      const float v = row[a];
-      return std::isnan(v) ? -std::numeric_limits<float>::infinity() : v;
-    };
-    std::nth_element(pos, pos + keep, pos + len, [&](int a, int b) {
-      const float ka = key(a), kb = key(b);
-      return ka > kb || (ka == kb && a < b);
-    });
-    std::sort(pos, pos + keep);
+// position wins. NaN ranks below everything. keys: len words of scratch. The keep-th largest key
+// is found by a byte-wise radix select (four histogram passes), then one ascending pass takes
+// everything above it and the first ties, so nothing is sorted.
+void select_topk(const float* row, int len, int keep, int* pos, uint32_t* keys) {
+  if (keep >= len) {
+    std::iota(pos, pos + len, 0);
+    return;
   }
+  for (int j = 0; j < len; ++j) keys[j] = order_key(row[j]);
+  uint32_t prefix = 0, mask = 0;
+  int need = keep;  // rank (from the top) of the wanted key among those matching the prefix
+  for (int shift = 24; shift >= 0; shift -= 8) {
+    int hist[256] = {};
+    for (int j = 0; j < len; ++j)
+      if ((keys[j] & mask) == prefix) ++hist[(keys[j] >> shift) & 255u];
+    int bin = 255;
+    for (; bin > 0 && hist[bin] < need; --bin) need -= hist[bin];
+    prefix |= uint32_t(bin) << shift;
+    mask |= 255u << shift;
+  }
+  const uint32_t thr = prefix;  // the keep-th largest key; `need` of its ties are kept
+  int m = 0;
+  for (int j = 0; j < len && m < keep; ++j)
+    if (keys[j] > thr || (keys[j] == thr && need-- > 0)) pos[m++] = j;
 }
 
 }  // namespace
@@ -365,7 +388,9 @@ struct PftNet::Work {
   std::vector<float> xn, qkv, lepe, ao, hid, hid2;
   struct Scratch {
     std::vector<float> s, p, p2, q, k, v, o;
+    std::vector<float> av;  // n x n, all zero between uses
     std::vector<int> lab, pos;
+    std::vector<uint32_t> keys;
     std::vector<int64_t> tok_pos;
   };
   std::vector<Scratch> scratch;  // one per worker
@@ -492,17 +517,29 @@ void PftNet::attention(const PftLayer& L, Work& wk, PfaState& st, ThreadPool* po
         }
       } else {
         const float* table = L.bias_table.data();
+        // Many kept keys: all scores by one GEMM, then gathered (far faster than gathered dots).
+        const bool via_gemm = k_in >= kGemmMinKeys;
+        if (via_gemm) {
+          GemmParams gp;
+          gp.trans_b = true;
+          gemm_f32(n, n, d, sc.q.data(), d, sc.k.data(), d, sc.p.data(), n, gp, nullptr);
+        }
         for (int i = 0; i < n; ++i) {
           const uint16_t* ix = st.idx.data() + (slot * n + i) * k_in;
           const float* pv = st.val.data() + (slot * n + i) * k_in;
           float* row = a + int64_t(i) * k_in;
           const float* qi = sc.q.data() + i * d;
+          const float* si = sc.p.data() + int64_t(i) * n;
           const int yi = i / ws, xi = i % ws;
           for (int j = 0; j < k_in; ++j) {
             const int key = ix[j];
-            const float* kj = sc.k.data() + key * d;
             float s = 0.f;
-            for (int64_t e = 0; e < d; ++e) s += qi[e] * kj[e];
+            if (via_gemm) {
+              s = si[key];
+            } else {
+              const float* kj = sc.k.data() + key * d;
+              for (int64_t e = 0; e < d; ++e) s += qi[e] * kj[e];
+            }
             const int rel = (yi - key / ws + ws - 1) * (2 * ws - 1) + (xi - key % ws + ws - 1);
             row[j] = s + table[rel * cols + hcol];
           }
@@ -513,6 +550,15 @@ void PftNet::attention(const PftLayer& L, Work& wk, PfaState& st, ThreadPool* po
       // Keep the top keys, or keep the map as it is.
       float* o = sc.o.data();
       auto sparse_av = [&](const float* vals, const uint16_t* idx, int kk) {
+        if (kk >= kGemmMinKeys) {  // scatter into the all-zero n x n buffer, GEMM, zero it again
+          float* dm = sc.av.data();
+          for (int i = 0; i < n; ++i)
+            for (int j = 0; j < kk; ++j) dm[int64_t(i) * n + idx[int64_t(i) * kk + j]] = vals[int64_t(i) * kk + j];
+          gemm_f32(n, d, n, dm, n, sc.v.data(), d, o, d, GemmParams{}, nullptr);
+          for (int i = 0; i < n; ++i)
+            for (int j = 0; j < kk; ++j) dm[int64_t(i) * n + idx[int64_t(i) * kk + j]] = 0.f;
+          return;
+        }
         for (int i = 0; i < n; ++i) {
           float* oi = o + i * d;
           for (int64_t e = 0; e < d; ++e) oi[e] = 0.f;
@@ -530,7 +576,7 @@ void PftNet::attention(const PftLayer& L, Work& wk, PfaState& st, ThreadPool* po
         uint16_t* ni = new_idx.data() + slot * n * t_keep;
         for (int i = 0; i < n; ++i) {
           const float* row = a + int64_t(i) * k_row;
-          select_topk(row, k_row, t_keep, sc.pos.data());
+          select_topk(row, k_row, t_keep, sc.pos.data(), sc.keys.data());
           const uint16_t* old = was_sparse ? st.idx.data() + (slot * n + i) * k_in : nullptr;
           for (int j = 0; j < t_keep; ++j) {
             const int p = sc.pos[size_t(j)];
@@ -662,6 +708,7 @@ Result<std::vector<float>> PftNet::forward(const float* image, int h, int w, Thr
   }
   for (Work::Scratch& sc : wk.scratch) {
     sc.s.resize(size_t(n) * n);
+    sc.av.assign(size_t(n) * n, 0.f);
     sc.p.resize(size_t(n) * n);
     if (long_chain) sc.p2.resize(size_t(n) * n);
     sc.q.resize(size_t(n * d));
@@ -670,6 +717,7 @@ Result<std::vector<float>> PftNet::forward(const float* image, int h, int w, Thr
     sc.o.resize(size_t(n * d));
     sc.lab.assign(size_t(n), 0);
     sc.pos.resize(size_t(n));
+    sc.keys.resize(size_t(n));
     sc.tok_pos.resize(size_t(n));
   }
 
