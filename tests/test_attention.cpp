@@ -12,6 +12,7 @@
 
 #include "attention/runtime/attention.h"
 #include "attention/runtime/attention_mask.h"
+#include "attention/runtime/half.h"
 #include "attention/runtime/safetensors.h"
 #include "test_support.h"
 
@@ -101,9 +102,52 @@ std::vector<float> reference(const Problem& p, const uint8_t* dense, bool causal
   return out;
 }
 
+float round_bf16(float x) {
+  return bf16_to_f32(f32_to_bf16(x));
+}
+
+// The reference of a bf16 request: the double reference on the kernel's rounded operands
+// (bf16(scale log2(e) Q), bf16(K), bf16(V); scores in base 2). What is left between this and the
+// kernel is the rounding of each probability to bf16 (relative <= 2^-8, so |out - ref| <=
+// 2^-8 max|V| per output) and fp32 accumulation.
+std::vector<float> reference_bf16(const Problem& p, const uint8_t* dense, bool causal) {
+  const size_t c = size_t(p.heads) * p.d;
+  const double s2 = double(p.scale * 1.4426950408889634f);
+  std::vector<float> out(size_t(p.nq) * c, 0.0f);
+  std::vector<double> s(size_t(p.nk));
+  for (int h = 0; h < p.heads; ++h)
+    for (int i = 0; i < p.nq; ++i) {
+      const float* q = p.q() + size_t(i) * p.stride + size_t(h) * p.d;
+      double mx = -INFINITY;
+      for (int j = 0; j < p.nk; ++j) {
+        const bool ok = (!dense || dense[size_t(i) * p.nk + j]) && (!causal || j <= i);
+        if (!ok) {
+          s[size_t(j)] = -INFINITY;
+          continue;
+        }
+        const float* k = p.k() + size_t(j) * p.stride + size_t(h) * p.d;
+        double acc = 0;
+        for (int e = 0; e < p.d; ++e)
+          acc += double(round_bf16(q[e] * float(s2))) * round_bf16(k[e]);
+        s[size_t(j)] = acc;
+        mx = std::max(mx, acc);
+      }
+      if (mx == -INFINITY) continue;
+      double sum = 0;
+      for (int j = 0; j < p.nk; ++j) sum += s[size_t(j)] = std::exp2(s[size_t(j)] - mx);
+      for (int e = 0; e < p.d; ++e) {
+        double acc = 0;
+        for (int j = 0; j < p.nk; ++j)
+          acc += s[size_t(j)] * round_bf16(p.v()[size_t(j) * p.stride + size_t(h) * p.d + e]);
+        out[size_t(i) * c + size_t(h) * p.d + e] = float(acc / sum);
+      }
+    }
+  return out;
+}
+
 std::vector<Isa> supported_isas() {
   std::vector<Isa> v;
-  for (Isa i : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512})
+  for (Isa i : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512, Isa::kAvx512Bf16})
     if (isa_supported(i)) v.push_back(i);
   return v;
 }
@@ -392,4 +436,109 @@ TEST_CASE("attention and mask builders reject bad arguments with named errors",
   CHECK(m.status().message().find("crop_plane[1]") != std::string::npos);
   std::vector<uint8_t> d(12);
   CHECK_FALSE(mask_from_dense(d.data(), 3, 4, 2).is_ok());  // stride below nk
+}
+
+// ---- bf16 products (AttentionArgs::bf16) --------------------------------------------------------
+namespace {
+
+float max_abs_v(const Problem& p) {
+  float m = 0;
+  for (int j = 0; j < p.nk; ++j)
+    for (size_t e = 0; e < size_t(p.heads) * p.d; ++e)
+      m = std::max(m, std::fabs(p.v()[size_t(j) * p.stride + e]));
+  return m;
+}
+
+// Every path with a bf16 request: the scalar twin and avx512bf16 against the rounded-operand
+// reference within the probability-rounding bound, each other within the same bound; other paths
+// (no bf16 products) must give exactly their fp32 result.
+void check_bf16_paths(const Problem& p, const BlockSparseMask* mask, const uint8_t* dense,
+                      bool causal) {
+  const std::vector<float> ref = reference_bf16(p, dense, causal);
+  const std::vector<float> ref32 = reference(p, dense, causal);
+  const double bound = std::ldexp(double(max_abs_v(p)), -8) + 1e-5;
+  std::vector<float> twin;
+  for (Isa isa : supported_isas()) {
+    INFO("path " << isa_name(isa) << ", nq " << p.nq << ", nk " << p.nk << ", heads " << p.heads
+                 << ", D " << p.d << (causal ? ", causal" : "") << (mask ? ", masked" : ""));
+    std::vector<float> out, out32;
+    AttentionArgs a = args_for(p, out, mask, causal);
+    a.bf16 = true;
+    REQUIRE(attention_with_isa(a, isa).is_ok());
+    const size_t n = ref.size();
+    CHECK(out[n] == -7.0f);
+    REQUIRE(attention_with_isa(args_for(p, out32, mask, causal), isa).is_ok());
+    const bool has_bf16 = isa == Isa::kScalar ? p.d % 2 == 0
+                                              : isa == Isa::kAvx512Bf16 && p.d % 32 == 0;
+    if (!has_bf16) {
+      CHECK(std::memcmp(out.data(), out32.data(), n * sizeof(float)) == 0);
+      continue;
+    }
+    const test::Diff diff = test::compare(out.data(), ref.data(), n);
+    CHECK(diff.max_abs <= bound);
+    // Against full fp32 the error is the operands' rounding too: a few times the bound, and the
+    // request must have changed the result (it really ran in bf16).
+    const test::Diff d32 = test::compare(out.data(), ref32.data(), n);
+    CHECK(d32.rel_l2 <= 0.03);
+    CHECK(std::memcmp(out.data(), out32.data(), n * sizeof(float)) != 0);
+    if (isa == Isa::kScalar) {
+      twin = out;
+    } else if (!twin.empty()) {
+      CHECK(test::compare(out.data(), twin.data(), n).max_abs <= bound);
+    }
+  }
+}
+
+}  // namespace
+
+TEST_CASE("bf16 attention matches the rounded-operand reference on every path", "[attention][bf16]") {
+  struct Case {
+    int nq, nk, heads, d;
+  };
+  // Odd key counts leave a key without a pair partner; D 16 has no bf16 kernel on SIMD paths.
+  const Case cases[] = {{1, 1, 1, 32},   {37, 53, 2, 32},  {130, 77, 3, 64}, {64, 64, 1, 64},
+                        {200, 129, 2, 128}, {20, 150, 1, 512}, {70, 45, 2, 16}, {9, 5, 1, 96}};
+  uint32_t seed = 101;
+  for (const Case& c : cases)
+    check_bf16_paths(make_problem(c.nq, c.nk, c.heads, c.d, seed++), nullptr, nullptr, false);
+  check_bf16_paths(make_problem(150, 200, 2, 64, 199, 3.0f), nullptr, nullptr, false);
+}
+
+TEST_CASE("bf16 attention with block-sparse, reordered and causal masks", "[attention][bf16][mask]") {
+  uint32_t seed = 120;
+  for (double density : {0.05, 0.5}) {
+    for (bool group : {false, true}) {
+      const int nq = 150, nk = 211;
+      Problem p = make_problem(nq, nk, 2, 64, seed++);
+      std::vector<uint8_t> dense = random_dense(nq, nk, density, seed++);
+      for (int j = 0; j < nk; ++j) dense[size_t(7) * nk + j] = 0;  // a fully masked row
+      auto mask = mask_from_dense(dense.data(), nq, nk, 0, group);
+      REQUIRE(mask.is_ok());
+      check_bf16_paths(p, &*mask, dense.data(), false);
+    }
+  }
+  check_bf16_paths(make_problem(77, 77, 2, 32, seed++), nullptr, nullptr, true);
+}
+
+TEST_CASE("bf16 attention is bit-identical across thread counts", "[attention][bf16][threads]") {
+  Problem p = make_problem(300, 260, 3, 64, 141);
+  std::vector<uint8_t> dense = random_dense(300, 260, 0.4, 142);
+  auto mask = mask_from_dense(dense.data(), 300, 260, 0, true);
+  REQUIRE(mask.is_ok());
+  for (Isa isa : supported_isas()) {
+    std::vector<float> first;
+    for (int threads : {1, 2, 3}) {
+      ThreadPool pool(threads);
+      std::vector<float> out;
+      AttentionArgs a = args_for(p, out, &*mask);
+      a.bf16 = true;
+      REQUIRE(attention_with_isa(a, isa, pool).is_ok());
+      if (first.empty()) {
+        first = out;
+      } else {
+        INFO(isa_name(isa) << " threads " << threads);
+        CHECK(std::memcmp(first.data(), out.data(), out.size() * sizeof(float)) == 0);
+      }
+    }
+  }
 }

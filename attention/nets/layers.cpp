@@ -138,8 +138,10 @@ void tokens_to_nchw_add(const Run& r, float* dst, const float* src, const float*
   });
 }
 
-void run_attention(const Run& r, const AttentionArgs& a) {
+void run_attention(const Run& r, const AttentionArgs& args) {
   if (r.planning()) return;
+  AttentionArgs a = args;
+  a.bf16 = r.bf16();  // bf16 products where the path has them (attention.h)
   Status s = attention(a, r.pool ? *r.pool : ThreadPool::global());
   if (!s) {
     std::fprintf(stderr, "attention: %s\n", s.message().c_str());

@@ -302,7 +302,8 @@ void copy_floats(const Run& r, float* dst, const float* src, int64_t n);
 // dst[n, c, p] = src[n, c, p] + tokens[(n * HW + p), c] (tokens row stride ldt); dst may alias src.
 void tokens_to_nchw_add(const Run& r, float* dst, const float* src, const float* tokens,
                         int64_t ldt, int64_t n, int64_t c, int64_t hw);
-// The fused attention kernel; masks/shapes are invariants here (MACRO_CHECK on failure).
+// The fused attention kernel; masks/shapes are invariants here (MACRO_CHECK on failure). A bf16
+// run asks for bf16 products (AttentionArgs::bf16).
 void run_attention(const Run& r, const AttentionArgs& a);
 // Self-attention over `tokens` rows of a packed q|k|v buffer [tokens, 3D] (FusedLinear output)
 // into out [tokens, D], `heads` heads of D / heads.

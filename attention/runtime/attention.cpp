@@ -19,6 +19,8 @@
 #include <string>
 #include <vector>
 
+#include "attention/runtime/half.h"
+
 namespace macro {
 namespace attention_detail {
 namespace {
@@ -92,6 +94,97 @@ void blocks_scalar(const BlockJob* jobs, int count, const BlockScratch* scratch)
   for (int g = 0; g < count; ++g) block_scalar(jobs[g], scratch[g]);
 }
 
+// The bf16 twin: the roundings of the avx512bf16 kernel (Q pre-scaled then rounded, K and V from
+// the rounded copies, P rounded per tile) and vdpbf16ps's order within a pair (odd element, then
+// even, each product exact, each sum rounded in fp32). exp2 is std::exp2 here, a polynomial there.
+// sum over pairs of q[i+1] k[i+1] + q[i] k[i], one rounding per addition (vdpbf16ps's order).
+// The empty asm keeps the loop scalar: GCC 12.2's -O3 loop vectorizer miscompiles this in-order
+// reduction (it counted the first product twice).
+float dot_pairs(const float* q, const uint16_t* k, int d) {
+  float acc = 0;
+  for (int i = 0; i < d; i += 2) {
+    acc += q[i + 1] * bf16_to_f32(k[i + 1]);
+    acc += q[i] * bf16_to_f32(k[i]);
+    __asm__("" : "+x"(acc));
+  }
+  return acc;
+}
+
+void block_scalar_bf16(const BlockJob& job, const BlockScratch& sc) {
+  const int d = job.d;
+  const float neg_inf = -std::numeric_limits<float>::infinity();
+  auto r16 = [](float x) { return bf16_to_f32(f32_to_bf16(x)); };
+  float* qr = sc.qt;  // [BQ, D] rounded, pre-scaled Q
+  for (int r = 0; r < job.rows; ++r) {
+    sc.m[r] = neg_inf;
+    sc.l[r] = 0;
+    std::fill(sc.o + size_t(r) * d, sc.o + size_t(r + 1) * d, 0.0f);
+    for (int i = 0; i < d; ++i) qr[size_t(r) * d + i] = r16(job.q_rows[r][i] * job.scale_log2e);
+  }
+  const uint16_t* k_rows[kBK];
+  const uint16_t* v_rows[kBK];
+  float p[kBK + 1];
+  for (int e = 0; e < job.entries; ++e) {
+    const int kb = job.key_blocks[e];
+    const int cols = std::min(kBK, job.nk - kb * kBK);
+    const uint8_t* tile = job.tiles[e];
+    for (int c = 0; c < cols; ++c) {
+      const int col = kb * kBK + c;
+      const size_t j = job.key_index ? size_t(job.key_index[col]) : size_t(col);
+      k_rows[c] = job.k16 + j * job.kv16_stride;
+      v_rows[c] = job.v16 + j * job.kv16_stride;
+    }
+    for (int r = 0; r < job.rows; ++r) {
+      float* s = sc.s + size_t(r) * kBK;
+      const float* q = qr + size_t(r) * d;
+      for (int c = 0; c < cols; ++c) {
+        s[c] = (tile && !tile[tile_offset(r, c)]) ? neg_inf : dot_pairs(q, k_rows[c], d);
+      }
+      float mx = neg_inf;
+      for (int c = 0; c < cols; ++c) mx = std::max(mx, s[c]);
+      const float m_new = std::max(sc.m[r], mx);
+      float alpha = 1;
+      if (m_new == neg_inf) {
+        std::fill(s, s + cols, 0.0f);
+      } else {
+        alpha = std::exp2(sc.m[r] - m_new);
+        float sum = 0;
+        for (int c = 0; c < cols; ++c) {
+          s[c] = std::exp2(s[c] - m_new);
+          sum += s[c];
+        }
+        sc.l[r] = sc.l[r] * alpha + sum;
+        sc.m[r] = m_new;
+      }
+      for (int c = 0; c < cols; ++c) p[c] = r16(s[c]);
+      p[cols] = 0;
+      float* o = sc.o + size_t(r) * d;
+      for (int i = 0; i < d; ++i) o[i] *= alpha;
+      for (int c = 0; c < cols; c += 2) {
+        const uint16_t* va = v_rows[c];
+        const uint16_t* vb = c + 1 < cols ? v_rows[c + 1] : nullptr;
+        for (int i = 0; i < d; ++i) {
+          o[i] += p[c + 1] * (vb ? bf16_to_f32(vb[i]) : 0.0f);
+          o[i] += p[c] * bf16_to_f32(va[i]);
+        }
+      }
+    }
+  }
+  for (int r = 0; r < job.rows; ++r) {
+    const float inv = sc.l[r] > 0 ? 1.0f / sc.l[r] : 0.0f;
+    const float* o = sc.o + size_t(r) * d;
+    for (int i = 0; i < d; ++i) job.out_rows[r][i] = o[i] * inv;
+  }
+}
+
+void blocks_scalar_bf16(const BlockJob* jobs, int count, const BlockScratch* scratch) {
+  for (int g = 0; g < count; ++g) block_scalar_bf16(jobs[g], scratch[g]);
+}
+
+void to_bf16_scalar(const float* src, uint16_t* dst, size_t n) {
+  for (size_t i = 0; i < n; ++i) dst[i] = f32_to_bf16(src[i]);
+}
+
 void score_tile_scalar(const float* const* k_rows, int keys, const float* qt, int d, float* s) {
   for (int c = 0; c < keys; ++c) {
     float* sc = s + size_t(c) * kBQ;
@@ -121,17 +214,26 @@ size_t align_up(size_t n) {
 }  // floats, to 64 bytes
 
 struct ScratchLayout {
-  size_t qt, s, o, m, l, alpha, total;  // offsets in floats
-  explicit ScratchLayout(int d) {
+  size_t qt, s, o, m, l, alpha, pp, vp, total;  // offsets in floats; pp, vp: bf16 kernels only
+  ScratchLayout(int d, bool bf16) {
     qt = 0;
     s = qt + align_up(size_t(d) * kBQ);
     o = s + align_up(size_t(kBQ) * kBK);
     m = o + align_up(size_t(kBQ) * d);
     l = m + align_up(kBQ);
     alpha = l + align_up(kBQ);
-    total = alpha + align_up(kBQ);
+    pp = alpha + align_up(kBQ);
+    vp = pp + (bf16 ? align_up(size_t(kBK / 2) * kBQ) : 0);
+    total = vp + (bf16 ? align_up(size_t(kBK / 2) * d) : 0);
   }
 };
+
+// K and V rounded to bf16 for the bf16 kernels: per calling thread, grown to the largest call and
+// reused (attention is not re-entrant on one thread).
+std::vector<uint16_t>& kv16_buffer() {
+  thread_local std::vector<uint16_t> buf;
+  return buf;
+}
 
 Status check_args(const AttentionArgs& a) {
   auto fail = [](const std::string& what) { return Status::error("attention: " + what); };
@@ -178,7 +280,9 @@ const AttentionKernels& pick_kernels(Isa isa, int d) {
   return *k;
 }
 
-Status run(const AttentionArgs& in, const AttentionKernels& kern, ThreadPool& pool) {
+// bf16_ok: kern is the path's own table (not a fallback for an awkward head dim), so a bf16 request
+// may use its bf16 kernel.
+Status run(const AttentionArgs& in, const AttentionKernels& kern, bool bf16_ok, ThreadPool& pool) {
   MACRO_TRY(check_args(in));
   AttentionArgs a = in;
   const int d = a.head_dim;
@@ -192,7 +296,26 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, ThreadPool& po
 
   const BlockSparseMask* mask = a.mask;
   const int nqb = (a.nq + kBQ - 1) / kBQ, nkb = (a.nk + kBK - 1) / kBK;
-  const ScratchLayout layout(d);
+  const bool bf16 = a.bf16 && bf16_ok && kern.block_bf16 && d % kern.bf16_d_multiple == 0;
+  const BlockFn block = bf16 ? kern.block_bf16 : kern.block;
+  const ScratchLayout layout(d, bf16);
+  const uint16_t* k16 = nullptr;
+  const uint16_t* v16 = nullptr;
+  if (bf16 && a.nk > 0) {
+    std::vector<uint16_t>& buf = kv16_buffer();
+    const size_t need = 2 * size_t(a.nk) * c;
+    if (buf.size() < need) buf.resize(need);
+    uint16_t* kb16 = buf.data();
+    uint16_t* vb16 = kb16 + size_t(a.nk) * c;
+    pool.parallel_for(size_t(a.nk), [&](size_t begin, size_t end, int) {
+      for (size_t j = begin; j < end; ++j) {
+        kern.to_bf16(a.k + j * a.k_stride, kb16 + j * c, c);
+        kern.to_bf16(a.v + j * a.v_stride, vb16 + j * c, c);
+      }
+    });
+    k16 = kb16;
+    v16 = vb16;
+  }
   // Query blocks per work item: the group's blocks share each K/V block while it is in cache.
   // Keep the group's scratch near 256 KiB (L2 holds it with the K/V blocks).
   const int group = std::clamp(int((256u << 10) / (layout.total * sizeof(float))), 1, kMaxGroup);
@@ -278,6 +401,9 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, ThreadPool& po
     job.v_stride = a.v_stride;
     job.key_index = mask && !mask->key_index.empty() ? mask->key_index.data() : nullptr;
     job.nk = a.nk;
+    job.k16 = k16 ? k16 + size_t(h) * d : nullptr;
+    job.v16 = v16 ? v16 + size_t(h) * d : nullptr;
+    job.kv16_stride = c;
   };
 
   const size_t items = size_t(groups) * size_t(a.heads);
@@ -291,6 +417,10 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, ThreadPool& po
           float* w = base + layout.total * k;
           scratch[g] = BlockScratch{w + layout.qt, w + layout.s,     w + layout.o,  w + layout.m,
                                     w + layout.l,  w + layout.alpha, slot[k].v_rows};
+          if (bf16) {
+            scratch[g].pp = reinterpret_cast<uint32_t*>(w + layout.pp);
+            scratch[g].vp = reinterpret_cast<uint32_t*>(w + layout.vp);
+          }
         }
         for (size_t item = begin; item < end; ++item) {
           const int h = int(item % size_t(a.heads));
@@ -298,7 +428,7 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, ThreadPool& po
           const int count = std::min(group, nqb - qb0);
           for (int g = 0; g < count; ++g)
             prepare(h, qb0 + g, slot[size_t(worker) * size_t(group) + size_t(g)], jobs[g]);
-          kern.block(jobs, count, scratch);
+          block(jobs, count, scratch);
         }
       },
       1);
@@ -310,8 +440,8 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, ThreadPool& po
 static_assert(kAttnBlockQ == kAttnBlockK, "the causal split assumes square tiles");
 
 const AttentionKernels& scalar_kernels() {
-  static const AttentionKernels k{Isa::kScalar, 1, blocks_scalar, score_tile_scalar,
-                                  fma_peak_scalar};
+  static const AttentionKernels k{Isa::kScalar,      1, blocks_scalar,      score_tile_scalar,
+                                  fma_peak_scalar,   blocks_scalar_bf16, 2, to_bf16_scalar};
   return k;
 }
 
@@ -319,6 +449,7 @@ const AttentionKernels& kernels_for(Isa isa) {
   switch (isa) {
     case Isa::kAmx:
     case Isa::kAvx512Bf16:
+      return avx512bf16_kernels();
     case Isa::kAvx512:
       return avx512_kernels();
     case Isa::kAvx2:
@@ -332,15 +463,15 @@ const AttentionKernels& kernels_for(Isa isa) {
 }  // namespace attention_detail
 
 Status attention(const AttentionArgs& args, ThreadPool& pool) {
-  return attention_detail::run(args, attention_detail::pick_kernels(active_isa(), args.head_dim),
-                               pool);
+  return attention_with_isa(args, active_isa(), pool);
 }
 
 Status attention_with_isa(const AttentionArgs& args, Isa isa, ThreadPool& pool) {
   if (!isa_supported(isa))
     return Status::error(std::string("attention: path ") + isa_name(isa) +
                          " is not supported on this machine");
-  return attention_detail::run(args, attention_detail::pick_kernels(isa, args.head_dim), pool);
+  const auto& kern = attention_detail::pick_kernels(isa, args.head_dim);
+  return attention_detail::run(args, kern, &kern == &attention_detail::kernels_for(isa), pool);
 }
 
 }  // namespace macro

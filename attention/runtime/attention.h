@@ -23,8 +23,17 @@
 //
 // Paths: scalar twin (any D), AVX2 (D % 8 == 0), AVX-512 (D % 16 == 0), chosen from active_isa()
 // at each call (a head dim the path cannot take falls back to the next narrower path; the
-// avx512bf16 and amx paths use the fp32 AVX-512 kernel). All paths run the same algorithm; they
-// differ only in rounding (exp2 polynomial, summation order, Q pre-scaled in the SIMD paths).
+// avx512bf16 and amx paths use the fp32 AVX-512 kernel unless bf16 is asked for). All paths run
+// the same algorithm; they differ only in rounding (exp2 polynomial, summation order, Q pre-scaled
+// in the SIMD paths).
+//
+// bf16 (AttentionArgs::bf16, set by networks running in bf16): the two products Q K^T and P V take
+// bf16 operands with fp32 accumulation (vdpbf16ps: 32 products per instruction instead of 16
+// FMAs); the scores, the online softmax, the running sum l and the output stay fp32. Rounded to
+// bf16 (nearest even): K and V once per call, scale * log2(e) * Q when a query block is packed,
+// and the probabilities P of each tile. Paths: avx512bf16 and amx (D % 32 == 0) and the scalar
+// twin (same roundings, reference for the tests); on avx2 / avx512 without bf16 dot products, or a
+// head dim the kernel cannot take, the request is ignored and attention runs in fp32.
 #pragma once
 
 #include <cstddef>
@@ -49,6 +58,7 @@ struct AttentionArgs {
   float scale = 0;   // 0 = 1 / sqrt(D)
   bool causal = false;
   const BlockSparseMask* mask = nullptr;  // nq x nk, or null for full attention
+  bool bf16 = false;  // bf16 products where the path has them (see above)
 };
 
 // Checks shapes (errors name the argument), then computes out. Empty problems (nq == 0) succeed.
@@ -79,6 +89,10 @@ struct BlockJob {
   size_t k_stride = 0, v_stride = 0;
   const int32_t* key_index = nullptr;  // mask column -> key token, or null = identity
   int nk = 0;
+  // bf16 kernels: K and V rounded to bf16, head slice of row 0 (token j at k16 + j * kv16_stride).
+  const uint16_t* k16 = nullptr;
+  const uint16_t* v16 = nullptr;
+  size_t kv16_stride = 0;
 };
 
 // Per-thread scratch, 64-byte aligned.
@@ -90,6 +104,9 @@ struct BlockScratch {
   float* l = nullptr;      // [BQ] running sum of probabilities
   float* alpha = nullptr;  // [BQ] rescale factor of the current key block
   const float** v_rows = nullptr;  // [BK]
+  // bf16 kernels only (null otherwise): qt holds Q as [D/2, BQ] bf16 pairs, and
+  uint32_t* pp = nullptr;  // [BK/2, BQ] probability pairs (keys 2c, 2c+1 of each query)
+  uint32_t* vp = nullptr;  // [BK/2, D]  value pairs (keys 2c, 2c+1 of each channel)
 };
 
 // Up to kMaxGroup query blocks of one head, processed together so that each K/V block read from
@@ -104,12 +121,18 @@ using ScoreTileFn = void (*)(const float* const* k_rows, int keys, const float* 
 // A register-only FMA loop: returns the flops it did (for the machine-peak measurement).
 using FmaPeakFn = double (*)(int64_t iterations);
 
+// dst[i] = bf16(src[i]), nearest even (the bf16 kernels' K / V conversion).
+using ToBf16Fn = void (*)(const float* src, uint16_t* dst, size_t n);
+
 struct AttentionKernels {
   Isa isa = Isa::kScalar;
   int d_multiple = 1;  // the block kernel needs D % d_multiple == 0
   BlockFn block = nullptr;
   ScoreTileFn score_tile = nullptr;
   FmaPeakFn fma_peak = nullptr;
+  BlockFn block_bf16 = nullptr;  // null: this path computes bf16 requests in fp32
+  int bf16_d_multiple = 1;
+  ToBf16Fn to_bf16 = nullptr;
 };
 
 // The table for a path (the scalar table for paths without their own kernels).
@@ -117,6 +140,7 @@ const AttentionKernels& kernels_for(Isa isa);
 const AttentionKernels& scalar_kernels();
 const AttentionKernels& avx2_kernels();
 const AttentionKernels& avx512_kernels();
+const AttentionKernels& avx512bf16_kernels();  // the fp32 AVX-512 kernel + the bf16 one
 
 }  // namespace attention_detail
 }  // namespace macro

@@ -174,45 +174,59 @@ inline void pack_qt(const BlockJob& job, float* qt) {
 }
 
 // Ask for the next key block's K and V rows while this one is computed: the rows are strided
-// (one head's D floats out of each token row), which the hardware prefetchers follow poorly.
-inline void prefetch_key_block(const BlockJob& job, int kb) {
+// (one head's D elements out of each token row), which the hardware prefetchers follow poorly.
+template <typename Row>
+inline void prefetch_key_block(const BlockJob& job, const Row* k, const Row* v, size_t k_stride,
+                               size_t v_stride, int kb) {
   const int cols = std::min(kTileK, job.nk - kb * kTileK);
+  constexpr int kStep = 64 / int(sizeof(Row));  // one cache line
   for (int c = 0; c < cols; ++c) {
     const int col = kb * kTileK + c;
     const size_t j = job.key_index ? size_t(job.key_index[col]) : size_t(col);
-    const float* kr = job.k + j * job.k_stride;
-    const float* vr = job.v + j * job.v_stride;
-    for (int i = 0; i < job.d; i += 16) {
+    const Row* kr = k + j * k_stride;
+    const Row* vr = v + j * v_stride;
+    for (int i = 0; i < job.d; i += kStep) {
       __builtin_prefetch(kr + i);
       __builtin_prefetch(vr + i);
     }
   }
 }
 
+// m = -inf, l = 0, O = 0 for a query block.
 template <typename T>
-void block_init(const BlockJob& job, const BlockScratch& sc) {
+void block_reset(const BlockJob& job, const BlockScratch& sc) {
   for (int r = 0; r < kTileQ; r += T::W) {
     T::store(sc.m + r, T::set1(-std::numeric_limits<float>::infinity()));
     T::store(sc.l + r, T::zero());
   }
   for (int r = 0; r < job.rows; ++r)
     for (int i = 0; i < job.d; i += T::W) T::store(sc.o + size_t(r) * job.d + i, T::zero());
+}
+
+template <typename T>
+void block_init(const BlockJob& job, const BlockScratch& sc) {
+  block_reset<T>(job, sc);
   pack_qt(job, sc.qt);
+}
+
+// Scores of keys a tile forbids become -inf (tile == null: all allowed).
+template <typename T>
+inline void mask_scores(float* s, int cols, const uint8_t* tile) {
+  if (!tile) return;
+  constexpr int NV = kTileQ / T::W;
+  for (int c = 0; c < cols; ++c)
+    for (int v = 0; v < NV; ++v) {
+      float* p = s + size_t(c) * kTileQ + v * T::W;
+      T::store(p, T::mask_tile(T::load(p), tile + size_t(c) * kTileQ + v * T::W));
+    }
 }
 
 // One key block for one query block: S^T, mask, online softmax, O += P V.
 template <typename T>
 void block_step(const BlockJob& job, const BlockScratch& sc, const float* const* k_rows,
                 const float* const* v_rows, int cols, const uint8_t* tile) {
-  constexpr int NV = kTileQ / T::W;
   score_tile<T>(k_rows, cols, sc.qt, job.d, sc.s);
-  if (tile) {
-    for (int c = 0; c < cols; ++c)
-      for (int v = 0; v < NV; ++v) {
-        float* p = sc.s + size_t(c) * kTileQ + v * T::W;
-        T::store(p, T::mask_tile(T::load(p), tile + size_t(c) * kTileQ + v * T::W));
-      }
-  }
+  mask_scores<T>(sc.s, cols, tile);
   softmax_tile<T>(sc.s, cols, sc.m, sc.l, sc.alpha);
   pv_tile<T>(job.rows, sc.s, cols, v_rows, sc.o, job.d, sc.alpha);
 }
@@ -231,14 +245,18 @@ void block_finish(const BlockJob& job, const BlockScratch& sc) {
 // The query blocks of a group walk the union of their key block lists in ascending order; each
 // K/V block is visited once and applied to every job that lists it, so a job sees exactly its
 // own blocks in its own order (results do not depend on the grouping).
-template <typename T>
-void blocks_simd(const BlockJob* jobs, int count, const BlockScratch* scratch) {
-  for (int g = 0; g < count; ++g) block_init<T>(jobs[g], scratch[g]);
+// Kern supplies the element type of the K / V rows and the per-block operations:
+//   using Row; k(job), v(job), k_stride(job), v_stride(job): head slice of token 0 and row strides;
+//   init(job, sc); step(job, sc, k_rows, v_rows, cols, tile); finish(job, sc).
+template <typename Kern>
+void blocks_walk(const BlockJob* jobs, int count, const BlockScratch* scratch) {
+  using Row = typename Kern::Row;
+  for (int g = 0; g < count; ++g) Kern::init(jobs[g], scratch[g]);
   int pos[kMaxGroup] = {};
-  const float* k_rows[kTileK];
-  const float* const* v_rows = scratch[0].v_rows;
-  const float* live_k[kTileK];
-  const float* live_v[kTileK];
+  const Row* k_rows[kTileK];
+  const Row* v_rows[kTileK];
+  const Row* live_k[kTileK];
+  const Row* live_v[kTileK];
   alignas(64) uint8_t live_tile[kTileQ * kTileK];
   auto next_block = [&](const int* at) {
     int kb = INT32_MAX;
@@ -247,23 +265,26 @@ void blocks_simd(const BlockJob* jobs, int count, const BlockScratch* scratch) {
     return kb;
   };
   const BlockJob& j0 = jobs[0];
+  const Row* kbase = Kern::k(j0);
+  const Row* vbase = Kern::v(j0);
+  const size_t ks = Kern::k_stride(j0), vs = Kern::v_stride(j0);
   for (int kb = next_block(pos); kb != INT32_MAX;) {
     const int cols = std::min(kTileK, j0.nk - kb * kTileK);
     for (int c = 0; c < cols; ++c) {
       const int col = kb * kTileK + c;
       const size_t j = j0.key_index ? size_t(j0.key_index[col]) : size_t(col);
-      k_rows[c] = j0.k + j * j0.k_stride;
-      scratch[0].v_rows[c] = j0.v + j * j0.v_stride;
+      k_rows[c] = kbase + j * ks;
+      v_rows[c] = vbase + j * vs;
     }
     for (int g = 0; g < count; ++g)
       if (pos[g] < jobs[g].entries && jobs[g].key_blocks[pos[g]] == kb) ++pos[g];
     const int next = next_block(pos);
-    if (next != INT32_MAX) prefetch_key_block(j0, next);
+    if (next != INT32_MAX) prefetch_key_block(j0, kbase, vbase, ks, vs, next);
     for (int g = 0; g < count; ++g) {
       if (pos[g] == 0 || jobs[g].key_blocks[pos[g] - 1] != kb) continue;
       const uint8_t* tile = jobs[g].tiles[pos[g] - 1];
       if (!tile) {
-        block_step<T>(jobs[g], scratch[g], k_rows, v_rows, cols, nullptr);
+        Kern::step(jobs[g], scratch[g], k_rows, v_rows, cols, nullptr);
         continue;
       }
       // Partial tile: drop the keys no query of this block may see (they would only add exact
@@ -284,14 +305,35 @@ void blocks_simd(const BlockJob* jobs, int count, const BlockScratch* scratch) {
         ++live;
       }
       if (live == cols) {
-        block_step<T>(jobs[g], scratch[g], k_rows, v_rows, cols, tile);
+        Kern::step(jobs[g], scratch[g], k_rows, v_rows, cols, tile);
       } else if (live > 0) {
-        block_step<T>(jobs[g], scratch[g], live_k, live_v, live, live_tile);
+        Kern::step(jobs[g], scratch[g], live_k, live_v, live, live_tile);
       }
     }
     kb = next;
   }
-  for (int g = 0; g < count; ++g) block_finish<T>(jobs[g], scratch[g]);
+  for (int g = 0; g < count; ++g) Kern::finish(jobs[g], scratch[g]);
+}
+
+// The fp32 block operations of traits T.
+template <typename T>
+struct F32Blocks {
+  using Row = float;
+  static const float* k(const BlockJob& j) { return j.k; }
+  static const float* v(const BlockJob& j) { return j.v; }
+  static size_t k_stride(const BlockJob& j) { return j.k_stride; }
+  static size_t v_stride(const BlockJob& j) { return j.v_stride; }
+  static void init(const BlockJob& j, const BlockScratch& sc) { block_init<T>(j, sc); }
+  static void step(const BlockJob& j, const BlockScratch& sc, const float* const* k_rows,
+                   const float* const* v_rows, int cols, const uint8_t* tile) {
+    block_step<T>(j, sc, k_rows, v_rows, cols, tile);
+  }
+  static void finish(const BlockJob& j, const BlockScratch& sc) { block_finish<T>(j, sc); }
+};
+
+template <typename T>
+void blocks_simd(const BlockJob* jobs, int count, const BlockScratch* scratch) {
+  blocks_walk<F32Blocks<T>>(jobs, count, scratch);
 }
 
 // Exposed score micro-GEMM for the benchmark: s[c][r] = sum_d rows[c][d] * packed[d][r].

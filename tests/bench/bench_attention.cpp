@@ -1,7 +1,11 @@
 // bench attention: fused block-sparse attention against the machine's own rates, measured in the
 // same run.
 //
-//   bench attention [--threads N] [--reps R] [--quick] [--unet-only]
+//   bench attention [--threads N] [--reps R] [--quick] [--unet-only] [--bf16]
+//
+// --bf16: every case also runs with bf16 products (AttentionArgs::bf16) and prints its time and
+// the fp32 / bf16 ratio (the fp32 run of the same case is the baseline); adds the VAE mid-block
+// shape (960x536 / 8 = 8040 tokens, 1 head x 512).
 //
 // Baselines (same run, same thread count):
 //  - FMA peak: a register-only FMA loop of the active path (per thread, times threads);
@@ -129,7 +133,7 @@ Buffers make_buffers(int n, int c) {
 int run(int argc, char** argv) {
   std::vector<int> thread_counts = {1, 2};
   int reps = 3;
-  bool quick = false, unet_only = false;
+  bool quick = false, unet_only = false, bf16 = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) {
       thread_counts = {std::atoi(argv[++i])};
@@ -139,6 +143,8 @@ int run(int argc, char** argv) {
       quick = true;
     } else if (!std::strcmp(argv[i], "--unet-only")) {
       unet_only = true;
+    } else if (!std::strcmp(argv[i], "--bf16")) {
+      bf16 = true;
     } else {
       std::fprintf(stderr, "bench attention: unknown flag '%s'\n", argv[i]);
       return 2;
@@ -175,7 +181,7 @@ int run(int argc, char** argv) {
     std::printf("  %-44s %9s %9s %8s %8s %7s %7s\n", "case", "wall ms", "cpu ms", "GF/wall",
                 "GF/cpu", "%peak", "%gemm");
     auto time_case = [&](const char* what, Buffers& b, int tokens, int h,
-                         const BlockSparseMask* mask, double allowed) {
+                         const BlockSparseMask* mask, double allowed, int head_dim) {
       AttentionArgs a;
       a.q = b.q.data();
       a.k = b.k.data();
@@ -183,26 +189,35 @@ int run(int argc, char** argv) {
       a.out = b.out.data();
       a.nq = a.nk = tokens;
       a.heads = h;
-      a.head_dim = d;
+      a.head_dim = head_dim;
       a.mask = mask;
-      bool ok = true;
-      const Timing t = median_timing(reps, [&] { ok &= attention(a, pool).is_ok(); });
-      const double flop = 4.0 * allowed * d * h;
-      const double per_cpu = flop / t.cpu * 1e-9;
-      std::printf("  %-44s %9.1f %9.1f %8.1f %8.1f %6.0f%% %6.0f%%%s\n", what, t.wall * 1e3,
-                  t.cpu * 1e3, flop / t.wall * 1e-9, per_cpu, 100 * per_cpu / peak,
-                  100 * per_cpu / gemm, ok ? "" : "  [FAILED]");
-      return t;
+      const double flop = 4.0 * allowed * head_dim * h;
+      Timing first{};
+      for (bool b16 : {false, true}) {
+        if (b16 && !bf16) break;
+        a.bf16 = b16;
+        bool ok = true;
+        const Timing t = median_timing(reps, [&] { ok &= attention(a, pool).is_ok(); });
+        const double per_cpu = flop / t.cpu * 1e-9;
+        std::printf("  %-44s %9.1f %9.1f %8.1f %8.1f %6.0f%% %6.0f%%%s", b16 ? "    bf16" : what,
+                    t.wall * 1e3, t.cpu * 1e3, flop / t.wall * 1e-9, per_cpu,
+                    100 * per_cpu / peak, 100 * per_cpu / gemm, ok ? "" : "  [FAILED]");
+        if (b16)
+          std::printf("  fp32/bf16 %.2fx wall, %.2fx cpu", first.wall / t.wall, first.cpu / t.cpu);
+        std::printf("\n");
+        if (!b16) first = t;
+      }
+      return first;
     };
     char label[160];
     std::snprintf(label, sizeof label, "MACRO L1 dense %d tok, %dx%d", n, heads, d);
     const Timing dense =
-        unet_only ? Timing{} : time_case(label, buf, n, heads, nullptr, double(n) * n);
+        unet_only ? Timing{} : time_case(label, buf, n, heads, nullptr, double(n) * n, d);
     for (const MaskCase& m : masks) {
       if (unet_only) break;
       const double frac = double(m.mask.allowed_pairs()) / (double(n) * n);
       std::snprintf(label, sizeof label, "  masked: %s", m.name.c_str());
-      const Timing t = time_case(label, buf, n, heads, &m.mask, double(m.mask.allowed_pairs()));
+      const Timing t = time_case(label, buf, n, heads, &m.mask, double(m.mask.allowed_pairs()), d);
       std::printf(
           "    masked/dense: wall %.3f, cpu %.3f for allowed fraction %.3f -> ratio %.2f "
           "wall, %.2f cpu (target <= 1.30)\n",
@@ -210,7 +225,13 @@ int run(int argc, char** argv) {
           t.cpu / dense.cpu / frac);
     }
     std::snprintf(label, sizeof label, "U-Net L0 Difix-ref %d tok, %dx%d", un, uheads, d);
-    time_case(label, ubuf, un, uheads, nullptr, double(un) * un);
+    time_case(label, ubuf, un, uheads, nullptr, double(un) * un, d);
+    if (bf16) {
+      const int vn = quick ? 2010 : 8040;
+      Buffers vbuf = make_buffers(vn, 512);
+      std::snprintf(label, sizeof label, "VAE mid %d tok, 1x512", vn);
+      time_case(label, vbuf, vn, 1, nullptr, double(vn) * vn, 512);
+    }
   }
   return 0;
 }
