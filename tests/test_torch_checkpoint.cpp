@@ -3,6 +3,8 @@
 // tests/fixtures/make_torch_checkpoints.py in torch.save's layout; the values below are the ones
 // that script stores (exact in their dtype).
 #include <catch2/catch.hpp>
+#include <sys/mman.h>
+#include <unistd.h>
 
 #include <cstring>
 #include <filesystem>
@@ -149,6 +151,32 @@ TEST_CASE("torch checkpoint: a deflated record and a protocol-4 pickle", "[pth]"
   REQUIRE(p.is_ok());
   CHECK(p->metadata().at("torch.key") == "model");
   CHECK(f32(*p, "head.weight", {3}) == std::vector<float>{0.5f, -0.5f, 0.25f});
+}
+
+TEST_CASE("torch checkpoint: copies survive a loader dropping their pages", "[pth]") {
+  // Weight loaders drop the pages of packed tensors with madvise(MADV_DONTNEED)
+  // (nets::release_param) and may read them again later; copies must come back intact, and so
+  // must the other tensors that share the copied record.
+  auto r = SafeTensors::open_torch(fixture("large_deflated.pth"));
+  INFO((r ? std::string() : r.status().message()));
+  REQUIRE(r.is_ok());
+  std::vector<float> m(64 * 64), mt(64 * 64);
+  for (int i = 0; i < 64 * 64; ++i) m[i] = float(i % 7 - 3);
+  for (int i = 0; i < 64; ++i)
+    for (int j = 0; j < 64; ++j) mt[i * 64 + j] = m[j * 64 + i];
+  const std::vector<float> tail(m.begin() + 2048, m.end());
+  const uintptr_t page = uintptr_t(sysconf(_SC_PAGESIZE));
+  for (const char* name : {"big", "big_t", "big_tail"}) {
+    const TensorEntry* e = r->find(name);
+    REQUIRE(e);
+    const uintptr_t b = reinterpret_cast<uintptr_t>(e->data), end = b + e->bytes;
+    const uintptr_t lo = (b + page - 1) / page * page, hi = end / page * page;
+    REQUIRE(hi > lo);
+    CHECK(madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_DONTNEED) == 0);
+  }
+  CHECK(f32(*r, "big", {64, 64}) == m);
+  CHECK(f32(*r, "big_t", {64, 64}) == mt);
+  CHECK(f32(*r, "big_tail", {2048}) == tail);
 }
 
 TEST_CASE("torch checkpoint: open_checkpoint dispatches on the zip magic", "[pth]") {

@@ -79,12 +79,31 @@ std::string printable(const std::string& s, size_t max = 80) {
 // ---------------------------------------------------------------------------------------------
 // Memory held by a checkpoint: the mapping (when read from a file) and owned copies.
 
+// Copies live in shared mappings of anonymous memory files (memfd), not on the heap: weight
+// loaders drop the pages of tensors they have packed with madvise(MADV_DONTNEED)
+// (nets::release_param), which for a file mapping only evicts them (a later read faults the same
+// bytes back) but would zero heap pages, including those of other tensors in the same buffer.
 struct Owner {
-  void* map_addr = nullptr;
-  size_t map_size = 0;
-  std::vector<std::unique_ptr<uint8_t[]>> buffers;
+  std::vector<std::pair<void*, size_t>> maps;  // the checkpoint file, then the copies
+  std::vector<std::unique_ptr<uint8_t[]>> buffers;  // copies if memfd_create is unavailable
   ~Owner() {
-    if (map_addr) ::munmap(map_addr, map_size);
+    for (auto& [addr, size] : maps) ::munmap(addr, size);
+  }
+  uint8_t* allocate(size_t bytes) {
+    const size_t len = bytes ? bytes : 1;
+    const int fd = ::memfd_create("macro-torch-checkpoint", MFD_CLOEXEC);
+    if (fd >= 0) {
+      void* p = ::ftruncate(fd, off_t(len)) == 0
+                    ? ::mmap(nullptr, len, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0)
+                    : MAP_FAILED;
+      ::close(fd);
+      if (p != MAP_FAILED) {
+        maps.emplace_back(p, len);
+        return static_cast<uint8_t*>(p);
+      }
+    }
+    buffers.emplace_back(new uint8_t[len]);
+    return buffers.back().get();
   }
 };
 
@@ -687,8 +706,7 @@ class Reader {
                            " bytes exceeds what the file can justify (" + num(copy_budget_) +
                            " bytes left of four times the file size plus 256 MiB)");
     copy_budget_ -= bytes;
-    owner_->buffers.emplace_back(new uint8_t[bytes ? bytes : 1]);
-    return owner_->buffers.back().get();
+    return owner_->allocate(size_t(bytes));
   }
   Status resolve_record(Record& e);
   Status flatten(const Unpickler& vm, ObjId id, const std::string& name, int depth,
@@ -1019,8 +1037,7 @@ Result<TorchCheckpoint> read_torch_checkpoint(const std::string& path, const std
       ::close(fd);
       return Status::error(path + ": cannot map: " + err);
     }
-    owner->map_addr = addr;
-    owner->map_size = bytes;
+    owner->maps.emplace_back(addr, bytes);
     base = static_cast<const uint8_t*>(addr);
   }
   ::close(fd);

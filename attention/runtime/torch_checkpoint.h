@@ -21,7 +21,8 @@
 //
 // Tensors: dtype from the storage class, shape, stride and storage offset from the rebuild call.
 // Contiguous row-major tensors of stored records point into the mapping; strided tensors and
-// tensors of deflated records are gathered into owned, contiguous memory. Everything is checked
+// tensors of deflated records are gathered into owned, contiguous memory (memfd mappings, so
+// madvise(MADV_DONTNEED) by a loader evicts rather than zeroes them). Everything is checked
 // before use: zip offsets and sizes inside the file, storage records present and of the size their
 // persistent id claims, offset + extent inside the storage, byte sizes without overflow and below
 // resource_limits().max_tensor_bytes, bounded pickle stack, memo and nesting.
