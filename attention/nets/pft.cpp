@@ -95,15 +95,18 @@ void depthwise(const PftDwConv& dw, const float* x, int64_t ldx, int64_t h, int6
   });
 }
 
-// a[i] = (a[i] * prev[i] + eps) / (sum_i a[i] * prev[i] + eps) over one row.
+// a[i] = (a[i] * prev[i] + eps) / (sum_i a[i] * prev[i] + eps) over one row (8 float partial
+// sums, as a vector reduction would).
 void focus_row(float* a, const float* prev, int64_t len) {
-  double sum = 0;
-  for (int64_t j = 0; j < len; ++j) {
-    a[j] *= prev[j];
-    sum += a[j];
-  }
-  const float den = float(sum) + kPfaEps;
-  for (int64_t j = 0; j < len; ++j) a[j] = (a[j] + kPfaEps) / den;
+  float part[8] = {};
+  int64_t j = 0;
+  for (; j + 8 <= len; j += 8)
+    for (int l = 0; l < 8; ++l) part[l] += (a[j + l] *= prev[j + l]);
+  for (; j < len; ++j) part[0] += (a[j] *= prev[j]);
+  const float sum =
+      ((part[0] + part[4]) + (part[1] + part[5])) + ((part[2] + part[6]) + (part[3] + part[7]));
+  const float den = sum + kPfaEps;
+  for (j = 0; j < len; ++j) a[j] = (a[j] + kPfaEps) / den;
 }
 
 // Order-preserving unsigned key of a float (NaN lowest).
@@ -115,30 +118,50 @@ inline uint32_t order_key(float v) {
 }
 
 // The positions of the `keep` largest values of row[0, len) in ascending order. Ties: the smaller
-// position wins. NaN ranks below everything. keys: len words of scratch. The keep-th largest key
-// is found by a byte-wise radix select (four histogram passes), then one ascending pass takes
-// everything above it and the first ties, so nothing is sorted.
-void select_topk(const float* row, int len, int keep, int* pos, uint32_t* keys) {
+// position wins. NaN ranks below everything. Scratch: keys (len words), cand (len ints).
+// Radix select on the order keys: each round histograms 8 bits just below the candidates' common
+// prefix (so the first round already spreads the values), keeps the bin holding the wanted rank,
+// and stops when the remaining candidates are all equal: that key is the threshold. One ascending
+// pass then takes every larger key and the first `need` ties, so nothing is sorted.
+void select_topk(const float* row, int len, int keep, int* pos, uint32_t* keys, int* cand) {
   if (keep >= len) {
     std::iota(pos, pos + len, 0);
     return;
   }
   for (int j = 0; j < len; ++j) keys[j] = order_key(row[j]);
-  uint32_t prefix = 0, mask = 0;
-  int need = keep;  // rank (from the top) of the wanted key among those matching the prefix
-  for (int shift = 24; shift >= 0; shift -= 8) {
+  int nc = len;
+  for (int j = 0; j < len; ++j) cand[j] = j;
+  int need = keep;  // rank (from the top) of the threshold key among the candidates
+  uint32_t thr = 0;
+  for (;;) {
+    uint32_t lo = keys[cand[0]], hi = lo;
+    for (int c = 1; c < nc; ++c) {
+      const uint32_t k = keys[cand[c]];
+      lo = std::min(lo, k), hi = std::max(hi, k);
+    }
+    if (lo == hi) {
+      thr = lo;
+      break;
+    }
+    const int top = 31 - __builtin_clz(lo ^ hi);
+    const int shift = std::max(0, top - 7);
     int hist[256] = {};
-    for (int j = 0; j < len; ++j)
-      if ((keys[j] & mask) == prefix) ++hist[(keys[j] >> shift) & 255u];
+    for (int c = 0; c < nc; ++c) ++hist[(keys[cand[c]] >> shift) & 255u];
     int bin = 255;
     for (; bin > 0 && hist[bin] < need; --bin) need -= hist[bin];
-    prefix |= uint32_t(bin) << shift;
-    mask |= 255u << shift;
+    int m = 0;
+    for (int c = 0; c < nc; ++c)
+      if (((keys[cand[c]] >> shift) & 255u) == uint32_t(bin)) cand[m++] = cand[c];
+    nc = m;
   }
-  const uint32_t thr = prefix;  // the keep-th largest key; `need` of its ties are kept
-  int m = 0;
-  for (int j = 0; j < len && m < keep; ++j)
-    if (keys[j] > thr || (keys[j] == thr && need-- > 0)) pos[m++] = j;
+  int m = 0;  // branch-free: pos always has room for len entries
+  for (int j = 0; j < len; ++j) {
+    const uint32_t k = keys[j];
+    const int eq = k == thr, take = (k > thr) | (eq & (need > 0));
+    pos[m] = j;
+    m += take;
+    need -= eq & take;
+  }
 }
 
 }  // namespace
@@ -391,6 +414,8 @@ struct PftNet::Work {
     std::vector<float> av;  // n x n, all zero between uses
     std::vector<int> lab, pos;
     std::vector<uint32_t> keys;
+    std::vector<int> cand;
+    std::vector<int> key_off;  // key (y, x) -> y (2 ws - 1) + x: bias index = row base - key_off
     std::vector<int64_t> tok_pos;
   };
   std::vector<Scratch> scratch;  // one per worker
@@ -442,7 +467,7 @@ void PftNet::attention(const PftLayer& L, Work& wk, PfaState& st, ThreadPool* po
   if (select) {
     new_val.resize(size_t(nslot) * n * t_keep);
     new_idx.resize(size_t(nslot) * n * t_keep);
-  } else if (!was_sparse) {
+  }else if (!was_sparse) {
     new_chain.resize(size_t(nslot) * 2 * n * d);
   }
   const size_t chain_len = st.kind == PfaState::kDense ? st.chain_qk.size() : 0;
@@ -530,7 +555,7 @@ void PftNet::attention(const PftLayer& L, Work& wk, PfaState& st, ThreadPool* po
           float* row = a + int64_t(i) * k_in;
           const float* qi = sc.q.data() + i * d;
           const float* si = sc.p.data() + int64_t(i) * n;
-          const int yi = i / ws, xi = i % ws;
+          const int row_base = (i / ws + ws - 1) * (2 * ws - 1) + i % ws + ws - 1;
           for (int j = 0; j < k_in; ++j) {
             const int key = ix[j];
             float s = 0.f;
@@ -540,8 +565,7 @@ void PftNet::attention(const PftLayer& L, Work& wk, PfaState& st, ThreadPool* po
               const float* kj = sc.k.data() + key * d;
               for (int64_t e = 0; e < d; ++e) s += qi[e] * kj[e];
             }
-            const int rel = (yi - key / ws + ws - 1) * (2 * ws - 1) + (xi - key % ws + ws - 1);
-            row[j] = s + table[rel * cols + hcol];
+            row[j] = s + table[(row_base - sc.key_off[size_t(key)]) * cols + hcol];
           }
           ok.softmax(row, row, k_in, 1.0f);
           focus_row(row, pv, k_in);
@@ -576,7 +600,7 @@ void PftNet::attention(const PftLayer& L, Work& wk, PfaState& st, ThreadPool* po
         uint16_t* ni = new_idx.data() + slot * n * t_keep;
         for (int i = 0; i < n; ++i) {
           const float* row = a + int64_t(i) * k_row;
-          select_topk(row, k_row, t_keep, sc.pos.data(), sc.keys.data());
+          select_topk(row, k_row, t_keep, sc.pos.data(), sc.keys.data(), sc.cand.data());
           const uint16_t* old = was_sparse ? st.idx.data() + (slot * n + i) * k_in : nullptr;
           for (int j = 0; j < t_keep; ++j) {
             const int p = sc.pos[size_t(j)];
@@ -718,6 +742,9 @@ Result<std::vector<float>> PftNet::forward(const float* image, int h, int w, Thr
     sc.lab.assign(size_t(n), 0);
     sc.pos.resize(size_t(n));
     sc.keys.resize(size_t(n));
+    sc.cand.resize(size_t(n));
+    sc.key_off.resize(size_t(n));
+    for (int j = 0; j < n; ++j) sc.key_off[size_t(j)] = (j / ws) * (2 * ws - 1) + j % ws;
     sc.tok_pos.resize(size_t(n));
   }
 
