@@ -410,6 +410,23 @@ TEST_CASE("winograd: modes, pack rule, and the direct path when forced", "[winog
     CHECK(std::memcmp(y_wino.data(), y_direct.data(), ny * 4) != 0);
     CHECK(max_err(y_wino) > 1e-5);
     CHECK(test::compare(y_wino, ref16).rel_l2 <= 1e-2);
+    // stride1_only: the direct pack is dropped and every call is Winograd, even with the mode off
+    // and under the tile threshold; the bits are the same weights' Winograd bits.
+    conv2d_set_winograd(ConvWinograd::kAuto);
+    ConvWeights lean = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3,
+                                         WeightType::kBf16, isa, /*stride1_only=*/true);
+    CHECK(lean.packed().empty());
+    CHECK(lean.type() == WeightType::kBf16);
+    CHECK(lean.bytes() + auto_w.packed().bytes() == auto_w.bytes());
+    conv2d_set_winograd(ConvWinograd::kOff);
+    std::vector<float> y_lean(ny, NAN);
+    conv2d(s, x.data(), lean, nullptr, y_lean.data(), nullptr);
+    CHECK(std::memcmp(y_lean.data(), y_wino.data(), ny * 4) == 0);
+    // ... but with the mode off at pack time there are no packs: the direct pack stays.
+    ConvWeights kept = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3,
+                                         WeightType::kBf16, isa, /*stride1_only=*/true);
+    CHECK_FALSE(kept.packed().empty());
+    CHECK(kept.winograd().empty());
   }
 }
 

@@ -167,16 +167,21 @@ void pack_im2col(const void* ctx, const GemmKernel& kern, bool is_a, int64_t r0,
 }  // namespace
 
 ConvWeights ConvWeights::pack(const float* w, const float* bias, int64_t c_out, int64_t c_in,
-                              int kh, int kw, WeightType type, Isa isa) {
+                              int kh, int kw, WeightType type, Isa isa, bool stride1_only) {
   ConvWeights cw;
   cw.c_out_ = c_out;
   cw.c_in_ = c_in;
   cw.kh_ = kh;
   cw.kw_ = kw;
+  const ConvWinograd mode = conv2d_winograd_mode();
+  const bool wino = type == WeightType::kBf16 && kh == 3 && kw == 3 &&
+                    (mode == ConvWinograd::kAlways ||
+                     (mode == ConvWinograd::kAuto && detail::winograd_pack_qualifies(c_out, c_in)));
+  if (wino) cw.wino_ = detail::winograd_pack(w, c_out, c_in, isa);
   if (type == WeightType::kF32) {
     const int64_t K = c_in * kh * kw;
     cw.packed_ = PackedWeights::pack_as_a(w, c_out, K, K, type, isa);
-  } else {
+  } else if (!(wino && stride1_only)) {
     // Reorder to [Cout][KH][KW][Cin2] (Cin2 = Cin rounded up to even, zero weights for the pad).
     const int64_t cin2 = (c_in + 1) / 2 * 2, K = int64_t(kh) * kw * cin2;
     std::vector<float> wr(size_t(c_out * K), 0.0f);
@@ -188,11 +193,6 @@ ConvWeights ConvWeights::pack(const float* w, const float* bias, int64_t c_out, 
                 w[((co * c_in + ci) * kh + dy) * kw + dx];
     cw.packed_ = PackedWeights::pack_as_a(wr.data(), c_out, K, K, type, isa);
   }
-  if (type == WeightType::kBf16 && kh == 3 && kw == 3 &&
-      (conv2d_winograd_mode() == ConvWinograd::kAlways ||
-       (conv2d_winograd_mode() == ConvWinograd::kAuto &&
-        detail::winograd_pack_qualifies(c_out, c_in))))
-    cw.wino_ = detail::winograd_pack(w, c_out, c_in, isa);
   if (bias) cw.bias_.assign(bias, bias + c_out);
   return cw;
 }
@@ -304,7 +304,7 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
   const int64_t oh = s.out_h(), ow = s.out_w();
   if (oh <= 0 || ow <= 0 || s.n <= 0 || s.c_out <= 0) return;
   const bool bf16 = w.type() == WeightType::kBf16;
-  if (bf16 && detail::winograd_applies(s, w)) {
+  if (bf16 && (w.packed().empty() || detail::winograd_applies(s, w))) {
     detail::conv2d_winograd(s, x, w, residual, y, act, pool);
     return;
   }
