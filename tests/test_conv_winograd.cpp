@@ -130,10 +130,10 @@ std::vector<double> winograd_bound(const Conv2dShape& s, const float* x, const f
           const int64_t o = ((b * s.c_out + co) * oh + oy) * ow + ox;
           const double extra = std::abs(double(ref[o])) + (bias ? std::abs(bias[co]) : 0.0) +
                                (res ? std::abs(res[o]) : 0.0);
-          bound[size_t(o)] =
-              (std::ldexp(1.0, -8) + std::ldexp(1.0, -16) + double(s.c_in + 10) * std::ldexp(1.0, -24)) *
-                  S +
-              std::ldexp(1.0, -22) * extra;
+          bound[size_t(o)] = (std::ldexp(1.0, -8) + std::ldexp(1.0, -16) +
+                              double(s.c_in + 10) * std::ldexp(1.0, -24)) *
+                                 S +
+                             std::ldexp(1.0, -22) * extra;
           if (direct > 0) ratio_sum += S / direct, ++ratio_n;
         }
       }
@@ -166,9 +166,9 @@ std::vector<float> check_case(const Case& c, ThreadPool* pool) {
   conv2d(s, x.data(), cw, c.residual ? (c.alias ? y.data() : res.data()) : nullptr, y.data(),
          c.relu ? ConvAct::kRelu : ConvAct::kNone, pool);
   double ratio = 0;
-  const std::vector<double> bound = winograd_bound(
-      s, x.data(), w.data(), c.bias ? bias.data() : nullptr, c.residual ? res.data() : nullptr,
-      ref.data(), &ratio);
+  const std::vector<double> bound =
+      winograd_bound(s, x.data(), w.data(), c.bias ? bias.data() : nullptr,
+                     c.residual ? res.data() : nullptr, ref.data(), &ratio);
   size_t bad = 0, first = 0, clamped = 0;
   double worst = 0;  // max err / bound
   for (size_t i = 0; i < ny; ++i) {
@@ -209,17 +209,16 @@ std::vector<float> check_case(const Case& c, ThreadPool* pool) {
 }
 
 const Case kCases[] = {
-    {shape(1, 5, 7, 9, 3, 1)},                             // odd H, W, Cin
-    {shape(1, 8, 1, 20, 16, 1), true, true},               // a 1-row image
-    {shape(2, 33, 11, 13, 29, 1), true, true, true},       // batch 2, Cout % MR != 0, alias y
+    {shape(1, 5, 7, 9, 3, 1)},                               // odd H, W, Cin
+    {shape(1, 8, 1, 20, 16, 1), true, true},                 // a 1-row image
+    {shape(2, 33, 11, 13, 29, 1), true, true, true},         // batch 2, Cout % MR != 0, alias y
     {shape(1, 16, 9, 10, 20, 0), false, true, false, true},  // pad 0, relu
-    {shape(1, 70, 6, 70, 24, 1), true, true, true, true},  // runs across rows and 16-tile groups
+    {shape(1, 70, 6, 70, 24, 1), true, true, true, true},    // runs across rows and 16-tile groups
 };
 
 }  // namespace
 
-TEST_CASE("winograd: the scalar twin and every path against the double loop nest",
-          "[winograd]") {
+TEST_CASE("winograd: the scalar twin and every path against the double loop nest", "[winograd]") {
   ModeGuard guard(ConvWinograd::kAlways);
   for (Isa isa : supported_isas()) {
     REQUIRE(set_isa(isa));
@@ -252,7 +251,8 @@ TEST_CASE("winograd: the vector transforms equal the scalar twins bit for bit", 
       x[3] = NAN;  // a NaN rounds to the same quiet NaN in both
       // A patch of fp32 denormals (V denormal too: flushed to zero by both).
       for (int64_t i = 0; i < 4; ++i)
-        for (int64_t j = 0; j < 4; ++j) x[size_t(2 * w * h + (6 + i) * w + 4 + j)] = 3e-39f * float(i - j);
+        for (int64_t j = 0; j < 4; ++j)
+          x[size_t(2 * w * h + (6 + i) * w + 4 + j)] = 3e-39f * float(i - j);
       const int nr = 32;
       const int64_t kp2 = 5, T = 64, xs = T * kp2;
       std::vector<uint32_t> v1(size_t(16 * xs), 0xdeadbeef), v2 = v1;
@@ -300,7 +300,8 @@ TEST_CASE("winograd: bit-identical for 1 and 2 threads, any chunk size and row b
   auto r = random_vec(ny, 44);
   for (Isa isa : supported_isas()) {
     REQUIRE(set_isa(isa));
-    ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3, WeightType::kBf16);
+    ConvWeights cw =
+        ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3, WeightType::kBf16);
     std::vector<float> base(ny);
     conv2d_set_winograd_chunk(0);
     conv2d(s, x.data(), cw, r.data(), base.data(), nullptr);
@@ -389,8 +390,7 @@ TEST_CASE("winograd: modes, pack rule, and the direct path when forced", "[winog
     CHECK_FALSE(detail::winograd_applies(s, auto_w));
     Conv2dShape big = s;
     big.h = 16, big.w = 16;  // 64 tiles
-    CHECK(detail::winograd_applies(big, auto_w) ==
-          (isa == Isa::kAvx512Bf16 || isa == Isa::kAmx));
+    CHECK(detail::winograd_applies(big, auto_w) == (isa == Isa::kAvx512Bf16 || isa == Isa::kAmx));
     Conv2dShape s2 = big;
     s2.stride = 2;
     CHECK_FALSE(detail::winograd_applies(s2, auto_w));

@@ -65,7 +65,9 @@ class ConvWeights {
   int kh() const { return kh_; }
   int kw() const { return kw_; }
   bool has_bias() const { return !bias_.empty(); }
-  WeightType type() const { return packed_.empty() && !wino_.empty() ? wino_[0].type() : packed_.type(); }
+  WeightType type() const {
+    return packed_.empty() && !wino_.empty() ? wino_[0].type() : packed_.type();
+  }
   const PackedWeights& packed() const { return packed_; }  // empty when dropped (stride1_only)
   const float* bias() const { return bias_.empty() ? nullptr : bias_.data(); }
   // bf16 3x3 weights packed while the Winograd rule held (conv2d_set_winograd below): the 16

@@ -55,8 +55,10 @@ struct Budgets {
 const Budgets& budgets() {
   static const Budgets b = [] {
     Budgets r;
-    if (const char* e = std::getenv("MACRO_WINO_V_KB")) r.v = std::max<int64_t>(1, std::atoll(e)) * 1024;
-    if (const char* e = std::getenv("MACRO_WINO_M_KB")) r.m = std::max<int64_t>(1, std::atoll(e)) * 1024;
+    if (const char* e = std::getenv("MACRO_WINO_V_KB"))
+      r.v = std::max<int64_t>(1, std::atoll(e)) * 1024;
+    if (const char* e = std::getenv("MACRO_WINO_M_KB"))
+      r.m = std::max<int64_t>(1, std::atoll(e)) * 1024;
     return r;
   }();
   return b;
@@ -251,7 +253,8 @@ std::vector<PackedWeights> winograd_pack(const float* w, int64_t c_out, int64_t 
       for (int i = 0; i < 4; ++i) {  // (G g) G^T
         const double uu[4] = {t[i][0], 0.5 * (t[i][0] + t[i][1] + t[i][2]),
                               0.5 * (t[i][0] - t[i][1] + t[i][2]), t[i][2]};
-        for (int j = 0; j < 4; ++j) u[size_t(((i * 4 + j) * c_out + co) * cin2 + ci)] = float(uu[j]);
+        for (int j = 0; j < 4; ++j)
+          u[size_t(((i * 4 + j) * c_out + co) * cin2 + ci)] = float(uu[j]);
       }
     }
   std::vector<PackedWeights> packs;
@@ -349,10 +352,10 @@ void conv2d_winograd(const Conv2dShape& s, const float* x, const ConvWeights& w,
     for (int64_t cb = part * blocks_per_part; cb < cb1; ++cb) {
       const int64_t co0 = cb * co_blk, nco = std::min(co_blk, s.c_out - co0);
       for (int xi = 0; xi < 16; ++xi) {
-        Operand oa{nullptr, nullptr,
-                   static_cast<const unsigned char*>(U[size_t(xi)].panels()) +
-                       (co0 / mr) * kp * mr * esz,
-                   kp};
+        Operand oa{
+            nullptr, nullptr,
+            static_cast<const unsigned char*>(U[size_t(xi)].panels()) + (co0 / mr) * kp * mr * esz,
+            kp};
         Operand ob{nullptr, nullptr, v + xi * xs_v, kp};
         DriverShape ds;
         ds.M = nco, ds.N = nt, ds.K = cin2;

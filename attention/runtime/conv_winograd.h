@@ -1,10 +1,11 @@
 // Winograd F(2x2, 3x3) for bf16 3x3 stride-1 convs (conv.h dispatches here; not for network code).
 //
 // Legend: Cin/Cout channels (Cin2 = Cin rounded up to even), H x W input, OH x OW output, tiles
-// of 2 x 2 output pixels (TH x TW of them; the last ones cropped when OH or OW is odd), xi = 4 i + j
-// one of the 16 positions of a 4 x 4 transformed tile.
+// of 2 x 2 output pixels (TH x TW of them; the last ones cropped when OH or OW is odd), xi = 4 i +
+// j one of the 16 positions of a 4 x 4 transformed tile.
 //
-// For every tile, with d the 4 x 4 input patch under it (zeros outside the image), g a 3 x 3 kernel:
+// For every tile, with d the 4 x 4 input patch under it (zeros outside the image), g a 3 x 3
+// kernel:
 //   V = B^T d B,  U = G g G^T,  M_xi = sum_ci U_xi[co, ci] V_xi[ci, tile],  Y = A^T M A (2 x 2)
 //   B^T = [1 0 -1 0; 0 1 1 0; 0 -1 1 0; 0 1 0 -1]   G = [1 0 0; .5 .5 .5; .5 -.5 .5; 0 0 1]
 //   A^T = [1 1 1 0; 0 1 -1 -1]
@@ -56,9 +57,9 @@ struct WinoInput {
   int64_t q0 = 0, q1 = 0;
   const WinoRun* runs = nullptr;
   int nruns = 0;
-  int nr = 0;              // B panel width of the kernel
-  int64_t kp2 = 0;         // pair rows per panel (padded K / 2)
-  int64_t xi_stride = 0;   // words between the 16 V_xi blocks
+  int nr = 0;             // B panel width of the kernel
+  int64_t kp2 = 0;        // pair rows per panel (padded K / 2)
+  int64_t xi_stride = 0;  // words between the 16 V_xi blocks
   uint32_t* v = nullptr;
 };
 

@@ -30,8 +30,7 @@ inline __mmask16 range_mask(int64_t start, int64_t limit) {
 }
 
 // V = B^T d B for 16 tiles of one channel (plane p, null = zeros): v[xi], xi = 4 i + j.
-inline void input_tiles(const float* p, int64_t h, int64_t w, int64_t iy0, int64_t ix0,
-                        __m512* v) {
+inline void input_tiles(const float* p, int64_t h, int64_t w, int64_t iy0, int64_t ix0, __m512* v) {
   const __m512i even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
   const __m512i odd = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
   __m512 d[16];
@@ -46,7 +45,8 @@ inline void input_tiles(const float* p, int64_t h, int64_t w, int64_t iy0, int64
     // Lane e of a load at offset o reads column ix0 + o + e; masked-off lanes are not accessed.
     const float* row = p + iy * w + ix0;
     const __m512 a0 = _mm512_maskz_loadu_ps(m0, row), a16 = _mm512_maskz_loadu_ps(m16, row + 16);
-    const __m512 a2 = _mm512_maskz_loadu_ps(m2, row + 2), a18 = _mm512_maskz_loadu_ps(m18, row + 18);
+    const __m512 a2 = _mm512_maskz_loadu_ps(m2, row + 2),
+                 a18 = _mm512_maskz_loadu_ps(m18, row + 18);
     d[i * 4 + 0] = _mm512_permutex2var_ps(a0, even, a16);
     d[i * 4 + 1] = _mm512_permutex2var_ps(a0, odd, a16);
     d[i * 4 + 2] = _mm512_permutex2var_ps(a2, even, a18);
@@ -70,9 +70,9 @@ inline void input_tiles(const float* p, int64_t h, int64_t w, int64_t iy0, int64
 
 void input_avx512(const detail::WinoInput& a) {
   const int64_t hw = a.h * a.w;
-  const __m512i pair_idx = _mm512_set_epi16(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9,
-                                            24, 8, 23, 7, 22, 6, 21, 5, 20, 4, 19, 3, 18, 2, 17,
-                                            1, 16, 0);
+  const __m512i pair_idx =
+      _mm512_set_epi16(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24, 8, 23, 7, 22, 6,
+                       21, 5, 20, 4, 19, 3, 18, 2, 17, 1, 16, 0);
   for (int64_t q = a.q0; q < a.q1; ++q) {
     const int64_t c0 = 2 * q, c1 = c0 + 1;
     const float* p0 = c0 < a.c_in ? a.x + c0 * hw : nullptr;
@@ -98,8 +98,7 @@ void input_avx512(const detail::WinoInput& a) {
 }
 
 void output_avx512(const detail::WinoOutput& a) {
-  const __m512i lo_idx =
-      _mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
+  const __m512i lo_idx = _mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
   const __m512i hi_idx =
       _mm512_setr_epi32(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31);
   const __m512 zero = _mm512_setzero_ps();

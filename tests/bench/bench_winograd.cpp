@@ -65,7 +65,7 @@ int run(int argc, char** argv) {
     const char* what;
   };
   const std::vector<C> convs = {
-      {128, 536, 960, "VAE 128ch"},  {256, 268, 480, "VAE 256ch"}, {512, 134, 240, "VAE 512ch"},
+      {128, 536, 960, "VAE 128ch"},   {256, 268, 480, "VAE 256ch"}, {512, 134, 240, "VAE 512ch"},
       {512, 67, 120, "VAE 512ch lo"}, {320, 67, 120, "UNet 320ch"}, {640, 34, 60, "UNet 640ch"},
       {1280, 17, 30, "UNet 1280ch"},
   };
@@ -88,8 +88,8 @@ int run(int argc, char** argv) {
     auto b = random_vec(size_t(s.c_out), 8);
     std::vector<float> y(size_t(s.c_out * s.out_h() * s.out_w()));
     const ConvWinograd old = conv2d_set_winograd(ConvWinograd::kAlways);  // packs for any shape
-    const ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3,
-                                             WeightType::kBf16);
+    const ConvWeights cw =
+        ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3, WeightType::kBf16);
     auto once = [&](ConvWinograd m) {
       conv2d_set_winograd(m);
       const double w0 = now_seconds(), c0 = cpu_seconds();
@@ -108,8 +108,8 @@ int run(int argc, char** argv) {
     char shape[64];
     std::snprintf(shape, sizeof shape, "C%ld %ldx%ld", long(cv.c), long(cv.w), long(cv.h));
     const double mdw = median(dw), mww = median(ww), mdc = median(dc), mwc = median(wc);
-    std::printf("  %-14s %-16s %10.2f %10.2f %7.2fx | %9.2f %9.2f %7.2fx | %7.1f %7.1f\n",
-                cv.what, shape, mdw * 1e3, mww * 1e3, mdw / mww, mdc * 1e3, mwc * 1e3, mdc / mwc,
+    std::printf("  %-14s %-16s %10.2f %10.2f %7.2fx | %9.2f %9.2f %7.2fx | %7.1f %7.1f\n", cv.what,
+                shape, mdw * 1e3, mww * 1e3, mdw / mww, mdc * 1e3, mwc * 1e3, mdc / mwc,
                 flop / mdw * 1e-9, flop / mww * 1e-9);
     std::fflush(stdout);
   }
