@@ -12,6 +12,7 @@
 
 #include "attention/nets/weights.h"
 #include "attention/runtime/conv.h"
+#include "attention/runtime/cpu.h"
 #include "attention/runtime/ops.h"
 
 namespace macro::nets {
@@ -70,28 +71,14 @@ void run_conv(const PftConv& cv, const float* x, int64_t h, int64_t w, const flo
   conv2d(s, x, cv.packed, residual, y, pool);
 }
 
-// y [H*W, C] (row stride ldy) = depthwise conv (pad k/2, zero outside) of x [H*W, C] (stride ldx).
+// y [H*W, C] (row stride ldy) = depthwise conv (pad k/2, zero outside) of x [H*W, C] (stride ldx),
+// one output row per kernel call (pft_dw_row, chosen once per call from the active path).
 void depthwise(const PftDwConv& dw, const float* x, int64_t ldx, int64_t h, int64_t w, float* y,
                int64_t ldy, ThreadPool* pool) {
-  const int64_t c = dw.c;
-  const int k = dw.k, r = k / 2;
+  const PftDwRow row = pft_dw_row(active_isa());
   par(pool, size_t(h), [&](size_t y0, size_t y1, int) {
-    for (int64_t oy = int64_t(y0); oy < int64_t(y1); ++oy) {
-      for (int64_t ox = 0; ox < w; ++ox) std::memcpy(y + (oy * w + ox) * ldy, dw.b.data(), c * 4);
-      for (int dy = 0; dy < k; ++dy) {
-        const int64_t iy = oy + dy - r;
-        if (iy < 0 || iy >= h) continue;
-        for (int dx = 0; dx < k; ++dx) {
-          const float* tap = dw.taps.data() + (dy * k + dx) * c;
-          const int64_t ox0 = std::max<int64_t>(0, r - dx), ox1 = std::min<int64_t>(w, w + r - dx);
-          for (int64_t ox = ox0; ox < ox1; ++ox) {
-            float* yp = y + (oy * w + ox) * ldy;
-            const float* xp = x + (iy * w + ox + dx - r) * ldx;
-            for (int64_t ch = 0; ch < c; ++ch) yp[ch] += tap[ch] * xp[ch];
-          }
-        }
-      }
-    }
+    for (int64_t oy = int64_t(y0); oy < int64_t(y1); ++oy)
+      row(y + oy * w * ldy, ldy, x, ldx, h, w, oy, dw.taps.data(), dw.b.data(), dw.c, dw.k);
   });
 }
 
@@ -165,6 +152,38 @@ void select_topk(const float* row, int len, int keep, int* pos, uint32_t* keys, 
 }
 
 }  // namespace
+
+// ---- depthwise row kernels ---------------------------------------------------------------------
+
+namespace detail {
+void pft_dw_row_avx512(float* y, int64_t ldy, const float* x, int64_t ldx, int64_t h, int64_t w,
+                       int64_t oy, const float* taps, const float* bias, int64_t c, int k);
+}  // namespace detail
+
+void pft_dw_row_scalar(float* y, int64_t ldy, const float* x, int64_t ldx, int64_t h, int64_t w,
+                       int64_t oy, const float* taps, const float* bias, int64_t c, int k) {
+  const int r = k / 2;
+  for (int64_t ox = 0; ox < w; ++ox) {
+    float* yp = y + ox * ldy;
+    for (int64_t ch = 0; ch < c; ++ch) yp[ch] = bias[ch];
+    for (int dy = 0; dy < k; ++dy) {
+      const int64_t iy = oy + dy - r;
+      if (iy < 0 || iy >= h) continue;
+      for (int dx = 0; dx < k; ++dx) {
+        const int64_t ix = ox + dx - r;
+        if (ix < 0 || ix >= w) continue;
+        const float* xp = x + (iy * w + ix) * ldx;
+        const float* tp = taps + (dy * k + dx) * c;
+        for (int64_t ch = 0; ch < c; ++ch) yp[ch] += tp[ch] * xp[ch];
+      }
+    }
+  }
+}
+
+PftDwRow pft_dw_row(Isa isa) {
+  if (isa >= Isa::kAvx512 && isa_supported(Isa::kAvx512)) return detail::pft_dw_row_avx512;
+  return pft_dw_row_scalar;
+}
 
 // ---- config ------------------------------------------------------------------------------------
 

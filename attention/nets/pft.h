@@ -44,6 +44,7 @@
 #include <vector>
 
 #include "attention/runtime/conv.h"
+#include "attention/runtime/cpu.h"
 #include "attention/runtime/gemm.h"
 #include "attention/runtime/safetensors.h"
 #include "attention/runtime/status.h"
@@ -84,6 +85,16 @@ struct PftTensorSpec {
 std::vector<PftTensorSpec> pft_tensor_specs(const PftConfig& cfg);
 // The buffer relative_position_index_SA [n, n]: (yi - yj + ws - 1) (2 ws - 1) + xi - xj + ws - 1.
 std::vector<int64_t> pft_relative_position_index(int window);
+
+// The depthwise conv's kernel (exposed for tests): output row oy of y [H*W, C] (row stride ldy;
+// y points at row oy's first pixel) = bias + sum over the k x k taps [k*k, C] of x [H*W, C]
+// (stride ldx), zero outside the image. Scalar twin, and AVX-512 (FMA) for kAvx512 and above.
+using PftDwRow = void (*)(float* y, int64_t ldy, const float* x, int64_t ldx, int64_t h,
+                          int64_t w, int64_t oy, const float* taps, const float* bias, int64_t c,
+                          int k);
+PftDwRow pft_dw_row(Isa isa);
+void pft_dw_row_scalar(float* y, int64_t ldy, const float* x, int64_t ldx, int64_t h, int64_t w,
+                       int64_t oy, const float* taps, const float* bias, int64_t c, int k);
 
 struct PftLinear {
   int64_t in = 0, out = 0;
