@@ -26,6 +26,7 @@
 #include "attention/nets/clip_tokenizer.h"
 #include "attention/nets/diffusers_config.h"
 #include "attention/runtime/safetensors.h"
+#include "attention/runtime/torch_checkpoint.h"
 #include "attention/runtime/status.h"
 #include "gs/camera.h"
 #include "gs/colmap_points.h"
@@ -113,6 +114,25 @@ inline Status safetensors(const uint8_t* data, size_t size) {
     if (!v.is_ok()) return v.status();
   }
   return Status::ok();
+}
+
+// A PyTorch zip checkpoint, with automatic selection and with an explicit key; every selected
+// tensor is then converted to float32.
+inline Status torch_checkpoint(const uint8_t* data, size_t size) {
+  Status last = Status::ok();
+  for (const char* key : {"", "params"}) {
+    auto r = read_torch_checkpoint_from_memory(data, size, "fuzz.pth", key);
+    if (!r.is_ok()) {
+      last = r.status();
+      continue;
+    }
+    std::vector<float> out;
+    for (const TensorEntry& e : r->tensors) {
+      out.resize(e.bytes / dtype_size(e.dtype));
+      MACRO_TRY(convert_to_f32(e, out.data(), out.size()));
+    }
+  }
+  return last;
 }
 
 // An index JSON (first part) naming shards; the second part is written as shard.safetensors.
@@ -240,6 +260,7 @@ inline const std::vector<Entry>& entries() {
       {"scene_spz", scene_spz},
       {"safetensors", safetensors},
       {"safetensors_index", safetensors_index},
+      {"torch_checkpoint", torch_checkpoint},
       {"cameras_json", cameras_json},
       {"cameras_any", cameras_any},
       {"nerfstudio", nerfstudio},

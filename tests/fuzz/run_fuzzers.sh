@@ -139,6 +139,8 @@ make_seeds() {
     convert "$shared/images/ex_ref.png" -resize 8x8 "$tmp/small.exr" 2>/dev/null &&
       add exr "$tmp/small.exr"
   fi
+  # PyTorch zip checkpoints (tests/fixtures/make_torch_checkpoints.py).
+  for f in "$src"/data/fixtures/torch/*; do add torch_checkpoint "$f"; done
   # Diffusers configs.
   find "$shared/golden" -name config.json 2>/dev/null | while read -r f; do
     add diffusers_config "$f"
