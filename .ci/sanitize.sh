@@ -13,7 +13,9 @@
 # `macro` binary is built with the same sanitizers), [nn-run] the TAESD CLI; and the small
 # kernels behind them, [kernels] and [ops]; [vit] the ViT loader and small forwards (DINOv2 /
 # DreamSim), [mem] the VAE's banded full-resolution level (halo rows, in-place bands), [pairs]
-# points3D and pair construction, [composite] composite views and masks. The networks' golden
+# points3D and pair construction, [composite] composite views and masks, [attention] the fused
+# attention (fp32 and bf16 kernels and their scalar twins), [winograd] the Winograd bf16 conv,
+# [pth] PyTorch checkpoints, [pft] the PFT-SR network. The networks' golden
 # tests and the end-to-end enhance/bench/render tests stay in the normal run (minutes each under
 # ASan).
 set -euo pipefail
@@ -21,7 +23,7 @@ cd "$(dirname "$0")/.."
 bash .ci/install-deps.sh
 BUILD=${BUILD_DIR:-build-sanitize}
 JOBS=${JOBS:-$(nproc)}
-SUBSET=${SANITIZE_TESTS:-"[formats],[cameras],[image_io],[runtime],[tokenizer],[config],[weights],[fuzz],[bad_inputs],[nn-run],[kernels],[ops],[vit],[mem],[pairs],[composite]"}
+SUBSET=${SANITIZE_TESTS:-"[formats],[cameras],[image_io],[runtime],[tokenizer],[config],[weights],[fuzz],[bad_inputs],[nn-run],[kernels],[ops],[vit],[mem],[pairs],[composite],[attention],[winograd],[pth],[pft]"}
 t0=$(date +%s)
 cmake -S . -B "$BUILD" -DCMAKE_BUILD_TYPE=Release -DMACRO_SANITIZE=ON >/dev/null
 cmake --build "$BUILD" -j"$JOBS" --target macro macro_tests
