@@ -20,9 +20,8 @@ namespace {
 
 constexpr float kPfaEps = 1e-20f;         // WindowAttention.eps: (a + eps) / (sum a + eps)
 constexpr float kShiftMaskValue = -100.f;  // calculate_mask: -100 between different regions
-// From this many kept keys per query on, sparse scores and A.V go through dense GEMMs (scores
-// gathered, weights scattered into zeros): the GEMM's n x n x d work is cheaper than K gathered
-// d-long dots at K >= 64 with d = 13 (bench pft).
+// From this many kept keys per query on, sparse scores come from one dense Q K^T GEMM (then
+// gathered): its n x n x d work is cheaper than K gathered d-long dots at K >= 64 with d = 13.
 constexpr int kGemmMinKeys = 64;
 
 int64_t round_up(int64_t v, int64_t m) { return (v + m - 1) / m * m; }
@@ -178,6 +177,31 @@ void pft_dw_row_scalar(float* y, int64_t ldy, const float* x, int64_t ldx, int64
       }
     }
   }
+}
+
+namespace detail {
+void pft_av_rows_avx512(float* o, const float* a, const uint16_t* idx, const float* v, int rows,
+                        int kk, int64_t d);
+}  // namespace detail
+
+void pft_av_rows_scalar(float* o, const float* a, const uint16_t* idx, const float* v, int rows,
+                        int kk, int64_t d) {
+  for (int i = 0; i < rows; ++i) {
+    float* oi = o + int64_t(i) * d;
+    for (int64_t e = 0; e < d; ++e) oi[e] = 0.f;
+    const float* ar = a + int64_t(i) * kk;
+    const uint16_t* ir = idx ? idx + int64_t(i) * kk : nullptr;
+    for (int j = 0; j < kk; ++j) {
+      const float w = ar[j];
+      const float* vj = v + int64_t(ir ? ir[j] : j) * d;
+      for (int64_t e = 0; e < d; ++e) oi[e] += w * vj[e];
+    }
+  }
+}
+
+PftAvRows pft_av_rows(Isa isa) {
+  if (isa >= Isa::kAvx512 && isa_supported(Isa::kAvx512)) return detail::pft_av_rows_avx512;
+  return pft_av_rows_scalar;
 }
 
 PftDwRow pft_dw_row(Isa isa) {
@@ -430,7 +454,6 @@ struct PftNet::Work {
   std::vector<float> xn, qkv, lepe, ao, hid, hid2;
   struct Scratch {
     std::vector<float> s, p, p2, q, k, v, o;
-    std::vector<float> av;  // n x n, all zero between uses
     std::vector<int> lab, pos;
     std::vector<uint32_t> keys;
     std::vector<int> cand;
@@ -492,6 +515,7 @@ void PftNet::attention(const PftLayer& L, Work& wk, PfaState& st, ThreadPool* po
   const size_t chain_len = st.kind == PfaState::kDense ? st.chain_qk.size() : 0;
 
   const OpsKernels& ok = ops_kernels();
+  const PftAvRows av_rows = pft_av_rows(active_isa());
   par(pool, size_t(nslot), [&](size_t j0, size_t j1, int worker) {
     Work::Scratch& sc = wk.scratch[size_t(worker)];
     for (size_t job = j0; job < j1; ++job) {
@@ -593,26 +617,7 @@ void PftNet::attention(const PftLayer& L, Work& wk, PfaState& st, ThreadPool* po
       // Keep the top keys, or keep the map as it is.
       float* o = sc.o.data();
       auto sparse_av = [&](const float* vals, const uint16_t* idx, int kk) {
-        if (kk >= kGemmMinKeys) {  // scatter into the all-zero n x n buffer, GEMM, zero it again
-          float* dm = sc.av.data();
-          for (int i = 0; i < n; ++i)
-            for (int j = 0; j < kk; ++j) dm[int64_t(i) * n + idx[int64_t(i) * kk + j]] = vals[int64_t(i) * kk + j];
-          gemm_f32(n, d, n, dm, n, sc.v.data(), d, o, d, GemmParams{}, nullptr);
-          for (int i = 0; i < n; ++i)
-            for (int j = 0; j < kk; ++j) dm[int64_t(i) * n + idx[int64_t(i) * kk + j]] = 0.f;
-          return;
-        }
-        for (int i = 0; i < n; ++i) {
-          float* oi = o + i * d;
-          for (int64_t e = 0; e < d; ++e) oi[e] = 0.f;
-          const float* vr = vals + int64_t(i) * kk;
-          const uint16_t* ir = idx + int64_t(i) * kk;
-          for (int j = 0; j < kk; ++j) {
-            const float w = vr[j];
-            const float* vj = sc.v.data() + int64_t(ir[j]) * d;
-            for (int64_t e = 0; e < d; ++e) oi[e] += w * vj[e];
-          }
-        }
+        av_rows(o, vals, idx, sc.v.data(), n, kk, d);
       };
       if (select) {
         float* nv = new_val.data() + slot * n * t_keep;
@@ -633,7 +638,7 @@ void PftNet::attention(const PftLayer& L, Work& wk, PfaState& st, ThreadPool* po
         std::memcpy(pv, a, size_t(n) * k_in * 4);
         sparse_av(pv, st.idx.data() + slot * n * k_in, k_in);
       } else {
-        gemm_f32(n, d, n, a, n, sc.v.data(), d, o, d, GemmParams{}, nullptr);
+        av_rows(o, a, nullptr, sc.v.data(), n, n, d);
         float* qk = new_chain.data() + slot * 2 * n * d;
         std::memcpy(qk, sc.q.data(), size_t(n * d) * 4);
         std::memcpy(qk + n * d, sc.k.data(), size_t(n * d) * 4);
@@ -751,7 +756,6 @@ Result<std::vector<float>> PftNet::forward(const float* image, int h, int w, Thr
   }
   for (Work::Scratch& sc : wk.scratch) {
     sc.s.resize(size_t(n) * n);
-    sc.av.assign(size_t(n) * n, 0.f);
     sc.p.resize(size_t(n) * n);
     if (long_chain) sc.p2.resize(size_t(n) * n);
     sc.q.resize(size_t(n * d));

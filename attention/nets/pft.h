@@ -96,6 +96,15 @@ PftDwRow pft_dw_row(Isa isa);
 void pft_dw_row_scalar(float* y, int64_t ldy, const float* x, int64_t ldx, int64_t h, int64_t w,
                        int64_t oy, const float* taps, const float* bias, int64_t c, int k);
 
+// A.V over kept keys (exposed for tests): o [rows, d] = per row i, sum_j a[i*kk + j] *
+// v[key * d ...] with key = idx[i*kk + j] (or j when idx is null; SMM_AmV). Scalar twin, and
+// AVX-512 (one masked register per 16 of d) for kAvx512 and above.
+using PftAvRows = void (*)(float* o, const float* a, const uint16_t* idx, const float* v, int rows,
+                           int kk, int64_t d);
+PftAvRows pft_av_rows(Isa isa);
+void pft_av_rows_scalar(float* o, const float* a, const uint16_t* idx, const float* v, int rows,
+                        int kk, int64_t d);
+
 struct PftLinear {
   int64_t in = 0, out = 0;
   std::vector<float> w, b;  // [out, in], [out] (w dropped after packing)
