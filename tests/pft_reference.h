@@ -1,7 +1,7 @@
 // Synthetic PFT-SR checkpoints (random weights under the state-dict names, written as
-// safetensors) and a double-precision PFT-SR forward written literally from the PyTorch module's maths (pad by
-// cat/flip, roll, window partition, dense attention maps kept whole, mask built from region
-// slices), for tests/test_pft.cpp. Slow and simple: small configs only.
+// safetensors) and a double-precision PFT-SR forward written literally from the PyTorch module's
+// maths (pad by cat/flip, roll, window partition, dense attention maps kept whole, mask built from
+// region slices), for tests/test_pft.cpp. Slow and simple: small configs only.
 //
 // Legend as in attention/nets/pft.h. Weights: state-dict name -> fp32 values (the I64 buffer
 // relative_position_index_SA is not read: the index is rebuilt here from coordinates).
@@ -40,12 +40,15 @@ inline PftWeights random_pft_weights(const nets::PftConfig& cfg, uint32_t seed) 
     std::vector<float> v(static_cast<size_t>(numel));
     const auto ends = [&](const char* suf) {
       const std::string x(suf);
-      return s.name.size() >= x.size() && s.name.compare(s.name.size() - x.size(), x.size(), x) == 0;
+      return s.name.size() >= x.size() &&
+             s.name.compare(s.name.size() - x.size(), x.size(), x) == 0;
     };
     const bool norm = s.name.find("norm") != std::string::npos;
     float scale = 0.1f;
-    if (ends("relative_position_bias_table")) scale = 2.0f;
-    else if (norm && ends(".weight")) scale = 0.2f;
+    if (ends("relative_position_bias_table"))
+      scale = 2.0f;
+    else if (norm && ends(".weight"))
+      scale = 0.2f;
     else if (ends(".weight") && s.shape.size() >= 2) {
       int64_t fan_in = 1;
       for (size_t i = 1; i < s.shape.size(); ++i) fan_in *= s.shape[i];
@@ -59,9 +62,9 @@ inline PftWeights random_pft_weights(const nets::PftConfig& cfg, uint32_t seed) 
 
 // Writes `ws` (+ the I64 index buffer) as a safetensors file; `drop`, `extra`, `reshape` make it
 // wrong on purpose.
-inline void write_pft_file(const std::string& path, const nets::PftConfig& cfg, const PftWeights& ws,
-                    const std::string& drop = "", bool extra = false,
-                    const std::string& reshape = "", bool bad_index = false) {
+inline void write_pft_file(const std::string& path, const nets::PftConfig& cfg,
+                           const PftWeights& ws, const std::string& drop = "", bool extra = false,
+                           const std::string& reshape = "", bool bad_index = false) {
   std::vector<TensorToWrite> t;
   std::vector<int64_t> rpi = nets::pft_relative_position_index(cfg.window);
   if (bad_index) rpi[5] += 1;
@@ -79,10 +82,10 @@ inline void write_pft_file(const std::string& path, const nets::PftConfig& cfg, 
     t.push_back({s.name, DType::kF32, shapes.back(), ws.at(s.name).data()});
   }
   static const float one = 1.f;
-  if (extra) t.push_back({"layers.0.residual_group.layers.0.attn_win.logit_scale", DType::kF32, {1}, &one});
+  if (extra)
+    t.push_back({"layers.0.residual_group.layers.0.attn_win.logit_scale", DType::kF32, {1}, &one});
   MACRO_CHECK(write_safetensors(path, t).is_ok());
 }
-
 
 namespace pft_ref {
 
@@ -107,8 +110,8 @@ inline Vec conv(const Vec& x, int64_t cin, int64_t h, int64_t wd, const std::vec
             for (int dx = 0; dx < k; ++dx) {
               const int64_t iy = yy + dy - r, ix = xx + dx - r;
               if (iy < 0 || iy >= h || ix < 0 || ix >= wd) continue;
-              const int64_t wi = depthwise ? (co * k + dy) * k + dx
-                                           : ((co * cin + ci) * k + dy) * k + dx;
+              const int64_t wi =
+                  depthwise ? (co * k + dy) * k + dx : ((co * cin + ci) * k + dy) * k + dx;
               acc += double(wt[size_t(wi)]) * x[size_t((ci * h + iy) * wd + ix)];
             }
         y[size_t((co * h + yy) * wd + xx)] = acc;
@@ -123,10 +126,12 @@ inline Vec layer_norm(const Vec& x, int64_t m, int64_t c, const std::vector<floa
     double mean = 0, var = 0;
     for (int64_t j = 0; j < c; ++j) mean += x[size_t(i * c + j)];
     mean /= double(c);
-    for (int64_t j = 0; j < c; ++j) var += (x[size_t(i * c + j)] - mean) * (x[size_t(i * c + j)] - mean);
+    for (int64_t j = 0; j < c; ++j)
+      var += (x[size_t(i * c + j)] - mean) * (x[size_t(i * c + j)] - mean);
     var /= double(c);
     for (int64_t j = 0; j < c; ++j)
-      y[size_t(i * c + j)] = (x[size_t(i * c + j)] - mean) / std::sqrt(var + eps) * g[size_t(j)] + b[size_t(j)];
+      y[size_t(i * c + j)] =
+          (x[size_t(i * c + j)] - mean) / std::sqrt(var + eps) * g[size_t(j)] + b[size_t(j)];
   }
   return y;
 }
@@ -138,13 +143,16 @@ inline Vec linear(const Vec& x, int64_t m, int64_t in, const std::vector<float>&
   for (int64_t i = 0; i < m; ++i)
     for (int64_t o = 0; o < out; ++o) {
       double acc = b[size_t(o)];
-      for (int64_t j = 0; j < in; ++j) acc += x[size_t(i * in + j)] * double(wt[size_t(o * in + j)]);
+      for (int64_t j = 0; j < in; ++j)
+        acc += x[size_t(i * in + j)] * double(wt[size_t(o * in + j)]);
       y[size_t(i * out + o)] = acc;
     }
   return y;
 }
 
-inline double gelu(double v) { return 0.5 * v * (1.0 + std::erf(v / std::sqrt(2.0))); }
+inline double gelu(double v) {
+  return 0.5 * v * (1.0 + std::erf(v / std::sqrt(2.0)));
+}
 
 // tokens [N, C] <-> image [C, H, W]
 inline Vec to_image(const Vec& t, int64_t n, int64_t c) {
@@ -189,7 +197,8 @@ inline std::vector<double> pft_reference_forward(const macro::nets::PftConfig& c
         x[size_t((c * hp + y) * wp + xx)] =
             (double(img[size_t((sy * Wd + sx) * 3 + c)]) - double(cfg.mean[c])) * cfg.img_range;
       }
-  const Vec f0 = conv(x, 3, hp, wp, w(W, "conv_first.weight"), w(W, "conv_first.bias"), C, 3, false);
+  const Vec f0 =
+      conv(x, 3, hp, wp, w(W, "conv_first.weight"), w(W, "conv_first.bias"), C, 3, false);
   Vec t = layer_norm(to_tokens(f0, N, C), N, C, w(W, "patch_embed.norm.weight"),
                      w(W, "patch_embed.norm.bias"), cfg.ln_eps);
 
@@ -223,11 +232,13 @@ inline std::vector<double> pft_reference_forward(const macro::nets::PftConfig& c
       const int64_t shift = li % 2 ? ws / 2 : 0;
       const int sp = shift ? 1 : 0;
       const int topk = cfg.topk[size_t(layer_id)];
-      const Vec xn = layer_norm(t, N, C, w(W, p + "norm1.weight"), w(W, p + "norm1.bias"), cfg.ln_eps);
+      const Vec xn =
+          layer_norm(t, N, C, w(W, p + "norm1.weight"), w(W, p + "norm1.bias"), cfg.ln_eps);
       const Vec qkv = linear(xn, N, C, w(W, p + "wqkv.weight"), w(W, p + "wqkv.bias"), 3 * C);
       Vec vimg(size_t(C * N));
       for (int64_t q = 0; q < N; ++q)
-        for (int64_t j = 0; j < C; ++j) vimg[size_t(j * N + q)] = qkv[size_t(q * 3 * C + 2 * C + j)];
+        for (int64_t j = 0; j < C; ++j)
+          vimg[size_t(j * N + q)] = qkv[size_t(q * 3 * C + 2 * C + j)];
       Vec lepe = conv(vimg, C, hp, wp, w(W, p + "v_LePE.depthwise_conv.0.weight"),
                       w(W, p + "v_LePE.depthwise_conv.0.bias"), C, cfg.ffn_kernel, true);
       for (double& v : lepe) v = gelu(v);
@@ -262,12 +273,14 @@ inline std::vector<double> pft_reference_forward(const macro::nets::PftConfig& c
               const int64_t j = keys[jj], pj = orig(j);
               double sdot = 0;
               for (int64_t e = 0; e < d; ++e)
-                sdot += qkv[size_t(pi * 3 * C + h * d + e)] * scale * qkv[size_t(pj * 3 * C + C + h * d + e)];
+                sdot += qkv[size_t(pi * 3 * C + h * d + e)] * scale *
+                        qkv[size_t(pj * 3 * C + C + h * d + e)];
               sdot += table[size_t(rpi[size_t(i * n + j)] * cols + (cols == 1 ? 0 : h))];
               if (shift && !st.has_index) {
                 const auto [yi, xi] = win_pos(win, i);
                 const auto [yj, xj] = win_pos(win, j);
-                if (img_mask[size_t(yi * wp + xi)] != img_mask[size_t(yj * wp + xj)]) sdot += -100.0;
+                if (img_mask[size_t(yi * wp + xi)] != img_mask[size_t(yj * wp + xj)])
+                  sdot += -100.0;
               }
               a[jj] = sdot;
             }
@@ -283,7 +296,8 @@ inline std::vector<double> pft_reference_forward(const macro::nets::PftConfig& c
             if (topk < n) {
               std::vector<int> order(a.size());
               std::iota(order.begin(), order.end(), 0);
-              std::stable_sort(order.begin(), order.end(), [&](int u, int v) { return a[size_t(u)] > a[size_t(v)]; });
+              std::stable_sort(order.begin(), order.end(),
+                               [&](int u, int v) { return a[size_t(u)] > a[size_t(v)]; });
               order.resize(size_t(topk));
               std::sort(order.begin(), order.end());
               Vec na;
@@ -305,28 +319,35 @@ inline std::vector<double> pft_reference_forward(const macro::nets::PftConfig& c
             next.index[row] = keys;
           }
       state[sp] = std::move(next);
-      const Vec pr = linear(attn_out, N, C, w(W, p + "attn_win.proj.weight"), w(W, p + "attn_win.proj.bias"), C);
+      const Vec pr = linear(attn_out, N, C, w(W, p + "attn_win.proj.weight"),
+                            w(W, p + "attn_win.proj.bias"), C);
       for (size_t q = 0; q < t.size(); ++q) t[q] += pr[q];
-      const Vec xn2 = layer_norm(t, N, C, w(W, p + "norm2.weight"), w(W, p + "norm2.bias"), cfg.ln_eps);
+      const Vec xn2 =
+          layer_norm(t, N, C, w(W, p + "norm2.weight"), w(W, p + "norm2.bias"), cfg.ln_eps);
       Vec a1 = linear(xn2, N, C, w(W, p + "convffn.fc1.weight"), w(W, p + "convffn.fc1.bias"), F);
       for (double& v : a1) v = gelu(v);
-      Vec dwo = conv(to_image(a1, N, F), F, hp, wp, w(W, p + "convffn.dwconv.depthwise_conv.0.weight"),
-                     w(W, p + "convffn.dwconv.depthwise_conv.0.bias"), F, cfg.ffn_kernel, true);
+      Vec dwo =
+          conv(to_image(a1, N, F), F, hp, wp, w(W, p + "convffn.dwconv.depthwise_conv.0.weight"),
+               w(W, p + "convffn.dwconv.depthwise_conv.0.bias"), F, cfg.ffn_kernel, true);
       for (double& v : dwo) v = gelu(v);
       dwo = to_tokens(dwo, N, F);
       for (size_t q = 0; q < a1.size(); ++q) a1[q] += dwo[q];
-      const Vec f2 = linear(a1, N, F, w(W, p + "convffn.fc2.weight"), w(W, p + "convffn.fc2.bias"), C);
+      const Vec f2 =
+          linear(a1, N, F, w(W, p + "convffn.fc2.weight"), w(W, p + "convffn.fc2.bias"), C);
       for (size_t q = 0; q < t.size(); ++q) t[q] += f2[q];
     }
     const std::string gp = "layers." + std::to_string(g) + ".conv.";
-    const Vec cv = conv(to_image(t, N, C), C, hp, wp, w(W, gp + "weight"), w(W, gp + "bias"), C, 3, false);
+    const Vec cv =
+        conv(to_image(t, N, C), C, hp, wp, w(W, gp + "weight"), w(W, gp + "bias"), C, 3, false);
     t = to_tokens(cv, N, C);
     for (size_t q = 0; q < t.size(); ++q) t[q] += t_group[q];
   }
   t = layer_norm(t, N, C, w(W, "norm.weight"), w(W, "norm.bias"), cfg.ln_eps);
-  Vec f = conv(to_image(t, N, C), C, hp, wp, w(W, "conv_after_body.weight"), w(W, "conv_after_body.bias"), C, 3, false);
+  Vec f = conv(to_image(t, N, C), C, hp, wp, w(W, "conv_after_body.weight"),
+               w(W, "conv_after_body.bias"), C, 3, false);
   for (size_t q = 0; q < f.size(); ++q) f[q] += f0[q];
-  const Vec up = conv(f, C, hp, wp, w(W, "upsample.0.weight"), w(W, "upsample.0.bias"), 3 * s * s, 3, false);
+  const Vec up =
+      conv(f, C, hp, wp, w(W, "upsample.0.weight"), w(W, "upsample.0.bias"), 3 * s * s, 3, false);
   std::vector<double> out(size_t(H * s * Wd * s * 3));
   for (int64_t y = 0; y < H * s; ++y)
     for (int64_t xx = 0; xx < Wd * s; ++xx)

@@ -134,7 +134,8 @@ TEST_CASE("pft: images smaller than half a window are mirrored periodically", "[
   // (which the reference can pad itself), so the first 3 output rows agree exactly.
   std::vector<float> six(size_t(6 * 2 * 3));
   for (int y = 0; y < 6; ++y)
-    for (int x = 0; x < 2 * 3; ++x) six[size_t(y * 6 + x)] = img[size_t((y < 3 ? y : 5 - y) * 6 + x)];
+    for (int x = 0; x < 2 * 3; ++x)
+      six[size_t(y * 6 + x)] = img[size_t((y < 3 ? y : 5 - y) * 6 + x)];
   auto out6 = (*net)->forward(six.data(), 6, 2);
   REQUIRE(out6.is_ok());
   for (size_t i = 0; i < out->size(); ++i) CHECK((*out)[i] == (*out6)[i]);
@@ -238,14 +239,14 @@ TEST_CASE("pft: the released light x4 / x2 names and shapes, synthetic weights r
 TEST_CASE("pft upsampling: pass scales and the stop rule", "[pft]") {
   using enhance::pft_pass_scales;
   using V = std::vector<int>;
-  CHECK(pft_pass_scales(100, 60, 960, 536) == V{4, 4});        // 400x240 -> 1600x960
-  CHECK(pft_pass_scales(10, 10, 960, 540) == V{4, 4, 4, 2});    // 640 > 512: then x2
-  CHECK(pft_pass_scales(600, 300, 960, 536) == V{2});           // a side > 512: x2
-  CHECK(pft_pass_scales(512, 512, 960, 960) == V{4});           // both <= 512: x4
-  CHECK(pft_pass_scales(800, 200, 960, 900) == V{2});           // 1600 > 1500: stop short
-  CHECK(pft_pass_scales(960, 536, 960, 536).empty());           // already there
-  CHECK(pft_pass_scales(1000, 100, 960, 200) == V{2});          // one side short is enough
-  CHECK(pft_pass_scales(1501, 10, 4000, 4000).empty());         // longer side already > 1500
+  CHECK(pft_pass_scales(100, 60, 960, 536) == V{4, 4});       // 400x240 -> 1600x960
+  CHECK(pft_pass_scales(10, 10, 960, 540) == V{4, 4, 4, 2});  // 640 > 512: then x2
+  CHECK(pft_pass_scales(600, 300, 960, 536) == V{2});         // a side > 512: x2
+  CHECK(pft_pass_scales(512, 512, 960, 960) == V{4});         // both <= 512: x4
+  CHECK(pft_pass_scales(800, 200, 960, 900) == V{2});         // 1600 > 1500: stop short
+  CHECK(pft_pass_scales(960, 536, 960, 536).empty());         // already there
+  CHECK(pft_pass_scales(1000, 100, 960, 200) == V{2});        // one side short is enough
+  CHECK(pft_pass_scales(1501, 10, 4000, 4000).empty());       // longer side already > 1500
 }
 
 TEST_CASE("pft upsampling: mask keeps padding black, 8-bit truncation, Lanczos to size", "[pft]") {
@@ -253,7 +254,8 @@ TEST_CASE("pft upsampling: mask keeps padding black, 8-bit truncation, Lanczos t
   gs::Image canvas(10, 7, 3);
   for (int y = 0; y < 7; ++y)
     for (int x = 0; x < 6; ++x)
-      for (int c = 0; c < 3; ++c) canvas.at(y, x, c) = float((y * 7 + x * 3 + c) % 200 + 20) / 255.f;
+      for (int c = 0; c < 3; ++c)
+        canvas.at(y, x, c) = float((y * 7 + x * 3 + c) % 200 + 20) / 255.f;
   canvas.at(3, 2, 0) = canvas.at(3, 2, 1) = canvas.at(3, 2, 2) = 0.f;  // a black pixel inside
   std::vector<std::pair<int, int>> seen;
   const enhance::SrPass pass = [&](const gs::Image& in, int s) -> Result<gs::Image> {
@@ -356,7 +358,8 @@ TEST_CASE("pft: depthwise row kernels match the scalar twin", "[pft]") {
     for (int64_t c : {12, 52, 70}) {
       for (int k : {3, 7}) {
         const int64_t h = 9, w = 11, ldx = c + 5, ldy = c + 3;
-        std::vector<float> x(size_t(h * w * ldx)), taps(size_t(k * k * c)), bias(static_cast<size_t>(c));
+        std::vector<float> x(size_t(h * w * ldx)), taps(size_t(k * k * c)),
+            bias(static_cast<size_t>(c));
         for (float& v : x) v = u(rng);
         for (float& v : taps) v = u(rng);
         for (float& v : bias) v = u(rng);
@@ -364,7 +367,8 @@ TEST_CASE("pft: depthwise row kernels match the scalar twin", "[pft]") {
         for (int64_t oy = 0; oy < h; ++oy) {
           pft_dw_row_scalar(a.data() + oy * w * ldy, ldy, x.data(), ldx, h, w, oy, taps.data(),
                             bias.data(), c, k);
-          kern(b.data() + oy * w * ldy, ldy, x.data(), ldx, h, w, oy, taps.data(), bias.data(), c, k);
+          kern(b.data() + oy * w * ldy, ldy, x.data(), ldx, h, w, oy, taps.data(), bias.data(), c,
+               k);
         }
         double worst = 0;
         for (size_t i = 0; i < a.size(); ++i) {
@@ -399,13 +403,15 @@ TEST_CASE("pft: A.V row kernels match the scalar twin, dense and gathered", "[pf
         for (float& x : a) x = u(rng);
         for (float& x : v) x = u(rng);
         for (uint16_t& k : idx) k = uint16_t(rng() % nkeys);
-        for (const uint16_t* ip : {static_cast<const uint16_t*>(nullptr), static_cast<const uint16_t*>(idx.data())}) {
+        for (const uint16_t* ip :
+             {static_cast<const uint16_t*>(nullptr), static_cast<const uint16_t*>(idx.data())}) {
           if (!ip && kk > nkeys) continue;
           std::vector<float> want(size_t(rows * d)), got(size_t(rows * d) + 8, 5.f);
           pft_av_rows_scalar(want.data(), a.data(), ip, v.data(), rows, kk, d);
           kern(got.data(), a.data(), ip, v.data(), rows, kk, d);
           double worst = 0;
-          for (size_t i = 0; i < want.size(); ++i) worst = std::max(worst, double(std::fabs(want[i] - got[i])));
+          for (size_t i = 0; i < want.size(); ++i)
+            worst = std::max(worst, double(std::fabs(want[i] - got[i])));
           INFO(isa_name(isa) << " d " << d << " kk " << kk << (ip ? " gathered" : " dense"));
           CHECK(worst < 1e-4);  // |terms| <= 1, <= 64 of them: FMA and order rounding only
           for (size_t i = want.size(); i < got.size(); ++i) CHECK(got[i] == 5.f);  // no overrun

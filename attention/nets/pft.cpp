@@ -18,13 +18,15 @@
 namespace macro::nets {
 namespace {
 
-constexpr float kPfaEps = 1e-20f;         // WindowAttention.eps: (a + eps) / (sum a + eps)
+constexpr float kPfaEps = 1e-20f;          // WindowAttention.eps: (a + eps) / (sum a + eps)
 constexpr float kShiftMaskValue = -100.f;  // calculate_mask: -100 between different regions
 // From this many kept keys per query on, sparse scores come from one dense Q K^T GEMM (then
 // gathered): its n x n x d work is cheaper than K gathered d-long dots at K >= 64 with d = 13.
 constexpr int kGemmMinKeys = 64;
 
-int64_t round_up(int64_t v, int64_t m) { return (v + m - 1) / m * m; }
+int64_t round_up(int64_t v, int64_t m) {
+  return (v + m - 1) / m * m;
+}
 
 // Padded index i >= 0 of a side of length n: torch.cat([x, flip(x)]) read periodically (the
 // reference needs pad <= n; beyond that we keep mirroring).
@@ -357,43 +359,43 @@ Result<std::unique_ptr<PftNet>> PftNet::load(const SafeTensors& file, const PftC
   auto net = std::make_unique<PftNet>(cfg);
   std::vector<std::string> missing, misshaped, bad_values;
   std::set<std::string> used;
-  net->visit([&](const std::string& name, const std::vector<int64_t>& shape,
-                 std::vector<float>* storage) {
-    used.insert(name);
-    const TensorEntry* e = file.find(name);
-    if (!e) {
-      missing.push_back(name + " " + shape_string(shape));
-      return;
-    }
-    if (e->shape != shape) {
-      misshaped.push_back(name + ": expected " + shape_string(shape) + ", found " +
-                          shape_string(e->shape));
-      return;
-    }
-    std::vector<float> tmp;
-    std::vector<float>& dst = storage ? *storage : tmp;
-    dst.resize(size_t(e->numel()));
-    if (Status s = convert_to_f32(*e, dst.data(), dst.size()); !s) {
-      bad_values.push_back(name + ": " + s.message());
-      return;
-    }
-    if (!storage) {  // the relative position index must be the one the forward computes
-      const std::vector<int64_t> rpi = pft_relative_position_index(cfg.window);
-      for (size_t i = 0; i < rpi.size(); ++i)
-        if (double(dst[i]) != double(rpi[i])) {
-          bad_values.push_back(name + ": element " + std::to_string(i) + " is " +
-                               std::to_string(dst[i]) + ", expected " + std::to_string(rpi[i]) +
-                               " for window " + std::to_string(cfg.window));
+  net->visit(
+      [&](const std::string& name, const std::vector<int64_t>& shape, std::vector<float>* storage) {
+        used.insert(name);
+        const TensorEntry* e = file.find(name);
+        if (!e) {
+          missing.push_back(name + " " + shape_string(shape));
           return;
         }
-      return;
-    }
-    for (float v : dst)
-      if (!std::isfinite(v)) {
-        bad_values.push_back(name + ": non-finite values");
-        return;
-      }
-  });
+        if (e->shape != shape) {
+          misshaped.push_back(name + ": expected " + shape_string(shape) + ", found " +
+                              shape_string(e->shape));
+          return;
+        }
+        std::vector<float> tmp;
+        std::vector<float>& dst = storage ? *storage : tmp;
+        dst.resize(size_t(e->numel()));
+        if (Status s = convert_to_f32(*e, dst.data(), dst.size()); !s) {
+          bad_values.push_back(name + ": " + s.message());
+          return;
+        }
+        if (!storage) {  // the relative position index must be the one the forward computes
+          const std::vector<int64_t> rpi = pft_relative_position_index(cfg.window);
+          for (size_t i = 0; i < rpi.size(); ++i)
+            if (double(dst[i]) != double(rpi[i])) {
+              bad_values.push_back(name + ": element " + std::to_string(i) + " is " +
+                                   std::to_string(dst[i]) + ", expected " + std::to_string(rpi[i]) +
+                                   " for window " + std::to_string(cfg.window));
+              return;
+            }
+          return;
+        }
+        for (float v : dst)
+          if (!std::isfinite(v)) {
+            bad_values.push_back(name + ": non-finite values");
+            return;
+          }
+      });
   std::vector<std::string> unused;
   for (const std::string& n : file.names())
     if (!used.count(n)) unused.push_back(n);
@@ -509,149 +511,155 @@ void PftNet::attention(const PftLayer& L, Work& wk, PfaState& st, ThreadPool* po
   if (select) {
     new_val.resize(size_t(nslot) * n * t_keep);
     new_idx.resize(size_t(nslot) * n * t_keep);
-  }else if (!was_sparse) {
+  } else if (!was_sparse) {
     new_chain.resize(size_t(nslot) * 2 * n * d);
   }
   const size_t chain_len = st.kind == PfaState::kDense ? st.chain_qk.size() : 0;
 
   const OpsKernels& ok = ops_kernels();
   const PftAvRows av_rows = pft_av_rows(active_isa());
-  par(pool, size_t(nslot), [&](size_t j0, size_t j1, int worker) {
-    Work::Scratch& sc = wk.scratch[size_t(worker)];
-    for (size_t job = j0; job < j1; ++job) {
-      const int64_t win = int64_t(job) / heads;
-      const int head = int(job % heads), hcol = cols == 1 ? 0 : head;
-      const int64_t wy = win / wk.nwin_x, wx = win % wk.nwin_x;
-      // Gather this head's q (scaled), k, v for the window of the (rolled) image; shifted-window
-      // labels from the rolled coordinates.
-      bool masked = false;
-      std::vector<int64_t>& tok_pos = sc.tok_pos;
-      for (int i = 0; i < n; ++i) {
-        const int64_t sy = wy * ws + i / ws, sx = wx * ws + i % ws;
-        const int64_t y = (sy + shift) % hp, x = (sx + shift) % wp;
-        const int64_t p = y * wp + x;
-        tok_pos[size_t(i)] = p;
-        const float* row = wk.qkv.data() + p * 3 * c + head * d;
-        for (int64_t e = 0; e < d; ++e) {
-          sc.q[size_t(i * d + e)] = row[e] * scale;
-          sc.k[size_t(i * d + e)] = row[c + e];
-          sc.v[size_t(i * d + e)] = row[2 * c + e];
-        }
-        if (shift) {
-          auto band = [&](int64_t v, int64_t size) {
-            return v < size - ws ? 0 : (v < size - ws / 2 ? 1 : 2);
-          };
-          sc.lab[size_t(i)] = band(sy, hp) * 3 + band(sx, wp);
-          masked |= sc.lab[size_t(i)] != sc.lab[0];
-        }
-      }
-      // Dense probabilities softmax(q k^T + bias (+ mask)) of a layer into dst [n, n].
-      auto dense_probs = [&](const float* q, const float* k, const PftLayer& layer, float* dst) {
-        GemmParams gp;
-        gp.trans_b = true;
-        gemm_f32(n, n, d, q, d, k, d, dst, n, gp, nullptr);
-        const float* table = layer.bias_table.data();
-        for (int i = 0; i < n; ++i) {
-          float* row = dst + int64_t(i) * n;
-          const int yi = i / ws, xi = i % ws;
-          for (int yj = 0; yj < ws; ++yj) {
-            const int base = (yi - yj + ws - 1) * (2 * ws - 1) + xi + ws - 1;
-            float* r = row + yj * ws;
-            for (int xj = 0; xj < ws; ++xj) r[xj] += table[(base - xj) * cols + hcol];
-          }
-          if (masked)
-            for (int j = 0; j < n; ++j)
-              if (sc.lab[size_t(j)] != sc.lab[size_t(i)]) row[j] += kShiftMaskValue;
-          ok.softmax(row, row, n, 1.0f);
-        }
-      };
-      float* a = sc.s.data();  // this layer's map, [n, k_row]
-      const int k_row = was_sparse ? k_in : n;
-      const size_t slot = size_t(job);
-      if (!was_sparse) {
-        dense_probs(sc.q.data(), sc.k.data(), L, a);
-        if (chain_len > 0) {
-          // The previous map: the chain's maps multiplied and renormalised in order.
-          for (size_t ci = 0; ci < chain_len; ++ci) {
-            const float* qk = st.chain_qk[ci].data() + slot * 2 * n * d;
-            float* dst = ci == 0 ? sc.p.data() : sc.p2.data();
-            dense_probs(qk, qk + n * d, *st.chain_layers[ci], dst);
-            if (ci == 0) continue;
-            for (int i = 0; i < n; ++i) focus_row(dst + int64_t(i) * n, sc.p.data() + int64_t(i) * n, n);
-            sc.p.swap(sc.p2);
-          }
-          for (int i = 0; i < n; ++i)
-            focus_row(a + int64_t(i) * n, sc.p.data() + int64_t(i) * n, n);
-        }
-      } else {
-        const float* table = L.bias_table.data();
-        // Many kept keys: all scores by one GEMM, then gathered (far faster than gathered dots).
-        const bool via_gemm = k_in >= kGemmMinKeys;
-        if (via_gemm) {
-          GemmParams gp;
-          gp.trans_b = true;
-          gemm_f32(n, n, d, sc.q.data(), d, sc.k.data(), d, sc.p.data(), n, gp, nullptr);
-        }
-        for (int i = 0; i < n; ++i) {
-          const uint16_t* ix = st.idx.data() + (slot * n + i) * k_in;
-          const float* pv = st.val.data() + (slot * n + i) * k_in;
-          float* row = a + int64_t(i) * k_in;
-          const float* qi = sc.q.data() + i * d;
-          const float* si = sc.p.data() + int64_t(i) * n;
-          const int row_base = (i / ws + ws - 1) * (2 * ws - 1) + i % ws + ws - 1;
-          for (int j = 0; j < k_in; ++j) {
-            const int key = ix[j];
-            float s = 0.f;
-            if (via_gemm) {
-              s = si[key];
-            } else {
-              const float* kj = sc.k.data() + key * d;
-              for (int64_t e = 0; e < d; ++e) s += qi[e] * kj[e];
+  par(
+      pool, size_t(nslot),
+      [&](size_t j0, size_t j1, int worker) {
+        Work::Scratch& sc = wk.scratch[size_t(worker)];
+        for (size_t job = j0; job < j1; ++job) {
+          const int64_t win = int64_t(job) / heads;
+          const int head = int(job % heads), hcol = cols == 1 ? 0 : head;
+          const int64_t wy = win / wk.nwin_x, wx = win % wk.nwin_x;
+          // Gather this head's q (scaled), k, v for the window of the (rolled) image;
+          // shifted-window labels from the rolled coordinates.
+          bool masked = false;
+          std::vector<int64_t>& tok_pos = sc.tok_pos;
+          for (int i = 0; i < n; ++i) {
+            const int64_t sy = wy * ws + i / ws, sx = wx * ws + i % ws;
+            const int64_t y = (sy + shift) % hp, x = (sx + shift) % wp;
+            const int64_t p = y * wp + x;
+            tok_pos[size_t(i)] = p;
+            const float* row = wk.qkv.data() + p * 3 * c + head * d;
+            for (int64_t e = 0; e < d; ++e) {
+              sc.q[size_t(i * d + e)] = row[e] * scale;
+              sc.k[size_t(i * d + e)] = row[c + e];
+              sc.v[size_t(i * d + e)] = row[2 * c + e];
             }
-            row[j] = s + table[(row_base - sc.key_off[size_t(key)]) * cols + hcol];
+            if (shift) {
+              auto band = [&](int64_t v, int64_t size) {
+                return v < size - ws ? 0 : (v < size - ws / 2 ? 1 : 2);
+              };
+              sc.lab[size_t(i)] = band(sy, hp) * 3 + band(sx, wp);
+              masked |= sc.lab[size_t(i)] != sc.lab[0];
+            }
           }
-          ok.softmax(row, row, k_in, 1.0f);
-          focus_row(row, pv, k_in);
-        }
-      }
-      // Keep the top keys, or keep the map as it is.
-      float* o = sc.o.data();
-      auto sparse_av = [&](const float* vals, const uint16_t* idx, int kk) {
-        av_rows(o, vals, idx, sc.v.data(), n, kk, d);
-      };
-      if (select) {
-        float* nv = new_val.data() + slot * n * t_keep;
-        uint16_t* ni = new_idx.data() + slot * n * t_keep;
-        for (int i = 0; i < n; ++i) {
-          const float* row = a + int64_t(i) * k_row;
-          select_topk(row, k_row, t_keep, sc.pos.data(), sc.keys.data(), sc.cand.data());
-          const uint16_t* old = was_sparse ? st.idx.data() + (slot * n + i) * k_in : nullptr;
-          for (int j = 0; j < t_keep; ++j) {
-            const int p = sc.pos[size_t(j)];
-            nv[int64_t(i) * t_keep + j] = row[p];
-            ni[int64_t(i) * t_keep + j] = old ? old[p] : uint16_t(p);
+          // Dense probabilities softmax(q k^T + bias (+ mask)) of a layer into dst [n, n].
+          auto dense_probs = [&](const float* q, const float* k, const PftLayer& layer,
+                                 float* dst) {
+            GemmParams gp;
+            gp.trans_b = true;
+            gemm_f32(n, n, d, q, d, k, d, dst, n, gp, nullptr);
+            const float* table = layer.bias_table.data();
+            for (int i = 0; i < n; ++i) {
+              float* row = dst + int64_t(i) * n;
+              const int yi = i / ws, xi = i % ws;
+              for (int yj = 0; yj < ws; ++yj) {
+                const int base = (yi - yj + ws - 1) * (2 * ws - 1) + xi + ws - 1;
+                float* r = row + yj * ws;
+                for (int xj = 0; xj < ws; ++xj) r[xj] += table[(base - xj) * cols + hcol];
+              }
+              if (masked)
+                for (int j = 0; j < n; ++j)
+                  if (sc.lab[size_t(j)] != sc.lab[size_t(i)]) row[j] += kShiftMaskValue;
+              ok.softmax(row, row, n, 1.0f);
+            }
+          };
+          float* a = sc.s.data();  // this layer's map, [n, k_row]
+          const int k_row = was_sparse ? k_in : n;
+          const size_t slot = size_t(job);
+          if (!was_sparse) {
+            dense_probs(sc.q.data(), sc.k.data(), L, a);
+            if (chain_len > 0) {
+              // The previous map: the chain's maps multiplied and renormalised in order.
+              for (size_t ci = 0; ci < chain_len; ++ci) {
+                const float* qk = st.chain_qk[ci].data() + slot * 2 * n * d;
+                float* dst = ci == 0 ? sc.p.data() : sc.p2.data();
+                dense_probs(qk, qk + n * d, *st.chain_layers[ci], dst);
+                if (ci == 0) continue;
+                for (int i = 0; i < n; ++i)
+                  focus_row(dst + int64_t(i) * n, sc.p.data() + int64_t(i) * n, n);
+                sc.p.swap(sc.p2);
+              }
+              for (int i = 0; i < n; ++i)
+                focus_row(a + int64_t(i) * n, sc.p.data() + int64_t(i) * n, n);
+            }
+          } else {
+            const float* table = L.bias_table.data();
+            // Many kept keys: all scores by one GEMM, then gathered (far faster than gathered
+            // dots).
+            const bool via_gemm = k_in >= kGemmMinKeys;
+            if (via_gemm) {
+              GemmParams gp;
+              gp.trans_b = true;
+              gemm_f32(n, n, d, sc.q.data(), d, sc.k.data(), d, sc.p.data(), n, gp, nullptr);
+            }
+            for (int i = 0; i < n; ++i) {
+              const uint16_t* ix = st.idx.data() + (slot * n + i) * k_in;
+              const float* pv = st.val.data() + (slot * n + i) * k_in;
+              float* row = a + int64_t(i) * k_in;
+              const float* qi = sc.q.data() + i * d;
+              const float* si = sc.p.data() + int64_t(i) * n;
+              const int row_base = (i / ws + ws - 1) * (2 * ws - 1) + i % ws + ws - 1;
+              for (int j = 0; j < k_in; ++j) {
+                const int key = ix[j];
+                float s = 0.f;
+                if (via_gemm) {
+                  s = si[key];
+                } else {
+                  const float* kj = sc.k.data() + key * d;
+                  for (int64_t e = 0; e < d; ++e) s += qi[e] * kj[e];
+                }
+                row[j] = s + table[(row_base - sc.key_off[size_t(key)]) * cols + hcol];
+              }
+              ok.softmax(row, row, k_in, 1.0f);
+              focus_row(row, pv, k_in);
+            }
+          }
+          // Keep the top keys, or keep the map as it is.
+          float* o = sc.o.data();
+          auto sparse_av = [&](const float* vals, const uint16_t* idx, int kk) {
+            av_rows(o, vals, idx, sc.v.data(), n, kk, d);
+          };
+          if (select) {
+            float* nv = new_val.data() + slot * n * t_keep;
+            uint16_t* ni = new_idx.data() + slot * n * t_keep;
+            for (int i = 0; i < n; ++i) {
+              const float* row = a + int64_t(i) * k_row;
+              select_topk(row, k_row, t_keep, sc.pos.data(), sc.keys.data(), sc.cand.data());
+              const uint16_t* old = was_sparse ? st.idx.data() + (slot * n + i) * k_in : nullptr;
+              for (int j = 0; j < t_keep; ++j) {
+                const int p = sc.pos[size_t(j)];
+                nv[int64_t(i) * t_keep + j] = row[p];
+                ni[int64_t(i) * t_keep + j] = old ? old[p] : uint16_t(p);
+              }
+            }
+            sparse_av(nv, ni, t_keep);
+          } else if (was_sparse) {
+            float* pv = st.val.data() + slot * n * k_in;
+            std::memcpy(pv, a, size_t(n) * k_in * 4);
+            sparse_av(pv, st.idx.data() + slot * n * k_in, k_in);
+          } else {
+            av_rows(o, a, nullptr, sc.v.data(), n, n, d);
+            float* qk = new_chain.data() + slot * 2 * n * d;
+            std::memcpy(qk, sc.q.data(), size_t(n * d) * 4);
+            std::memcpy(qk + n * d, sc.k.data(), size_t(n * d) * 4);
+          }
+          // Scatter back to image positions (the reverse roll), adding the LePE.
+          for (int i = 0; i < n; ++i) {
+            const int64_t p = tok_pos[size_t(i)];
+            float* dst = wk.ao.data() + p * c + head * d;
+            const float* lp = wk.lepe.data() + p * c + head * d;
+            for (int64_t e = 0; e < d; ++e) dst[e] = o[i * d + e] + lp[e];
           }
         }
-        sparse_av(nv, ni, t_keep);
-      } else if (was_sparse) {
-        float* pv = st.val.data() + slot * n * k_in;
-        std::memcpy(pv, a, size_t(n) * k_in * 4);
-        sparse_av(pv, st.idx.data() + slot * n * k_in, k_in);
-      } else {
-        av_rows(o, a, nullptr, sc.v.data(), n, n, d);
-        float* qk = new_chain.data() + slot * 2 * n * d;
-        std::memcpy(qk, sc.q.data(), size_t(n * d) * 4);
-        std::memcpy(qk + n * d, sc.k.data(), size_t(n * d) * 4);
-      }
-      // Scatter back to image positions (the reverse roll), adding the LePE.
-      for (int i = 0; i < n; ++i) {
-        const int64_t p = tok_pos[size_t(i)];
-        float* dst = wk.ao.data() + p * c + head * d;
-        const float* lp = wk.lepe.data() + p * c + head * d;
-        for (int64_t e = 0; e < d; ++e) dst[e] = o[i * d + e] + lp[e];
-      }
-    }
-  }, 1);
+      },
+      1);
 
   if (select) {
     st.kind = PfaState::kSparse;
@@ -676,7 +684,7 @@ void PftNet::run_layer(const PftLayer& L, float* t, Work& wk, PfaState* states,
   gemm_packed(n, wk.xn.data(), c, L.wqkv.packed, wk.qkv.data(), 3 * c, gp, pool);  // [N, 3C]
   depthwise(L.lepe, wk.qkv.data() + 2 * c, 3 * c, wk.hp, wk.wp, wk.lepe.data(), c, pool);
   activation(wk.lepe.data(), wk.lepe.data(), n * c, Act::kGelu, pool);  // [N, C]
-  attention(L, wk, states[L.shift ? 1 : 0], pool);                       // ao [N, C]
+  attention(L, wk, states[L.shift ? 1 : 0], pool);                      // ao [N, C]
   GemmParams pp;
   pp.bias_n = L.proj.b.data();
   pp.residual = t;
@@ -701,8 +709,8 @@ void PftNet::run_layer(const PftLayer& L, float* t, Work& wk, PfaState* states,
 Result<std::vector<float>> PftNet::forward(const float* image, int h, int w, ThreadPool* pool,
                                            const LayerCallback& on_layer) const {
   if (!image || h <= 0 || w <= 0)
-    return Status::error("pft: empty input image (" + std::to_string(w) + "x" +
-                         std::to_string(h) + ")");
+    return Status::error("pft: empty input image (" + std::to_string(w) + "x" + std::to_string(h) +
+                         ")");
   const size_t need = state_bytes(h, w);
   if (need > max_state_bytes_)
     return Status::error("pft: a " + std::to_string(w) + "x" + std::to_string(h) + " input needs " +

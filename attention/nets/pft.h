@@ -20,11 +20,11 @@
 //
 // Progressive focusing attention (PFA): one state per shift parity, carried across all layers.
 // A layer computes scores only at the keys its parity's previous layer kept (all n at first), adds
-// the relative position bias (and the shifted-window mask, dense scores only), softmaxes, multiplies
-// by the previous map and renormalises ((a + 1e-20) / (sum a + 1e-20)), then keeps the top
-// topk[L] keys per query when topk[L] < n (values not renormalised). Details, the state-dict names
-// and what is uncertain: docs/pft.md. Top-k ties: larger value first, then the smaller key index;
-// kept keys are stored in ascending key order.
+// the relative position bias (and the shifted-window mask, dense scores only), softmaxes,
+// multiplies by the previous map and renormalises ((a + 1e-20) / (sum a + 1e-20)), then keeps the
+// top topk[L] keys per query when topk[L] < n (values not renormalised). Details, the state-dict
+// names and what is uncertain: docs/pft.md. Top-k ties: larger value first, then the smaller key
+// index; kept keys are stored in ascending key order.
 //
 // Memory: the image is processed window by window (scratch n x n floats per worker). The focusing
 // state is what grows with the image: a dense map is never stored (the producing layer's q and k
@@ -53,14 +53,14 @@
 namespace macro::nets {
 
 struct PftConfig {
-  int64_t embed = 52;                 // C
+  int64_t embed = 52;  // C
   std::vector<int> depths{2, 4, 6, 6, 6};
-  int heads = 4;                      // Hd (C % Hd == 0)
-  int window = 32;                    // ws (even)
-  std::vector<int> topk;              // one per global layer (sum of depths entries)
-  int ffn_kernel = 7;                 // depthwise kernel of the ConvFFN and the LePE
-  int64_t mlp_hidden = 52;            // ConvFFN hidden width (mlp_ratio 1)
-  int upscale = 4;                    // s (pixelshuffledirect: one conv C -> 3 s^2)
+  int heads = 4;            // Hd (C % Hd == 0)
+  int window = 32;          // ws (even)
+  std::vector<int> topk;    // one per global layer (sum of depths entries)
+  int ffn_kernel = 7;       // depthwise kernel of the ConvFFN and the LePE
+  int64_t mlp_hidden = 52;  // ConvFFN hidden width (mlp_ratio 1)
+  int upscale = 4;          // s (pixelshuffledirect: one conv C -> 3 s^2)
   float img_range = 1.0f;
   float mean[3] = {0.4488f, 0.4371f, 0.4040f};
   float ln_eps = 1e-5f;
@@ -89,9 +89,8 @@ std::vector<int64_t> pft_relative_position_index(int window);
 // The depthwise conv's kernel (exposed for tests): output row oy of y [H*W, C] (row stride ldy;
 // y points at row oy's first pixel) = bias + sum over the k x k taps [k*k, C] of x [H*W, C]
 // (stride ldx), zero outside the image. Scalar twin, and AVX-512 (FMA) for kAvx512 and above.
-using PftDwRow = void (*)(float* y, int64_t ldy, const float* x, int64_t ldx, int64_t h,
-                          int64_t w, int64_t oy, const float* taps, const float* bias, int64_t c,
-                          int k);
+using PftDwRow = void (*)(float* y, int64_t ldy, const float* x, int64_t ldx, int64_t h, int64_t w,
+                          int64_t oy, const float* taps, const float* bias, int64_t c, int k);
 PftDwRow pft_dw_row(Isa isa);
 void pft_dw_row_scalar(float* y, int64_t ldy, const float* x, int64_t ldx, int64_t h, int64_t w,
                        int64_t oy, const float* taps, const float* bias, int64_t c, int k);
@@ -119,9 +118,9 @@ struct PftConv {  // dense k x k conv, pad k/2, bias
 struct PftDwConv {  // depthwise k x k conv, pad k/2, bias, on token-major [N, C]
   int64_t c = 0;
   int k = 7;
-  std::vector<float> w;    // [C, 1, k, k] as loaded
-  std::vector<float> taps; // [k*k, C] (packed)
-  std::vector<float> b;    // [C]
+  std::vector<float> w;     // [C, 1, k, k] as loaded
+  std::vector<float> taps;  // [k*k, C] (packed)
+  std::vector<float> b;     // [C]
 };
 struct PftNorm {
   std::vector<float> gamma, beta;  // [C]

@@ -15,7 +15,9 @@ void pft_dw_row_avx512(float* y, int64_t ldy, const float* x, int64_t ldx, int64
     __mmask16 m[4];
     for (int b = 0; b < 4; ++b) {
       const int64_t left = nb - 16 * b;
-      m[b] = left >= 16 ? __mmask16(0xFFFF) : left <= 0 ? __mmask16(0) : __mmask16((1u << left) - 1);
+      m[b] = left >= 16  ? __mmask16(0xFFFF)
+             : left <= 0 ? __mmask16(0)
+                         : __mmask16((1u << left) - 1);
     }
     for (int64_t ox = 0; ox < w; ++ox) {
       __m512 acc[4];
@@ -57,13 +59,15 @@ void pft_av_rows_avx512(float* o, const float* a, const uint16_t* idx, const flo
       int j = 0;
       for (; j + 2 <= kk; j += 2) {
         const int64_t k0 = ir ? ir[j] : j, k1 = ir ? ir[j + 1] : j + 1;
-        acc0 = _mm512_fmadd_ps(_mm512_set1_ps(ar[j]), _mm512_maskz_loadu_ps(m, v + k0 * d + e0), acc0);
+        acc0 =
+            _mm512_fmadd_ps(_mm512_set1_ps(ar[j]), _mm512_maskz_loadu_ps(m, v + k0 * d + e0), acc0);
         acc1 = _mm512_fmadd_ps(_mm512_set1_ps(ar[j + 1]), _mm512_maskz_loadu_ps(m, v + k1 * d + e0),
                                acc1);
       }
       if (j < kk) {
         const int64_t k0 = ir ? ir[j] : j;
-        acc0 = _mm512_fmadd_ps(_mm512_set1_ps(ar[j]), _mm512_maskz_loadu_ps(m, v + k0 * d + e0), acc0);
+        acc0 =
+            _mm512_fmadd_ps(_mm512_set1_ps(ar[j]), _mm512_maskz_loadu_ps(m, v + k0 * d + e0), acc0);
       }
       _mm512_mask_storeu_ps(o + int64_t(i) * d + e0, m, _mm512_add_ps(acc0, acc1));
     }

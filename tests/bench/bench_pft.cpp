@@ -31,8 +31,9 @@ int run(int argc, char** argv) {
   const std::string dir = exe_dir() + "/bench-pft-tmp";
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
-  std::printf("bench pft: PFT-SR light, synthetic weights, isa %s, pool %d threads, medians of %d\n",
-              isa_name(active_isa()), ThreadPool::global().size(), reps);
+  std::printf(
+      "bench pft: PFT-SR light, synthetic weights, isa %s, pool %d threads, medians of %d\n",
+      isa_name(active_isa()), ThreadPool::global().size(), reps);
   std::printf("%-5s %-9s %8s %10s %10s %10s %9s\n", "pass", "input", "threads", "wall s", "cpu s",
               "state MiB", "vs 1 thr");
   struct Case {
