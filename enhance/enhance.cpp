@@ -181,6 +181,14 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
   const int W = in.closeup.width, H = in.closeup.height;
   MACRO_ASSIGN_OR_RETURN(std::unique_ptr<Upsampler> upsampler,
                          make_upsampler(o.upsampler, o.upsampler_weights));
+  // The transfer enhancer reads detail from the crops at their own resolution; a super-resolution
+  // upsampler would be loaded and then not used, so say so instead.
+  if (o.method != EnhanceMethod::k3dgs && o.enhancer == Enhancer::kTransfer &&
+      std::string(upsampler->name()) != "lanczos")
+    return Status::error(std::string("--upsampler ") + upsampler->name() +
+                         ": the transfer enhancer takes detail from the crops at their own "
+                         "resolution and does not upsample them; use it with --enhancer difix "
+                         "--weights DIR, or leave --upsampler at lanczos");
   if (o.method != EnhanceMethod::k3dgs) MACRO_TRY(upsampler->ready());
 
   if (o.method == EnhanceMethod::k3dgs) {

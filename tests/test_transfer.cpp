@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
+#include <fstream>
 
 #include "enhance/metrics.h"
 #include "enhance/transfer.h"
@@ -251,4 +252,14 @@ TEST_CASE("transfer: macro enhance --enhancer transfer writes a PNG and a side-b
                           " --closeup closeup.png --enhancer difix --out " + tmp.file("difix.png") +
                           " 2>/dev/null") != 0);
   CHECK_FALSE(fs::exists(tmp.file("difix.png")));
+  // A super-resolution upsampler has no effect on the transfer enhancer: refused, named.
+  const std::string log = tmp.file("pft.log");
+  CHECK(test::run_command(test::macro_exe() + " enhance --quiet --scene-dir " + dir +
+                          " --closeup closeup.png --enhancer transfer --upsampler pft-sr --out " +
+                          tmp.file("pft.png") + " 2>" + log) != 0);
+  CHECK_FALSE(fs::exists(tmp.file("pft.png")));
+  std::ifstream in(log);
+  const std::string text((std::istreambuf_iterator<char>(in)), {});
+  CHECK(text.find("--upsampler pft-sr") != std::string::npos);
+  CHECK(text.find("--enhancer difix") != std::string::npos);
 }
