@@ -292,11 +292,18 @@ TEST_CASE("loading keeps no widened copies: packed straight from the file, bytes
     CHECK(std::memcmp(a->f32(), b->f32(), size_t(a->numel()) * sizeof(float)) == 0);
   }
   // The packed size tracks the precision: bf16 GEMM/conv panels are half the fp32 ones (the fp32
-  // norm/bias vectors and panel padding keep it a little above half).
+  // norm/bias vectors and panel padding keep it a little above half) with the direct convs; the
+  // Winograd packs of the convs that get them are 16/9 of a direct pack, and are counted too.
   auto m32 = UNet2DConditionModel::load(dir.path + "/bf16", Precision::kF32);
+  const ConvWinograd mode = conv2d_set_winograd(ConvWinograd::kOff);
   auto m16 = UNet2DConditionModel::load(dir.path + "/bf16", Precision::kBf16);
-  REQUIRE((m32.is_ok() && m16.is_ok()));
+  conv2d_set_winograd(ConvWinograd::kAlways);
+  auto m16w = UNet2DConditionModel::load(dir.path + "/bf16", Precision::kBf16);
+  conv2d_set_winograd(mode);
+  REQUIRE((m32.is_ok() && m16.is_ok() && m16w.is_ok()));
   CHECK(double((*m16)->weight_bytes()) < 0.6 * double((*m32)->weight_bytes()));
+  CHECK((*m16w)->weight_bytes() > (*m16)->weight_bytes());
+  CHECK((*m16w)->weight_bytes() < (*m32)->weight_bytes());
   // An eager store (the default, for small loaders) owns converted copies; a lazy one owns none.
   WeightStoreOptions lazy;
   lazy.lazy = true;

@@ -49,7 +49,7 @@ size_t packed_bytes(const PackedWeights& w) {
 }
 
 size_t packed_bytes(const ConvWeights& w) {
-  return w.packed().bytes() + (w.has_bias() ? size_t(w.c_out()) * sizeof(float) : 0);
+  return w.bytes();  // the direct pack, the Winograd packs and the bias
 }
 
 void Workspace::reset(size_t mark) {
@@ -296,14 +296,18 @@ void Conv2d::pack(Precision p) {
   const float* bp = has_bias ? bv.data() : nullptr;
   // bf16: the conv kernel takes bf16 weights (packed from the rounded fp32 values) and rounds its
   // input itself; fp32 F32 files pack straight from the mapping.
+  // Only Downsample2D calls its conv at stride 2; every other conv keeps just the Winograd packs
+  // when it gets them (conv.h, stride1_only).
   if (weight_scale == 1.0f) {
     ParamF32 w(weight);
-    packed = ConvWeights::pack(w.data(), bp, c_out, c_in, k, k, weight_type(p));
+    packed = ConvWeights::pack(w.data(), bp, c_out, c_in, k, k, weight_type(p), active_isa(),
+                               !strided);
   } else {
     WidenedBuffer w(weight.numel());
     read_param_f32(weight, w.data());
     for (int64_t i = 0; i < w.size(); ++i) w.data()[i] *= weight_scale;
-    packed = ConvWeights::pack(w.data(), bp, c_out, c_in, k, k, weight_type(p));
+    packed = ConvWeights::pack(w.data(), bp, c_out, c_in, k, k, weight_type(p), active_isa(),
+                               !strided);
   }
   release_param(weight);
   weight = Param();
@@ -321,14 +325,15 @@ void Conv2d::forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t
 }
 
 void Conv2d::forward_scratch(const Run& r, float* x, int64_t n, int64_t h, int64_t w, float* y,
-                             const float* residual, int stride, int pt, int pl, int pb,
-                             int pr) const {
+                             const float* residual, int stride, int pt, int pl, int pb, int pr,
+                             int64_t row_origin) const {
   if (r.planning()) return;
   if (packed.type() != WeightType::kBf16) round_if_bf16(r, x, n * c_in * h * w);
   Conv2dShape s;
   s.n = n, s.c_in = c_in, s.h = h, s.w = w, s.c_out = c_out, s.kh = k, s.kw = k;
   s.stride = stride;
   s.pad_top = pt, s.pad_left = pl, s.pad_bottom = pb, s.pad_right = pr;
+  s.row_origin = row_origin;
   conv2d(s, x, packed, residual, y, r.pool);
 }
 
@@ -343,7 +348,7 @@ void Conv2d::forward_rows(const Run& r, const float* x, int64_t h, int64_t w, in
   else
     gather_rows(r, in, x, c_in, h, w, iy0, iy1);
   forward_scratch(r, in, 1, iy1 - iy0, w, y, residual, 1, int(hk - (y0 - iy0)), hk,
-                  int(hk - (iy1 - y1)), hk);
+                  int(hk - (iy1 - y1)), hk, y0);
 }
 
 // ---- norms -------------------------------------------------------------------------------------
@@ -548,6 +553,7 @@ void ResnetBlock2D::forward_lean(const Run& r, float* x, int64_t h, int64_t w, f
 
 void Downsample2D::init(int64_t channels, bool vae_pad) {
   conv.init(channels, channels, 3);
+  conv.strided = true;
   vae_padding = vae_pad;
 }
 
@@ -614,7 +620,7 @@ void Upsample2D::forward_lean(const Run& r, const float* x, int64_t c, int64_t h
         }
     });
     conv.forward_scratch(r, in, 1, n, ow, yb, nullptr, 1, int(1 - (y0 - iy0)), 1,
-                         int(1 - (iy1 - y1)), 1);
+                         int(1 - (iy1 - y1)), 1, y0);
     scatter_rows(r, out, yb, c, oh, ow, y0, y1);
   }
 }

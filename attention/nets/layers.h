@@ -152,6 +152,7 @@ struct Conv2d {
   int k = 3;
   bool has_bias = true;
   float weight_scale = 1.0f;  // folded into the packed weights (Difix skip gamma)
+  bool strided = false;       // called at stride 2 (Downsample2D): keep the direct pack
   Param weight, bias;
   ConvWeights packed;
 
@@ -164,8 +165,10 @@ struct Conv2d {
   // (forward_scratch: x is the caller's scratch and may be modified).
   void forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* y,
                const float* residual, int stride, int pt, int pl, int pb, int pr) const;
+  // row_origin: whole-image index of output row 0 when called for a band of rows (conv.h).
   void forward_scratch(const Run& r, float* x, int64_t n, int64_t h, int64_t w, float* y,
-                       const float* residual, int stride, int pt, int pl, int pb, int pr) const;
+                       const float* residual, int stride, int pt, int pl, int pb, int pr,
+                       int64_t row_origin = 0) const;
   // Same padding k/2 on all sides, stride 1.
   void forward_same(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* y,
                     const float* residual = nullptr) const {

@@ -311,6 +311,8 @@ Result<std::unique_ptr<UNet2DConditionModel>> UNet2DConditionModel::load(const s
   model->visit(*store);
   MACRO_TRY(store->finish());
   model->pack(precision);
+  release_widen_spare();     // the loading buffers kept between tensors
+  conv2d_release_scratch();
   return model;
 }
 

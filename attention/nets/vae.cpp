@@ -173,6 +173,8 @@ Result<std::unique_ptr<DifixVae>> DifixVae::load(const std::string& folder, Prec
   model->visit(*store);
   MACRO_TRY(store->finish());
   model->pack(precision);
+  release_widen_spare();     // the loading buffers kept between tensors
+  conv2d_release_scratch();
   return model;
 }
 

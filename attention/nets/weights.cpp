@@ -137,7 +137,20 @@ void release_param(const Param& p) {
   }
 }
 
-WidenedBuffer::WidenedBuffer(int64_t floats) : v_(size_t(floats)) {
+namespace {
+// The largest buffer a thread has widened into, kept for the next one: a loader widens tensor
+// after tensor, and a fresh buffer each time costs its page faults again. Freed by
+// release_widen_spare().
+thread_local std::vector<float> t_widen_spare;
+}  // namespace
+
+void release_widen_spare() {
+  std::vector<float>().swap(t_widen_spare);
+}
+
+WidenedBuffer::WidenedBuffer(int64_t floats) {
+  if (t_widen_spare.capacity() >= size_t(floats)) v_.swap(t_widen_spare);
+  v_.assign(size_t(floats), 0.0f);
   const size_t live = g_widened_live += v_.size() * sizeof(float);
   size_t peak = g_widened_peak.load();
   while (live > peak && !g_widened_peak.compare_exchange_weak(peak, live)) {
@@ -146,6 +159,7 @@ WidenedBuffer::WidenedBuffer(int64_t floats) : v_(size_t(floats)) {
 
 WidenedBuffer::~WidenedBuffer() {
   g_widened_live -= v_.size() * sizeof(float);
+  if (v_.capacity() > t_widen_spare.capacity()) v_.swap(t_widen_spare);
 }
 
 WidenStats widen_stats() {

@@ -84,6 +84,9 @@ struct WidenStats {
   size_t live_bytes = 0, peak_bytes = 0;
 };
 WidenStats widen_stats();
+// Frees the calling thread's spare widening buffer (kept between WidenedBuffers; loaders call
+// this when they are done).
+void release_widen_spare();
 void reset_widen_peak();  // peak := live
 
 // fp32 view of a parameter: `data` when bound to fp32, else widened into a WidenedBuffer.

@@ -237,10 +237,15 @@ const WinogradTransforms& winograd_transforms(Isa isa) {
   return winograd_scalar_transforms();
 }
 
+thread_local std::vector<float> t_pack_buffer;
+
 std::vector<PackedWeights> winograd_pack(const float* w, int64_t c_out, int64_t c_in, Isa isa) {
   const int64_t cin2 = (c_in + 1) / 2 * 2;
-  // u [xi][Cout][Cin2], zero for the pad channel.
-  std::vector<float> u(size_t(16 * c_out * cin2), 0.0f);
+  // u [xi][Cout][Cin2], zero for the pad channel. Kept per thread across packs (a network packs
+  // dozens of convs in a row; a fresh buffer each time costs its page faults again), freed by
+  // winograd_release_scratch().
+  std::vector<float>& u = t_pack_buffer;
+  u.assign(size_t(16 * c_out * cin2), 0.0f);
   for (int64_t co = 0; co < c_out; ++co)
     for (int64_t ci = 0; ci < c_in; ++ci) {
       const float* g = w + (co * c_in + ci) * 9;  // [3][3]
@@ -395,6 +400,7 @@ void conv2d_winograd(const Conv2dShape& s, const float* x, const ConvWeights& w,
 
 void winograd_release_scratch() {
   std::vector<Slot>().swap(t_slots);
+  std::vector<float>().swap(t_pack_buffer);
 }
 
 }  // namespace detail
