@@ -164,8 +164,9 @@ TEST_CASE("macro enhance --upsampler: pft-sr fails before rendering, names the w
   const std::string out = tmp.file("enhanced.png"), log = tmp.file("log.txt");
   const std::string base = test::macro_exe() + " enhance --scene-dir " + scene +
                            " --closeup closeup.png --quiet --out " + out;
-  CHECK(test::run_command(base + " --upsampler pft-sr --upsampler-weights /nowhere/pft 2> " +
-                          log) == 1);
+  // (--enhancer difix: the upsampler feeds the network; the transfer enhancer refuses pft-sr.)
+  CHECK(test::run_command(base + " --enhancer difix --upsampler pft-sr --upsampler-weights " +
+                          "/nowhere/pft 2> " + log) == 1);
   std::string msg;
   {
     std::FILE* f = std::fopen(log.c_str(), "rb");
