@@ -8,6 +8,7 @@
 
 #include "attention/runtime/safetensors.h"
 #include "enhance/resample.h"
+#include "enhance_fixture.h"
 #include "pft_reference.h"
 #include "test_support.h"
 
@@ -164,9 +165,11 @@ TEST_CASE("macro enhance --upsampler: pft-sr fails before rendering, names the w
   const std::string out = tmp.file("enhanced.png"), log = tmp.file("log.txt");
   const std::string base = test::macro_exe() + " enhance --scene-dir " + scene +
                            " --closeup closeup.png --quiet --out " + out;
-  // (--enhancer difix: the upsampler feeds the network; the transfer enhancer refuses pft-sr.)
-  CHECK(test::run_command(base + " --enhancer difix --upsampler pft-sr --upsampler-weights " +
-                          "/nowhere/pft 2> " + log) == 1);
+  // The upsampler feeds the network (the transfer enhancer refuses pft-sr): a tiny Difix
+  // pipeline gets past the network's own checks, so the missing PFT-SR files are what stops it.
+  const std::string pipe = test::make_tiny_pipeline(tmp);
+  CHECK(test::run_command(base + " --weights " + pipe + " --ctx " + tmp.file("ctx.safetensors") +
+                          " --upsampler pft-sr --upsampler-weights /nowhere/pft 2> " + log) == 1);
   std::string msg;
   {
     std::FILE* f = std::fopen(log.c_str(), "rb");
