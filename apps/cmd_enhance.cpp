@@ -36,8 +36,9 @@ constexpr const char* kUsage =
     "  without --weights, difix with it. --side-by-side writes render | enhanced | ground truth\n"
     "  (DIR/closeup_gt/FRAME when present, else render | enhanced).\n"
     "  --upsampler: how crops reach the model size: lanczos (Pillow-exact, the default) or pft-sr\n"
-    "  (the released super-resolution network; not available in this build, so it fails naming\n"
-    "  the weight files).\n";
+    "  (the released PFT-SR light network, x4/x2 passes then Lanczos; difix enhancer only). It\n"
+    "  reads 103_PFT_light_SRx4_finetune.pth and 101_PFT_light_SRx2_scratch.pth (or .safetensors)\n"
+    "  from --upsampler-weights DIR (default data/weights/pft-sr); docs/pft.md.\n";
 
 int run_enhance(std::vector<std::string> argv) {
   Args args(std::move(argv));
