@@ -68,9 +68,21 @@ AttentionArgs args_for(const Problem& p, std::vector<float>& out, const BlockSpa
   return a;
 }
 
+float round_bf16(float x) {
+  return bf16_to_f32(f32_to_bf16(x));
+}
+
 // Materialised scores in double; dense mask [nq, nk] (null = all allowed); empty rows -> 0.
-std::vector<float> reference(const Problem& p, const uint8_t* dense, bool causal) {
+// bf16: the reference of a bf16 request, the same maths on the kernel's rounded operands
+// (bf16(scale log2(e) Q), bf16(K), bf16(V)). What is left between this and the kernel is the
+// rounding of each probability to bf16 (relative <= 2^-8, so |out - ref| <= 2^-8 max|V| per
+// output) and fp32 accumulation.
+std::vector<float> reference(const Problem& p, const uint8_t* dense, bool causal,
+                             bool bf16 = false) {
   const size_t c = size_t(p.heads) * p.d;
+  const float s2 = p.scale * 1.4426950408889634f;  // scale log2(e), as the kernels pre-scale Q
+  auto rq = [&](float q) { return bf16 ? double(round_bf16(q * s2)) / s2 : double(q); };
+  auto rkv = [&](float x) { return bf16 ? double(round_bf16(x)) : double(x); };
   std::vector<float> out(size_t(p.nq) * c, 0.0f);
   std::vector<double> s(size_t(p.nk));
   for (int h = 0; h < p.heads; ++h)
@@ -85,7 +97,7 @@ std::vector<float> reference(const Problem& p, const uint8_t* dense, bool causal
         }
         const float* k = p.k() + size_t(j) * p.stride + size_t(h) * p.d;
         double acc = 0;
-        for (int e = 0; e < p.d; ++e) acc += double(q[e]) * k[e];
+        for (int e = 0; e < p.d; ++e) acc += rq(q[e]) * rkv(k[e]);
         s[size_t(j)] = acc * p.scale;
         mx = std::max(mx, s[size_t(j)]);
       }
@@ -95,50 +107,7 @@ std::vector<float> reference(const Problem& p, const uint8_t* dense, bool causal
       for (int e = 0; e < p.d; ++e) {
         double acc = 0;
         for (int j = 0; j < p.nk; ++j)
-          acc += s[size_t(j)] * p.v()[size_t(j) * p.stride + size_t(h) * p.d + e];
-        out[size_t(i) * c + size_t(h) * p.d + e] = float(acc / sum);
-      }
-    }
-  return out;
-}
-
-float round_bf16(float x) {
-  return bf16_to_f32(f32_to_bf16(x));
-}
-
-// The reference of a bf16 request: the double reference on the kernel's rounded operands
-// (bf16(scale log2(e) Q), bf16(K), bf16(V); scores in base 2). What is left between this and the
-// kernel is the rounding of each probability to bf16 (relative <= 2^-8, so |out - ref| <=
-// 2^-8 max|V| per output) and fp32 accumulation.
-std::vector<float> reference_bf16(const Problem& p, const uint8_t* dense, bool causal) {
-  const size_t c = size_t(p.heads) * p.d;
-  const double s2 = double(p.scale * 1.4426950408889634f);
-  std::vector<float> out(size_t(p.nq) * c, 0.0f);
-  std::vector<double> s(size_t(p.nk));
-  for (int h = 0; h < p.heads; ++h)
-    for (int i = 0; i < p.nq; ++i) {
-      const float* q = p.q() + size_t(i) * p.stride + size_t(h) * p.d;
-      double mx = -INFINITY;
-      for (int j = 0; j < p.nk; ++j) {
-        const bool ok = (!dense || dense[size_t(i) * p.nk + j]) && (!causal || j <= i);
-        if (!ok) {
-          s[size_t(j)] = -INFINITY;
-          continue;
-        }
-        const float* k = p.k() + size_t(j) * p.stride + size_t(h) * p.d;
-        double acc = 0;
-        for (int e = 0; e < p.d; ++e)
-          acc += double(round_bf16(q[e] * float(s2))) * round_bf16(k[e]);
-        s[size_t(j)] = acc;
-        mx = std::max(mx, acc);
-      }
-      if (mx == -INFINITY) continue;
-      double sum = 0;
-      for (int j = 0; j < p.nk; ++j) sum += s[size_t(j)] = std::exp2(s[size_t(j)] - mx);
-      for (int e = 0; e < p.d; ++e) {
-        double acc = 0;
-        for (int j = 0; j < p.nk; ++j)
-          acc += s[size_t(j)] * round_bf16(p.v()[size_t(j) * p.stride + size_t(h) * p.d + e]);
+          acc += s[size_t(j)] * rkv(p.v()[size_t(j) * p.stride + size_t(h) * p.d + e]);
         out[size_t(i) * c + size_t(h) * p.d + e] = float(acc / sum);
       }
     }
@@ -454,7 +423,7 @@ float max_abs_v(const Problem& p) {
 // (no bf16 products) must give exactly their fp32 result.
 void check_bf16_paths(const Problem& p, const BlockSparseMask* mask, const uint8_t* dense,
                       bool causal) {
-  const std::vector<float> ref = reference_bf16(p, dense, causal);
+  const std::vector<float> ref = reference(p, dense, causal, /*bf16=*/true);
   const std::vector<float> ref32 = reference(p, dense, causal);
   const double bound = std::ldexp(double(max_abs_v(p)), -8) + 1e-5;
   std::vector<float> twin;

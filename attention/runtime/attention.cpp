@@ -31,14 +31,50 @@ constexpr float kLog2e = 1.4426950408889634f;
 
 // ---- scalar twin ------------------------------------------------------------------------------
 
+// m = -inf, l = 0, O = 0 for the job's rows.
+void reset_rows(const BlockJob& job, const BlockScratch& sc) {
+  for (int r = 0; r < job.rows; ++r) {
+    sc.m[r] = -std::numeric_limits<float>::infinity();
+    sc.l[r] = 0;
+    std::fill(sc.o + size_t(r) * job.d, sc.o + size_t(r + 1) * job.d, 0.0f);
+  }
+}
+
+// Online-softmax update of one row's base-2 scores s[cols] in place (probabilities out); returns
+// alpha, the factor the row's accumulator must be rescaled by.
+float softmax_row(float* s, int cols, float& m, float& l) {
+  const float neg_inf = -std::numeric_limits<float>::infinity();
+  float mx = neg_inf;
+  for (int c = 0; c < cols; ++c) mx = std::max(mx, s[c]);
+  const float m_new = std::max(m, mx);
+  if (m_new == neg_inf) {
+    std::fill(s, s + cols, 0.0f);
+    return 1.0f;
+  }
+  const float alpha = std::exp2(m - m_new);
+  float sum = 0;
+  for (int c = 0; c < cols; ++c) {
+    s[c] = std::exp2(s[c] - m_new);
+    sum += s[c];
+  }
+  l = l * alpha + sum;
+  m = m_new;
+  return alpha;
+}
+
+// out = O / l, or 0 for a row that attended to nothing.
+void finish_rows(const BlockJob& job, const BlockScratch& sc) {
+  for (int r = 0; r < job.rows; ++r) {
+    const float inv = sc.l[r] > 0 ? 1.0f / sc.l[r] : 0.0f;
+    const float* o = sc.o + size_t(r) * job.d;
+    for (int i = 0; i < job.d; ++i) job.out_rows[r][i] = o[i] * inv;
+  }
+}
+
 void block_scalar(const BlockJob& job, const BlockScratch& sc) {
   const int d = job.d;
   const float neg_inf = -std::numeric_limits<float>::infinity();
-  for (int r = 0; r < job.rows; ++r) {
-    sc.m[r] = neg_inf;
-    sc.l[r] = 0;
-    std::fill(sc.o + size_t(r) * d, sc.o + size_t(r + 1) * d, 0.0f);
-  }
+  reset_rows(job, sc);
   const float* k_rows[kBK];
   for (int e = 0; e < job.entries; ++e) {
     const int kb = job.key_blocks[e];
@@ -58,22 +94,7 @@ void block_scalar(const BlockJob& job, const BlockScratch& sc) {
         for (int i = 0; i < d; ++i) acc += q[i] * k_rows[c][i];
         s[c] = (tile && !tile[tile_offset(r, c)]) ? neg_inf : acc * job.scale_log2e;
       }
-      float mx = neg_inf;
-      for (int c = 0; c < cols; ++c) mx = std::max(mx, s[c]);
-      const float m_new = std::max(sc.m[r], mx);
-      float alpha = 1;
-      if (m_new == neg_inf) {
-        std::fill(s, s + cols, 0.0f);
-      } else {
-        alpha = std::exp2(sc.m[r] - m_new);
-        float sum = 0;
-        for (int c = 0; c < cols; ++c) {
-          s[c] = std::exp2(s[c] - m_new);
-          sum += s[c];
-        }
-        sc.l[r] = sc.l[r] * alpha + sum;
-        sc.m[r] = m_new;
-      }
+      const float alpha = softmax_row(s, cols, sc.m[r], sc.l[r]);
       float* o = sc.o + size_t(r) * d;
       for (int i = 0; i < d; ++i) o[i] *= alpha;
       for (int c = 0; c < cols; ++c) {
@@ -83,11 +104,7 @@ void block_scalar(const BlockJob& job, const BlockScratch& sc) {
       }
     }
   }
-  for (int r = 0; r < job.rows; ++r) {
-    const float inv = sc.l[r] > 0 ? 1.0f / sc.l[r] : 0.0f;
-    const float* o = sc.o + size_t(r) * d;
-    for (int i = 0; i < d; ++i) job.out_rows[r][i] = o[i] * inv;
-  }
+  finish_rows(job, sc);
 }
 
 void blocks_scalar(const BlockJob* jobs, int count, const BlockScratch* scratch) {
@@ -115,12 +132,9 @@ void block_scalar_bf16(const BlockJob& job, const BlockScratch& sc) {
   const float neg_inf = -std::numeric_limits<float>::infinity();
   auto r16 = [](float x) { return bf16_to_f32(f32_to_bf16(x)); };
   float* qr = sc.qt;  // [BQ, D] rounded, pre-scaled Q
-  for (int r = 0; r < job.rows; ++r) {
-    sc.m[r] = neg_inf;
-    sc.l[r] = 0;
-    std::fill(sc.o + size_t(r) * d, sc.o + size_t(r + 1) * d, 0.0f);
+  reset_rows(job, sc);
+  for (int r = 0; r < job.rows; ++r)
     for (int i = 0; i < d; ++i) qr[size_t(r) * d + i] = r16(job.q_rows[r][i] * job.scale_log2e);
-  }
   const uint16_t* k_rows[kBK];
   const uint16_t* v_rows[kBK];
   float p[kBK + 1];
@@ -140,22 +154,7 @@ void block_scalar_bf16(const BlockJob& job, const BlockScratch& sc) {
       for (int c = 0; c < cols; ++c) {
         s[c] = (tile && !tile[tile_offset(r, c)]) ? neg_inf : dot_pairs(q, k_rows[c], d);
       }
-      float mx = neg_inf;
-      for (int c = 0; c < cols; ++c) mx = std::max(mx, s[c]);
-      const float m_new = std::max(sc.m[r], mx);
-      float alpha = 1;
-      if (m_new == neg_inf) {
-        std::fill(s, s + cols, 0.0f);
-      } else {
-        alpha = std::exp2(sc.m[r] - m_new);
-        float sum = 0;
-        for (int c = 0; c < cols; ++c) {
-          s[c] = std::exp2(s[c] - m_new);
-          sum += s[c];
-        }
-        sc.l[r] = sc.l[r] * alpha + sum;
-        sc.m[r] = m_new;
-      }
+      const float alpha = softmax_row(s, cols, sc.m[r], sc.l[r]);
       for (int c = 0; c < cols; ++c) p[c] = r16(s[c]);
       p[cols] = 0;
       float* o = sc.o + size_t(r) * d;
@@ -170,11 +169,7 @@ void block_scalar_bf16(const BlockJob& job, const BlockScratch& sc) {
       }
     }
   }
-  for (int r = 0; r < job.rows; ++r) {
-    const float inv = sc.l[r] > 0 ? 1.0f / sc.l[r] : 0.0f;
-    const float* o = sc.o + size_t(r) * d;
-    for (int i = 0; i < d; ++i) job.out_rows[r][i] = o[i] * inv;
-  }
+  finish_rows(job, sc);
 }
 
 void blocks_scalar_bf16(const BlockJob* jobs, int count, const BlockScratch* scratch) {
