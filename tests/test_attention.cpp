@@ -114,12 +114,7 @@ std::vector<float> reference(const Problem& p, const uint8_t* dense, bool causal
   return out;
 }
 
-std::vector<Isa> supported_isas() {
-  std::vector<Isa> v;
-  for (Isa i : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512, Isa::kAvx512Bf16})
-    if (isa_supported(i)) v.push_back(i);
-  return v;
-}
+using test::supported_isas;
 
 // Runs every supported path, checks against the reference and the scalar twin, returns the
 // scalar result.

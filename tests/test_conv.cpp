@@ -17,25 +17,14 @@
 namespace macro {
 namespace {
 
-std::vector<Isa> supported_isas() {
-  std::vector<Isa> v;
-  for (Isa isa : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512, Isa::kAvx512Bf16, Isa::kAmx})
-    if (isa_supported(isa)) v.push_back(isa);
-  return v;
-}
+using test::supported_isas;
 
 struct IsaGuard {
   Isa saved = active_isa();
   ~IsaGuard() { (void)set_isa(saved); }
 };
 
-std::vector<float> random_vec(size_t n, uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> d(-1.0f, 1.0f);
-  std::vector<float> v(n);
-  for (float& x : v) x = d(rng);
-  return v;
-}
+using test::random_vec;
 
 double max_rel_err(const std::vector<float>& y, const std::vector<float>& ref) {
   double mx = 0, mref = 1e-30;

@@ -25,12 +25,7 @@
 namespace macro {
 namespace {
 
-std::vector<Isa> supported_isas() {
-  std::vector<Isa> v;
-  for (Isa isa : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512, Isa::kAvx512Bf16, Isa::kAmx})
-    if (isa_supported(isa)) v.push_back(isa);
-  return v;
-}
+using test::supported_isas;
 
 struct ModeGuard {
   Isa isa = active_isa();
@@ -45,13 +40,7 @@ struct ModeGuard {
   }
 };
 
-std::vector<float> random_vec(size_t n, uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> d(-1.0f, 1.0f);
-  std::vector<float> v(n);
-  for (float& x : v) x = d(rng);
-  return v;
-}
+using test::random_vec;
 
 Conv2dShape shape(int64_t n, int64_t ci, int64_t h, int64_t w, int64_t co, int pad) {
   return Conv2dShape::make(n, ci, h, w, co, 3, 1, pad);

@@ -30,12 +30,7 @@ const Shape kShapes[] = {{1, 1, 1},     {1, 17, 3},     {13, 1, 29},    {15, 33,
                          {3, 64, 700},  {43, 129, 64},  {601, 45, 70}};  // M >= 3 row blocks: B
                                                                          // packed once per call
 
-std::vector<Isa> supported_isas() {
-  std::vector<Isa> v;
-  for (Isa isa : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512, Isa::kAvx512Bf16, Isa::kAmx})
-    if (isa_supported(isa)) v.push_back(isa);
-  return v;
-}
+using test::supported_isas;
 
 // Restores the process's path when a test section ends.
 struct IsaGuard {

@@ -9,8 +9,11 @@
 #include <cstdlib>
 #include <algorithm>
 #include <filesystem>
+#include <random>
 #include <string>
 #include <vector>
+
+#include "attention/runtime/cpu.h"
 
 namespace macro::test {
 
@@ -72,6 +75,23 @@ inline Diff compare(const std::vector<float>& a, const std::vector<float>& b) {
 inline int run_command(const std::string& cmd) {
   int rc = std::system(cmd.c_str());
   return WIFEXITED(rc) ? WEXITSTATUS(rc) : 255;
+}
+
+// Every instruction-set path this machine runs (the ISA-twin tests loop over them).
+inline std::vector<Isa> supported_isas() {
+  std::vector<Isa> v;
+  for (Isa isa : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512, Isa::kAvx512Bf16, Isa::kAmx})
+    if (isa_supported(isa)) v.push_back(isa);
+  return v;
+}
+
+// n uniform values in [-1, 1) from a seeded generator.
+inline std::vector<float> random_vec(size_t n, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> d(-1.0f, 1.0f);
+  std::vector<float> v(n);
+  for (float& x : v) x = d(rng);
+  return v;
 }
 
 }  // namespace macro::test

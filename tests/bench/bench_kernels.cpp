@@ -23,14 +23,6 @@
 namespace macro::bench {
 namespace {
 
-std::vector<float> random_vec(size_t n, uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> d(-1.0f, 1.0f);
-  std::vector<float> v(n);
-  for (float& x : v) x = d(rng);
-  return v;
-}
-
 // The machine is shared with builds, so every measurement records both the wall time and the
 // process CPU time (all threads); rates per CPU-second show the kernels' efficiency on the cores
 // they actually got, rates per wall-second what a user would see. Both are medians.

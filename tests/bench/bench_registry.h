@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <functional>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -48,6 +49,15 @@ inline std::string golden_root() {
     if (std::filesystem::is_directory(p, ec)) return std::filesystem::weakly_canonical(p).string();
   }
   return exe_dir() + "/../../shared/golden";
+}
+
+// n uniform values in [-1, 1) from a seeded generator (benchmark inputs).
+inline std::vector<float> random_vec(size_t n, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> d(-1.0f, 1.0f);
+  std::vector<float> v(n);
+  for (float& x : v) x = d(rng);
+  return v;
 }
 
 inline double now_seconds() {
