@@ -9,11 +9,11 @@
 #include <cstdlib>
 #include <algorithm>
 #include <filesystem>
-#include <random>
 #include <string>
 #include <vector>
 
 #include "attention/runtime/cpu.h"
+#include "tests/test_random.h"
 
 namespace macro::test {
 
@@ -82,15 +82,6 @@ inline std::vector<Isa> supported_isas() {
   std::vector<Isa> v;
   for (Isa isa : {Isa::kScalar, Isa::kAvx2, Isa::kAvx512, Isa::kAvx512Bf16, Isa::kAmx})
     if (isa_supported(isa)) v.push_back(isa);
-  return v;
-}
-
-// n uniform values in [-1, 1) from a seeded generator.
-inline std::vector<float> random_vec(size_t n, uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> d(-1.0f, 1.0f);
-  std::vector<float> v(n);
-  for (float& x : v) x = d(rng);
   return v;
 }
 

@@ -9,11 +9,11 @@
 #include <cstdlib>
 #include <filesystem>
 #include <functional>
-#include <random>
 #include <string>
 #include <vector>
 
 #include "attention/runtime/thread_pool.h"
+#include "tests/test_random.h"
 
 namespace macro::bench {
 
@@ -51,14 +51,7 @@ inline std::string golden_root() {
   return exe_dir() + "/../../shared/golden";
 }
 
-// n uniform values in [-1, 1) from a seeded generator (benchmark inputs).
-inline std::vector<float> random_vec(size_t n, uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> d(-1.0f, 1.0f);
-  std::vector<float> v(n);
-  for (float& x : v) x = d(rng);
-  return v;
-}
+using test::random_vec;  // benchmark inputs (tests/test_random.h)
 
 inline double now_seconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
