@@ -351,20 +351,23 @@ TEST_CASE("attention is bit-identical across thread counts", "[attention][thread
   std::vector<uint8_t> dense = random_dense(300, 260, 0.4, 42);
   auto mask = mask_from_dense(dense.data(), 300, 260, 0, true);
   REQUIRE(mask.is_ok());
-  for (Isa isa : supported_isas()) {
-    std::vector<float> first;
-    for (int threads : {1, 2, 3}) {
-      ThreadPool pool(threads);
-      std::vector<float> out;
-      REQUIRE(attention_with_isa(args_for(p, out, &*mask), isa, pool).is_ok());
-      if (first.empty()) {
-        first = out;
-      } else {
-        INFO(isa_name(isa) << " threads " << threads);
-        CHECK(std::memcmp(first.data(), out.data(), out.size() * sizeof(float)) == 0);
+  for (bool bf16 : {false, true})
+    for (Isa isa : supported_isas()) {
+      std::vector<float> first;
+      for (int threads : {1, 2, 3}) {
+        ThreadPool pool(threads);
+        std::vector<float> out;
+        AttentionArgs a = args_for(p, out, &*mask);
+        a.bf16 = bf16;
+        REQUIRE(attention_with_isa(a, isa, pool).is_ok());
+        if (first.empty()) {
+          first = out;
+        } else {
+          INFO(isa_name(isa) << (bf16 ? " bf16" : " fp32") << " threads " << threads);
+          CHECK(std::memcmp(first.data(), out.data(), out.size() * sizeof(float)) == 0);
+        }
       }
     }
-  }
 }
 
 TEST_CASE("attention and mask builders reject bad arguments with named errors",
@@ -482,27 +485,4 @@ TEST_CASE("bf16 attention with block-sparse, reordered and causal masks", "[atte
     }
   }
   check_bf16_paths(make_problem(77, 77, 2, 32, seed++), nullptr, nullptr, true);
-}
-
-TEST_CASE("bf16 attention is bit-identical across thread counts", "[attention][bf16][threads]") {
-  Problem p = make_problem(300, 260, 3, 64, 141);
-  std::vector<uint8_t> dense = random_dense(300, 260, 0.4, 142);
-  auto mask = mask_from_dense(dense.data(), 300, 260, 0, true);
-  REQUIRE(mask.is_ok());
-  for (Isa isa : supported_isas()) {
-    std::vector<float> first;
-    for (int threads : {1, 2, 3}) {
-      ThreadPool pool(threads);
-      std::vector<float> out;
-      AttentionArgs a = args_for(p, out, &*mask);
-      a.bf16 = true;
-      REQUIRE(attention_with_isa(a, isa, pool).is_ok());
-      if (first.empty()) {
-        first = out;
-      } else {
-        INFO(isa_name(isa) << " threads " << threads);
-        CHECK(std::memcmp(first.data(), out.data(), out.size() * sizeof(float)) == 0);
-      }
-    }
-  }
 }
