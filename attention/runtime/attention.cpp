@@ -80,12 +80,7 @@ void block_scalar(const BlockJob& job, const BlockScratch& sc) {
     const int kb = job.key_blocks[e];
     const int cols = std::min(kBK, job.nk - kb * kBK);
     const uint8_t* tile = job.tiles[e];
-    for (int c = 0; c < cols; ++c) {
-      const int col = kb * kBK + c;
-      const size_t j = job.key_index ? size_t(job.key_index[col]) : size_t(col);
-      k_rows[c] = job.k + j * job.k_stride;
-      sc.v_rows[c] = job.v + j * job.v_stride;
-    }
+    key_block_rows(job, kb, cols, job.k, job.v, job.k_stride, job.v_stride, k_rows, sc.v_rows);
     for (int r = 0; r < job.rows; ++r) {
       float* s = sc.s + size_t(r) * kBK;
       const float* q = job.q_rows[r];
@@ -142,12 +137,8 @@ void block_scalar_bf16(const BlockJob& job, const BlockScratch& sc) {
     const int kb = job.key_blocks[e];
     const int cols = std::min(kBK, job.nk - kb * kBK);
     const uint8_t* tile = job.tiles[e];
-    for (int c = 0; c < cols; ++c) {
-      const int col = kb * kBK + c;
-      const size_t j = job.key_index ? size_t(job.key_index[col]) : size_t(col);
-      k_rows[c] = job.k16 + j * job.kv16_stride;
-      v_rows[c] = job.v16 + j * job.kv16_stride;
-    }
+    key_block_rows(job, kb, cols, job.k16, job.v16, job.kv16_stride, job.kv16_stride, k_rows,
+                   v_rows);
     for (int r = 0; r < job.rows; ++r) {
       float* s = sc.s + size_t(r) * kBK;
       const float* q = qr + size_t(r) * d;

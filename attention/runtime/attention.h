@@ -95,6 +95,20 @@ struct BlockJob {
   size_t kv16_stride = 0;
 };
 
+// Row pointers of key block kb (`cols` keys, mask column order through job.key_index) from the
+// head-slice bases k, v of one element type (fp32 rows or their bf16 copies).
+template <typename Row>
+inline void key_block_rows(const BlockJob& job, int kb, int cols, const Row* k, const Row* v,
+                           size_t k_stride, size_t v_stride, const Row** k_rows,
+                           const Row** v_rows) {
+  for (int c = 0; c < cols; ++c) {
+    const int col = kb * kAttnBlockK + c;
+    const size_t j = job.key_index ? size_t(job.key_index[col]) : size_t(col);
+    k_rows[c] = k + j * k_stride;
+    v_rows[c] = v + j * v_stride;
+  }
+}
+
 // Per-thread scratch, 64-byte aligned.
 struct BlockScratch {
   float* qt = nullptr;     // [D, BQ]  packed, pre-scaled Q^T of the query block

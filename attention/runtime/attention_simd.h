@@ -270,12 +270,7 @@ void blocks_walk(const BlockJob* jobs, int count, const BlockScratch* scratch) {
   const size_t ks = Kern::k_stride(j0), vs = Kern::v_stride(j0);
   for (int kb = next_block(pos); kb != INT32_MAX;) {
     const int cols = std::min(kTileK, j0.nk - kb * kTileK);
-    for (int c = 0; c < cols; ++c) {
-      const int col = kb * kTileK + c;
-      const size_t j = j0.key_index ? size_t(j0.key_index[col]) : size_t(col);
-      k_rows[c] = kbase + j * ks;
-      v_rows[c] = vbase + j * vs;
-    }
+    key_block_rows(j0, kb, cols, kbase, vbase, ks, vs, k_rows, v_rows);
     for (int g = 0; g < count; ++g)
       if (pos[g] < jobs[g].entries && jobs[g].key_blocks[pos[g]] == kb) ++pos[g];
     const int next = next_block(pos);

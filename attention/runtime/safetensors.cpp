@@ -70,16 +70,6 @@ Result<json> parse_json_strict(const std::string& text) {
   return j;
 }
 
-std::string shape_text(const std::vector<int64_t>& s) {
-  std::string t = "[";
-  for (size_t i = 0; i < s.size(); ++i) {
-    if (i) t += ',';
-    t += std::to_string(s[i]);
-  }
-  t += ']';
-  return t;
-}
-
 std::string dir_of(const std::string& path) {
   size_t p = path.find_last_of('/');
   return p == std::string::npos ? std::string(".") : path.substr(0, p);
@@ -91,6 +81,16 @@ bool ends_with(const std::string& s, const std::string& suffix) {
 }
 
 }  // namespace
+
+std::string shape_text(const std::vector<int64_t>& s) {
+  std::string t = "[";
+  for (size_t i = 0; i < s.size(); ++i) {
+    if (i) t += ',';
+    t += std::to_string(s[i]);
+  }
+  t += ']';
+  return t;
+}
 
 const char* dtype_name(DType dtype) {
   switch (dtype) {

@@ -24,6 +24,7 @@ enum class DType { kF32, kF16, kBF16, kI32, kI64, kU8, kI8, kBool, kF64 };
 
 const char* dtype_name(DType dtype);  // safetensors spelling: "F32", "BF16", ...
 size_t dtype_size(DType dtype);
+std::string shape_text(const std::vector<int64_t>& shape);  // "[2,3]", for messages
 Result<DType> parse_dtype(const std::string& name);
 
 // A tensor inside a mapped file (valid while the file object lives).

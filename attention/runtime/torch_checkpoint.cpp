@@ -44,16 +44,6 @@ bool add_overflow(uint64_t a, uint64_t b, uint64_t* out) {
   return __builtin_add_overflow(a, b, out);
 }
 
-std::string shape_text(const std::vector<int64_t>& s) {
-  std::string t = "[";
-  for (size_t i = 0; i < s.size(); ++i) {
-    if (i) t += ',';
-    t += std::to_string(s[i]);
-  }
-  t += ']';
-  return t;
-}
-
 // ---------------------------------------------------------------------------------------------
 // Memory held by a checkpoint: the mapping (when read from a file) and owned copies.
 
@@ -129,7 +119,7 @@ Status Reader::resolve_record(Record& e) {
     if (!e.bytes) e.bytes = base_ + e.data_offset;
     return Status::ok();
   }
-  const std::string rec = file_ + ": record '" + printable(e.name) + "'";
+  const std::string rec = file_ + ": record '" + printable_name(e.name) + "'";
   if (e.method == 0) {
     e.bytes = base_ + e.data_offset;
     return Status::ok();
@@ -138,7 +128,7 @@ Status Reader::resolve_record(Record& e) {
   if (e.size > resource_limits().max_tensor_bytes)
     return Status::error(rec + ": " + num(e.size) + " bytes exceeds the limit of " +
                          num(resource_limits().max_tensor_bytes) + " (--max-tensor-bytes)");
-  MACRO_ASSIGN_OR_RETURN(uint8_t * out, allocate(e.size, "record '" + printable(e.name) + "'"));
+  MACRO_ASSIGN_OR_RETURN(uint8_t * out, allocate(e.size, "record '" + printable_name(e.name) + "'"));
   MACRO_TRY(inflate_zip_record(base_, e, out, file_));
   e.bytes = out;
   return Status::ok();
@@ -146,7 +136,7 @@ Status Reader::resolve_record(Record& e) {
 
 Result<TensorEntry> Reader::make_tensor(const Unpickler& vm, const Obj& t,
                                         const std::string& name) {
-  const std::string where = file_ + ": tensor '" + printable(name, 200) + "'";
+  const std::string where = file_ + ": tensor '" + printable_name(name, 200) + "'";
   const Obj& st = vm.obj(t.storage);
   const Obj& off = vm.obj(t.offset);
   const Obj& shape_o = vm.obj(t.shape);
@@ -204,7 +194,7 @@ Result<TensorEntry> Reader::make_tensor(const Unpickler& vm, const Obj& t,
   if (last >= storage_numel)
     return Status::error(where + ": size " + shape_text(e.shape) + ", stride " +
                          shape_text(stride) + ", offset " + num(uint64_t(off.i)) +
-                         " reach element " + num(last) + " of storage '" + printable(st.s) +
+                         " reach element " + num(last) + " of storage '" + printable_name(st.s) +
                          "', which holds " + num(storage_numel));
   Record& rec = entries_[st.record];
   MACRO_TRY(resolve_record(rec));
@@ -220,7 +210,7 @@ Result<TensorEntry> Reader::make_tensor(const Unpickler& vm, const Obj& t,
     e.data = src;
     return e;
   }
-  MACRO_ASSIGN_OR_RETURN(uint8_t * dst, allocate(nbytes, "tensor '" + printable(name) + "'"));
+  MACRO_ASSIGN_OR_RETURN(uint8_t * dst, allocate(nbytes, "tensor '" + printable_name(name) + "'"));
   // Gather in row-major order with an odometer over the dims.
   const size_t nd = e.shape.size();
   std::vector<int64_t> idx(nd, 0);
@@ -244,18 +234,18 @@ Status Reader::flatten(const Unpickler& vm, ObjId id, const std::string& name, i
                        TorchCheckpoint* out, std::set<std::string>* seen) {
   const Obj& o = vm.obj(id);
   if (visits_left_-- == 0)
-    return Status::error(file_ + ": '" + printable(name, 200) +
+    return Status::error(file_ + ": '" + printable_name(name, 200) +
                          "': the pickle's shared references expand to more entries than it has "
                          "objects (" + num(vm.object_count()) + "); not a state dict");
   if (depth > kMaxNesting)
-    return Status::error(file_ + ": '" + printable(name, 200) + "': nested deeper than " +
+    return Status::error(file_ + ": '" + printable_name(name, 200) + "': nested deeper than " +
                          num(kMaxNesting) + " levels");
   auto child = [&](const std::string& k) { return name.empty() ? k : name + "." + k; };
   switch (o.kind) {
     case Kind::kTensor: {
       MACRO_ASSIGN_OR_RETURN(TensorEntry e, make_tensor(vm, o, name));
       if (!seen->insert(name).second)
-        return Status::error(file_ + ": tensor '" + printable(name, 200) + "' appears twice");
+        return Status::error(file_ + ": tensor '" + printable_name(name, 200) + "' appears twice");
       out->tensors.push_back(std::move(e));
       return Status::ok();
     }
@@ -268,7 +258,7 @@ Status Reader::flatten(const Unpickler& vm, ObjId id, const std::string& name, i
         } else if (key.kind == Kind::kInt) {
           ks = std::to_string(key.i);
         } else {
-          return Status::error(file_ + ": '" + printable(name, 200) +
+          return Status::error(file_ + ": '" + printable_name(name, 200) +
                                "': a dict key is neither a string nor an integer");
         }
         MACRO_TRY(flatten(vm, o.items[k + 1], child(ks), depth + 1, out, seen));
@@ -312,7 +302,7 @@ Result<TorchCheckpoint> Reader::read(const std::string& key) {
   if (prefix.empty()) {
     std::string names;
     for (size_t i = 0; i < entries_.size() && i < 5; ++i)
-      names += (i ? ", " : "") + printable(entries_[i].name);
+      names += (i ? ", " : "") + printable_name(entries_[i].name);
     return Status::error(file_ + ": no '<folder>/data.pkl' record, not a torch.save checkpoint" +
                          (names.empty() ? std::string(" (empty archive)")
                                         : " (records: " + names + ")"));
@@ -327,7 +317,7 @@ Result<TorchCheckpoint> Reader::read(const std::string& key) {
     std::string order(reinterpret_cast<const char*>(entries_[bo].bytes),
                       std::min<uint64_t>(entries_[bo].size, 16));
     if (order != "little")
-      return Status::error(file_ + ": record '" + prefix + "/byteorder' is '" + printable(order) +
+      return Status::error(file_ + ": record '" + prefix + "/byteorder' is '" + printable_name(order) +
                            "', only little-endian checkpoints are supported");
   }
   Record& pkl = entries_[vm.record_index(prefix + "/data.pkl")];
@@ -362,7 +352,7 @@ Result<TorchCheckpoint> Reader::read(const std::string& key) {
         t += ", ...";
         break;
       }
-      t += (t.empty() ? "'" : ", '") + printable(ko.s) + "'";
+      t += (t.empty() ? "'" : ", '") + printable_name(ko.s) + "'";
     }
     return t.empty() ? std::string("none") : t;
   };
@@ -370,7 +360,7 @@ Result<TorchCheckpoint> Reader::read(const std::string& key) {
   if (!key.empty()) {
     selected = lookup(key);
     if (selected == UINT32_MAX)
-      return Status::error(file_ + ": key '" + printable(key) + "' not found (top-level keys: " +
+      return Status::error(file_ + ": key '" + printable_name(key) + "' not found (top-level keys: " +
                            root_keys() + ")");
     out.selected_key = key;
   } else {
@@ -400,7 +390,7 @@ Result<TorchCheckpoint> Reader::read(const std::string& key) {
   if (out.tensors.empty())
     return Status::error(file_ + ": no tensors found" +
                          (out.selected_key.empty() ? std::string()
-                                                   : " under key '" + printable(out.selected_key) +
+                                                   : " under key '" + printable_name(out.selected_key) +
                                                          "'") +
                          " (top-level keys: " + root_keys() + ")");
   out.owner = owner_;

@@ -71,7 +71,7 @@ Result<ObjId> Unpickler::resolve_global(const std::string& module, const std::st
       return make(std::move(o));
     }
   }
-  return fail("global '" + printable(module) + "." + printable(name) +
+  return fail("global '" + printable_name(module) + "." + printable_name(name) +
               "' is not allowed (a checkpoint may only reference collections.OrderedDict, "
               "torch tensor rebuild functions, storage classes and dtypes; nothing is executed)");
 }
@@ -102,15 +102,15 @@ Result<ObjId> Unpickler::persistent_load(ObjId pid) {
   const std::string record = prefix_ + "/data/" + k;
   const size_t idx = record_index(record);
   if (idx == SIZE_MAX)
-    return fail("storage '" + printable(k) + "' refers to record '" + printable(record) +
+    return fail("storage '" + printable_name(k) + "' refers to record '" + printable_name(record) +
                 "', which the archive does not contain");
   const DType dtype = type.dtype;
   uint64_t nbytes = 0;
   if (mul_overflow(uint64_t(count.i), dtype_size(dtype), &nbytes) ||
       nbytes != (*entries_)[idx].size)
-    return fail("storage '" + printable(k) + "': " + num(uint64_t(count.i)) + " elements of " +
+    return fail("storage '" + printable_name(k) + "': " + num(uint64_t(count.i)) + " elements of " +
                 dtype_name(dtype) + " need " + num(nbytes) + " bytes, record '" +
-                printable(record) + "' holds " + num((*entries_)[idx].size));
+                printable_name(record) + "' holds " + num((*entries_)[idx].size));
   Obj o;
   o.kind = Kind::kStorage;
   o.dtype = dtype;

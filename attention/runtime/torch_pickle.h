@@ -29,23 +29,6 @@ inline bool mul_overflow(uint64_t a, uint64_t b, uint64_t* out) {
 
 inline std::string num(uint64_t v) { return std::to_string(v); }
 
-// Printable form of a name from the file (globals, keys) for messages.
-inline std::string printable(const std::string& s, size_t max = 80) {
-  std::string out;
-  for (size_t i = 0; i < s.size() && i < max; ++i) {
-    unsigned char c = static_cast<unsigned char>(s[i]);
-    if (c >= 32 && c < 127) {
-      out.push_back(char(c));
-    } else {
-      char buf[8];
-      std::snprintf(buf, sizeof buf, "\\x%02x", c);
-      out += buf;
-    }
-  }
-  if (s.size() > max) out += "...";
-  return out;
-}
-
 enum class Kind : uint8_t {
   kNone, kBool, kInt, kBigInt, kFloat, kStr, kBytes, kTuple, kList, kDict, kGlobal, kStorage,
   kTensor

@@ -22,10 +22,11 @@ bool add_overflow(uint64_t a, uint64_t b, uint64_t* out) {
 
 std::string num(uint64_t v) { return std::to_string(v); }
 
-// A record name from the file, printable in messages.
-std::string printable(const std::string& s) {
+}  // namespace
+
+std::string printable_name(const std::string& s, size_t max) {
   std::string out;
-  for (size_t i = 0; i < s.size() && i < 120; ++i) {
+  for (size_t i = 0; i < s.size() && i < max; ++i) {
     const unsigned char c = static_cast<unsigned char>(s[i]);
     if (c >= 32 && c < 127) {
       out.push_back(char(c));
@@ -35,11 +36,9 @@ std::string printable(const std::string& s) {
       out += buf;
     }
   }
-  if (s.size() > 120) out += "...";
+  if (s.size() > max) out += "...";
   return out;
 }
-
-}  // namespace
 
 Result<std::vector<ZipEntry>> read_zip_directory(const uint8_t* base, uint64_t n,
                                                  const std::string& file) {
@@ -104,7 +103,7 @@ Result<std::vector<ZipEntry>> read_zip_directory(const uint8_t* base, uint64_t n
       return Status::error(where + ": central directory entry " + num(i) + " runs past the directory");
     ZipEntry z;
     z.name.assign(reinterpret_cast<const char*>(c + 46), name_len);
-    const std::string rec = where + ": record '" + printable(z.name) + "'";
+    const std::string rec = where + ": record '" + printable_name(z.name) + "'";
     // zip64 extra field: the 64-bit values of the fields saturated at 0xFFFFFFFF, in this order.
     const uint8_t* x = c + 46 + name_len;
     const uint8_t* x_end = x + extra_len;
@@ -169,7 +168,7 @@ uint32_t zip_crc32(const uint8_t* data, uint64_t n) {
 Status check_inflated_size(const ZipEntry& e, const std::string& file) {
   uint64_t max_out = 0;
   if (__builtin_mul_overflow(e.comp_size, kMaxDeflateRatio, &max_out) || e.size > max_out + 1024)
-    return Status::error(file + ": record '" + printable(e.name) + "': claims " + num(e.size) +
+    return Status::error(file + ": record '" + printable_name(e.name) + "': claims " + num(e.size) +
                          " bytes inflated from " + num(e.comp_size) +
                          " compressed, more than deflate can produce");
   return Status::ok();
@@ -177,7 +176,7 @@ Status check_inflated_size(const ZipEntry& e, const std::string& file) {
 
 Status inflate_zip_record(const uint8_t* base, const ZipEntry& e, uint8_t* out,
                           const std::string& file) {
-  const std::string rec = file + ": record '" + printable(e.name) + "'";
+  const std::string rec = file + ": record '" + printable_name(e.name) + "'";
   z_stream zs;
   std::memset(&zs, 0, sizeof zs);
   if (inflateInit2(&zs, -MAX_WBITS) != Z_OK) return Status::error(rec + ": zlib init failed");

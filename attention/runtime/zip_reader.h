@@ -41,6 +41,10 @@ Status check_inflated_size(const ZipEntry& e, const std::string& file);
 Status inflate_zip_record(const uint8_t* base, const ZipEntry& e, uint8_t* dst,
                           const std::string& file);
 
+// A name read from a file (a record, a pickle global or key) made printable for messages: bytes
+// outside printable ASCII become \xNN, and more than `max` bytes end in "...".
+std::string printable_name(const std::string& s, size_t max = 120);
+
 // CRC-32 (zip's) of n bytes.
 uint32_t zip_crc32(const uint8_t* data, uint64_t n);
 
