@@ -1,13 +1,13 @@
-// macro bench run|merge|report: the evaluation harness (enhance/bench_harness.h) and its tables and
-// charts (enhance/bench_report.h). docs/benchmark.md describes the protocol and the files.
+// macro bench run|merge|report: the evaluation harness (enhance/bench/bench_harness.h) and its tables and
+// charts (enhance/bench/bench_report.h). docs/benchmark.md describes the protocol and the files.
 #include <cstdio>
 #include <sstream>
 
 #include "apps/args.h"
 #include "apps/bench_commands.h"
 #include "attention/runtime/file_io.h"
-#include "enhance/bench_harness.h"
-#include "enhance/bench_report.h"
+#include "enhance/bench/bench_harness.h"
+#include "enhance/bench/bench_report.h"
 
 namespace macro::cli {
 

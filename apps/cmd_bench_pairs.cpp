@@ -1,5 +1,5 @@
 // macro bench pairs: a COLMAP scene -> a close-up split JSON (the paper's appendix D), readable by
-// `macro bench run`. The construction is enhance/pair_construction.h; docs/benchmark.md
+// `macro bench run`. The construction is enhance/datasets/pair_construction.h; docs/benchmark.md
 // "Pair construction" describes it.
 #include <cerrno>
 #include <cmath>
@@ -10,7 +10,7 @@
 #include "apps/args.h"
 #include "apps/bench_commands.h"
 #include "attention/runtime/progress.h"
-#include "enhance/pair_construction.h"
+#include "enhance/datasets/pair_construction.h"
 
 namespace macro::cli {
 namespace {

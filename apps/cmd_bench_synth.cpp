@@ -1,4 +1,4 @@
-// macro bench synth: the SynthClose benchmark (enhance/synth_close.h) written as DL3DV-Closeup
+// macro bench synth: the SynthClose benchmark (enhance/datasets/synth_close.h) written as DL3DV-Closeup
 // scene folders, ready for `macro bench run --root DIR`.
 #include <chrono>
 #include <cstdio>
@@ -7,7 +7,7 @@
 #include "apps/args.h"
 #include "apps/bench_commands.h"
 #include "attention/runtime/progress.h"
-#include "enhance/synth_close.h"
+#include "enhance/datasets/synth_close.h"
 
 namespace macro::cli {
 namespace {

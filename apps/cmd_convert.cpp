@@ -4,7 +4,7 @@
 #include <cstdio>
 
 #include "apps/args.h"
-#include "gs/scene_io.h"
+#include "gs/formats/scene_io.h"
 
 namespace macro::cli {
 namespace {

@@ -4,7 +4,7 @@
 #include <cstdio>
 
 #include "apps/args.h"
-#include "enhance/metrics.h"
+#include "enhance/metrics/metrics.h"
 #include "gs/image_io.h"
 
 namespace macro::cli {

@@ -1,10 +1,10 @@
-// macro plan: MACRO's planning stage for one close-up (enhance/plan.h) -> plan.json [+ debug
+// macro plan: MACRO's planning stage for one close-up (enhance/macro/plan.h) -> plan.json [+ debug
 // images].
 #include <cstdio>
 
 #include "apps/args.h"
 #include "attention/runtime/progress.h"
-#include "enhance/plan.h"
+#include "enhance/macro/plan.h"
 
 namespace macro::cli {
 namespace {

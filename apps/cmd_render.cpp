@@ -1,11 +1,11 @@
 // macro render: one camera of a splat scene to PNG / EXR / safetensors / inverse-depth PNG.
-// Thin main over gs::run_render_job (gs/render_job.h documents every output channel).
+// Thin main over gs::run_render_job (gs/raster/render_job.h documents every output channel).
 #include <cmath>
 #include <cstdio>
 
 #include "apps/args.h"
 #include "attention/runtime/progress.h"
-#include "gs/render_job.h"
+#include "gs/raster/render_job.h"
 
 namespace macro::cli {
 namespace {

@@ -1,10 +1,10 @@
-// macro synth: a deterministic synthetic scene with known geometry (gs/synth.h) to a folder:
+// macro synth: a deterministic synthetic scene with known geometry (gs/synth/synth.h) to a folder:
 // scene.ply, cameras.json, geometry.json.
 #include <cstdio>
 
 #include "apps/args.h"
 #include "attention/runtime/progress.h"
-#include "gs/synth.h"
+#include "gs/synth/synth.h"
 
 namespace macro::cli {
 namespace {

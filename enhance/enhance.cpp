@@ -11,9 +11,9 @@
 #include "attention/nets/difix.h"
 #include "attention/nets/scheduler.h"
 #include "attention/runtime/progress.h"
-#include "attention/runtime/safetensors.h"
-#include "enhance/warp.h"
-#include "gs/rasterizer.h"
+#include "attention/runtime/io/safetensors.h"
+#include "enhance/macro/warp.h"
+#include "gs/raster/rasterizer.h"
 
 namespace macro::enhance {
 namespace {

@@ -1,5 +1,5 @@
 // MACRO enhancement of one close-up (macro-method.md §0, §4, §5, §6): the planning stage
-// (enhance/plan.h), then one Difix-ref step (attention/nets/difix.h) over the views
+// (enhance/macro/plan.h), then one Difix-ref step (attention/nets/difix.h) over the views
 // [close-up, crops...] with the plan's attention masks, then the close-up decoded, quantised to
 // 8 bits (as the released pipeline's PIL output) and Lanczos-resized back to the render size.
 //
@@ -14,7 +14,7 @@
 //                   size, no planes, no mask (Difix's native joint attention), V = 2;
 //   macro           the full method, masks of the chosen mode (released by default);
 //   macro-unmasked  macro with mask mode "none";
-//   warp            the paper's backward-warp ablation (enhance/warp.h): each reference
+//   warp            the paper's backward-warp ablation (enhance/macro/warp.h): each reference
 //                   backward-warped into the close-up replaces its crops (full frames, no crop,
 //                   no SR), masks of the chosen mode over the warp's validity; --occlusion adds
 //                   the per-pixel occlusion test.
@@ -30,9 +30,9 @@
 #include "attention/nets/precision.h"
 #include "attention/runtime/status.h"
 #include "attention/runtime/thread_pool.h"
-#include "enhance/plan.h"
+#include "enhance/macro/plan.h"
 #include "enhance/scene_input.h"
-#include "enhance/transfer.h"
+#include "enhance/transfer/transfer.h"
 #include "gs/image_io.h"
 
 namespace macro::enhance {
@@ -42,7 +42,7 @@ const char* method_name(EnhanceMethod method);  // "3dgs", "difix", "macro", ...
 Result<EnhanceMethod> parse_method(const std::string& text);
 
 // What turns the views into the enhanced close-up: the Difix-ref network (needs --weights), or
-// the weight-free detail transfer (enhance/transfer.h). With transfer, difix means K whole
+// the weight-free detail transfer (enhance/transfer/transfer.h). With transfer, difix means K whole
 // references (TransferSource::kWhole, no planes), macro / macro-unmasked the plan's crops with
 // the plane mask / with every crop visible to every plane; 3dgs ignores it.
 enum class Enhancer { kDifix, kTransfer };

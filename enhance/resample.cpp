@@ -8,7 +8,7 @@
 
 #include "attention/nets/pft.h"
 #include "attention/runtime/progress.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 
 namespace macro::enhance {
 namespace {

@@ -3,7 +3,7 @@
 //
 // Scene folder (DL3DV-Closeup, macro-method.md §7):
 //   images/            the training images (reference candidates)
-//   sparse/0/          COLMAP model (or transforms.json; gs/camera.h load_cameras order)
+//   sparse/0/          COLMAP model (or transforms.json; gs/cameras/camera.h load_cameras order)
 //   split.json         training_frames, closeup_eval_pairs, closeup_poses (OpenGL c2w), intrinsics
 //   <the trained .ply> found by find_scene_ply (below)
 //
@@ -21,10 +21,10 @@
 #include <vector>
 
 #include "attention/runtime/status.h"
-#include "gs/camera.h"
+#include "gs/cameras/camera.h"
 #include "gs/gaussians.h"
 #include "gs/image_io.h"
-#include "gs/scene_io.h"
+#include "gs/formats/scene_io.h"
 
 namespace macro::enhance {
 

@@ -1,7 +1,7 @@
 // Shared by the end-to-end enhance tests (test_enhance, test_warp, test_tight_crops, test_transfer,
 // test_determinism, test_interrupts): a tiny Difix pipeline folder over the goldens (unet-tiny,
 // vae-tiny; cross-attention width 48, so the prompt context is a fixed [1, 77, 48] tensor) and a
-// small synthetic DL3DV-Closeup scene folder (gs/synth.h generator, enhance/synth_scene_folder.h).
+// small synthetic DL3DV-Closeup scene folder (gs/synth/synth.h generator, enhance/datasets/synth_scene_folder.h).
 #pragma once
 
 #include <catch2/catch.hpp>
@@ -12,12 +12,12 @@
 #include <vector>
 
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/thread_pool.h"
 #include "enhance/enhance.h"
 #include "enhance/scene_input.h"
-#include "enhance/synth_scene_folder.h"
-#include "gs/synth.h"
+#include "enhance/datasets/synth_scene_folder.h"
+#include "gs/synth/synth.h"
 #include "test_support.h"
 
 namespace macro::test {

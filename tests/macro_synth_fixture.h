@@ -1,5 +1,5 @@
 // Shared by the MACRO planning tests: a small synthetic three-plane scene and cameras with
-// analytic answers (gs/synth.h cast_pixel).
+// analytic answers (gs/synth/synth.h cast_pixel).
 #pragma once
 
 #include <Eigen/Geometry>
@@ -9,10 +9,10 @@
 #include <vector>
 
 #include "attention/runtime/status.h"
-#include "enhance/depth_planes.h"
-#include "enhance/reference_selection.h"
-#include "gs/rasterizer.h"
-#include "gs/synth.h"
+#include "enhance/macro/depth_planes.h"
+#include "enhance/macro/reference_selection.h"
+#include "gs/raster/rasterizer.h"
+#include "gs/synth/synth.h"
 
 namespace macro::test {
 

@@ -11,12 +11,12 @@
 #include <string>
 #include <vector>
 
-#include "enhance/pair_construction.h"
-#include "gs/camera.h"
-#include "gs/colmap_points.h"
+#include "enhance/datasets/pair_construction.h"
+#include "gs/cameras/camera.h"
+#include "gs/cameras/colmap_points.h"
 #include "gs/image_io.h"
-#include "gs/random_scene.h"
-#include "gs/scene_io.h"
+#include "gs/synth/random_scene.h"
+#include "gs/formats/scene_io.h"
 #include "tests/test_support.h"
 
 namespace macro::pair_test {

@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "attention/nets/pft.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/status.h"
 
 namespace macro::test {

@@ -13,7 +13,7 @@
 #include "attention/runtime/attention.h"
 #include "attention/runtime/attention_mask.h"
 #include "attention/runtime/half.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "test_support.h"
 
 using namespace macro;

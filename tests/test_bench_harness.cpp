@@ -9,11 +9,11 @@
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/progress.h"
-#include "enhance/bench_harness.h"
-#include "enhance/bench_report.h"
-#include "enhance/synth_scene_folder.h"
+#include "enhance/bench/bench_harness.h"
+#include "enhance/bench/bench_report.h"
+#include "enhance/datasets/synth_scene_folder.h"
 #include "gs/image_io.h"
-#include "gs/synth.h"
+#include "gs/synth/synth.h"
 #include "tests/test_support.h"
 
 namespace macro {

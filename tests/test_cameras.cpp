@@ -1,4 +1,4 @@
-// Cameras (gs/camera.h): pose conventions with known answers, one reference rig written by hand in
+// Cameras (gs/cameras/camera.h): pose conventions with known answers, one reference rig written by hand in
 // every input format, nerfstudio applied_transform round trips, the DL3DV-Closeup split, writers,
 // resized/validate/find, and bad input with message checks.
 #include <Eigen/Geometry>
@@ -10,7 +10,7 @@
 #include <functional>
 #include <random>
 
-#include "gs/camera.h"
+#include "gs/cameras/camera.h"
 #include "test_support.h"
 
 using namespace macro;

@@ -14,7 +14,7 @@
 #include "attention/nets/prompt_cache.h"
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "test_support.h"
 
 using namespace macro;

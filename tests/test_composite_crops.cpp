@@ -13,8 +13,8 @@
 #include <random>
 
 #include "attention/runtime/file_io.h"
-#include "enhance/bench_harness.h"
-#include "enhance/crops.h"
+#include "enhance/bench/bench_harness.h"
+#include "enhance/macro/crops.h"
 #include "enhance/enhance.h"
 #include "enhance_fixture.h"
 #include "macro_synth_fixture.h"
@@ -351,7 +351,7 @@ TEST_CASE("macro enhance --crop composite on the tiny pipeline: deterministic, f
       CHECK(fr->image.data != r.one.image.data);
     }
   }
-  // The bench grid's "crop" option reaches the macro method (enhance/bench_harness.h).
+  // The bench grid's "crop" option reaches the macro method (enhance/bench/bench_harness.h).
   {
     BenchMethodSettings settings;
     settings.difix_weights = f.pipe;

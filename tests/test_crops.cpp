@@ -2,7 +2,7 @@
 // within 1% of the analytic ratio, crop centres within 1 px of the analytic projection centroid.
 #include <catch2/catch.hpp>
 
-#include "enhance/crops.h"
+#include "enhance/macro/crops.h"
 #include "macro_synth_fixture.h"
 
 using namespace macro;

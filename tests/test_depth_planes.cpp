@@ -2,7 +2,7 @@
 // automatic plane count.
 #include <catch2/catch.hpp>
 
-#include "enhance/depth_planes.h"
+#include "enhance/macro/depth_planes.h"
 
 using namespace macro;
 using namespace macro::enhance;

@@ -12,7 +12,7 @@
 #include <sstream>
 
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "enhance_fixture.h"
 #include "test_support.h"
 

@@ -11,7 +11,7 @@
 #include "attention/runtime/attention_mask.h"
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "golden_tensors.h"
 #include "test_support.h"
 

@@ -15,9 +15,9 @@
 #include <vector>
 
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
-#include "enhance/bench_harness.h"
-#include "enhance/feature_metrics.h"
+#include "attention/runtime/io/safetensors.h"
+#include "enhance/bench/bench_harness.h"
+#include "enhance/metrics/feature_metrics.h"
 #include "test_support.h"
 
 using namespace macro;

@@ -1,4 +1,4 @@
-// DreamSim ensemble (enhance/dreamsim.h): Pillow-exact bicubic preprocessing, the ensemble maths
+// DreamSim ensemble (enhance/metrics/dreamsim.h): Pillow-exact bicubic preprocessing, the ensemble maths
 // against a double-precision reference written here from the definitions (per-backbone
 // normalisation, ViT features, LoRA merge, embedding centring/normalisation, concatenation, cosine
 // distance), the full-size weight layout, and the weight-file errors.
@@ -13,9 +13,9 @@
 #include <random>
 
 #include "attention/runtime/cpu.h"
-#include "attention/runtime/safetensors.h"
-#include "enhance/dreamsim.h"
-#include "enhance/feature_metrics.h"
+#include "attention/runtime/io/safetensors.h"
+#include "enhance/metrics/dreamsim.h"
+#include "enhance/metrics/feature_metrics.h"
 #include "test_support.h"
 #include "vit_reference.h"
 

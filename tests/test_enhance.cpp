@@ -11,7 +11,7 @@
 #include "attention/runtime/file_io.h"
 #include "enhance/enhance.h"
 #include "enhance_fixture.h"
-#include "gs/rasterizer.h"
+#include "gs/raster/rasterizer.h"
 #include "test_support.h"
 
 using namespace macro;

@@ -20,7 +20,7 @@
 
 #include "attention/runtime/file_io.h"
 #include "enhance_fixture.h"
-#include "gs/synth.h"
+#include "gs/synth/synth.h"
 #include "test_support.h"
 
 using namespace macro;

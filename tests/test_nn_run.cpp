@@ -3,7 +3,7 @@
 #include <cmath>
 
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "test_support.h"
 
 using namespace macro;

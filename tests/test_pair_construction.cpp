@@ -1,5 +1,5 @@
-// Appendix D pair construction (enhance/pair_construction.h), the COLMAP points3D reader/writer
-// (gs/colmap_points.h) and `macro bench pairs` end to end, on synthetic camera rigs whose depths,
+// Appendix D pair construction (enhance/datasets/pair_construction.h), the COLMAP points3D reader/writer
+// (gs/cameras/colmap_points.h) and `macro bench pairs` end to end, on synthetic camera rigs whose depths,
 // angles, IoUs and set memberships are known in closed form.
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -14,12 +14,12 @@
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/thread_pool.h"
-#include "enhance/pair_construction.h"
-#include "gs/camera.h"
-#include "gs/colmap_points.h"
+#include "enhance/datasets/pair_construction.h"
+#include "gs/cameras/camera.h"
+#include "gs/cameras/colmap_points.h"
 #include "gs/image_io.h"
-#include "gs/random_scene.h"
-#include "gs/scene_io.h"
+#include "gs/synth/random_scene.h"
+#include "gs/formats/scene_io.h"
 #include "tests/pair_rig_fixture.h"
 #include "tests/test_support.h"
 
@@ -444,7 +444,7 @@ TEST_CASE("pairs: points3D text and binary readers agree, bad files are named er
 }
 
 // The rig as a COLMAP binary model (cameras.bin, images.bin, points3D.bin) in `folder`, byte
-// layouts as in gs/cameras_colmap_binary.cpp and gs/colmap_points.h.
+// layouts as in gs/cameras/cameras_colmap_binary.cpp and gs/cameras/colmap_points.h.
 void write_rig_binary(const Rig& rig, const std::string& folder) {
   fs::create_directories(folder);
   std::vector<uint8_t> cams, images, points;

@@ -12,7 +12,7 @@
 
 #include "attention/nets/pft.h"
 #include "attention/runtime/cpu.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "enhance/resample.h"
 #include "pft_reference.h"
 #include "test_support.h"

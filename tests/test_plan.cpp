@@ -6,8 +6,8 @@
 #include <nlohmann/json.hpp>
 
 #include "attention/runtime/file_io.h"
-#include "enhance/plan.h"
-#include "enhance/synth_scene_folder.h"
+#include "enhance/macro/plan.h"
+#include "enhance/datasets/synth_scene_folder.h"
 #include "test_support.h"
 
 using namespace macro;

@@ -2,8 +2,8 @@
 // rule for every mode; latent plane map by majority vote.
 #include <catch2/catch.hpp>
 
-#include "attention/runtime/safetensors.h"
-#include "enhance/plane_masks.h"
+#include "attention/runtime/io/safetensors.h"
+#include "enhance/macro/plane_masks.h"
 #include "test_support.h"
 
 using namespace macro;

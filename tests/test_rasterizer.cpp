@@ -1,4 +1,4 @@
-// Tile rasterizer (gs/rasterizer.h): analytic one- and two-Gaussian scenes, culling and errors,
+// Tile rasterizer (gs/raster/rasterizer.h): analytic one- and two-Gaussian scenes, culling and errors,
 // SIMD paths against the scalar twin, the naive baseline, thread-count determinism, and the gsplat
 // goldens in golden/raster/<scene>/expected-<camera>.safetensors.
 #include <algorithm>
@@ -10,11 +10,11 @@
 #include <limits>
 
 #include "attention/runtime/cpu.h"
-#include "attention/runtime/safetensors.h"
-#include "gs/camera.h"
-#include "gs/random_scene.h"
-#include "gs/rasterizer.h"
-#include "gs/scene_io.h"
+#include "attention/runtime/io/safetensors.h"
+#include "gs/cameras/camera.h"
+#include "gs/synth/random_scene.h"
+#include "gs/raster/rasterizer.h"
+#include "gs/formats/scene_io.h"
 #include "test_support.h"
 
 using namespace macro;

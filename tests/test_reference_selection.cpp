@@ -2,7 +2,7 @@
 // the occlusion option.
 #include <catch2/catch.hpp>
 
-#include "enhance/reference_selection.h"
+#include "enhance/macro/reference_selection.h"
 #include "macro_synth_fixture.h"
 
 using namespace macro;

@@ -8,9 +8,9 @@
 #include <sstream>
 
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "gs/image_io.h"
-#include "gs/render_job.h"
+#include "gs/raster/render_job.h"
 #include "test_support.h"
 
 using namespace macro;

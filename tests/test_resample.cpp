@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "enhance/resample.h"
 #include "enhance_fixture.h"
 #include "pft_reference.h"

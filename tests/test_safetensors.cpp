@@ -7,7 +7,7 @@
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/half.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "test_support.h"
 
 using namespace macro;

@@ -1,4 +1,4 @@
-// Splat scene formats (gs/scene_io.h): the three MetalSplatter files of the same 3 trained
+// Splat scene formats (gs/formats/scene_io.h): the three MetalSplatter files of the same 3 trained
 // Gaussians against each other, PLY layouts (ascii, big endian, shuffled/typed/extra properties),
 // SH degrees, Mip filter_3D, point clouds, SuperSplat compressed .ply bit layout, writers and round
 // trips, every bad-input policy, a byte-mutation sweep, and `macro convert`.
@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "attention/runtime/file_io.h"
-#include "gs/scene_io.h"
+#include "gs/formats/scene_io.h"
 #include "ply_test_writer.h"
 #include "test_support.h"
 

@@ -5,9 +5,9 @@
 #include <filesystem>
 
 #include "attention/runtime/file_io.h"
-#include "gs/rasterizer.h"
-#include "gs/scene_io.h"
-#include "gs/synth.h"
+#include "gs/raster/rasterizer.h"
+#include "gs/formats/scene_io.h"
+#include "gs/synth/synth.h"
 #include "test_support.h"
 
 using namespace macro;

@@ -1,4 +1,4 @@
-// SynthClose (enhance/synth_close.h): determinism, the merge, the reconstruction against the GT
+// SynthClose (enhance/datasets/synth_close.h): determinism, the merge, the reconstruction against the GT
 // photographs (close at the training views, blurrier up close), the folder as the harness reads
 // it, an end-to-end `macro bench synth | run | report`, and the committed demo scene.
 #include <algorithm>
@@ -10,13 +10,13 @@
 #include <set>
 
 #include "attention/runtime/file_io.h"
-#include "enhance/bench_harness.h"
-#include "enhance/metrics.h"
+#include "enhance/bench/bench_harness.h"
+#include "enhance/metrics/metrics.h"
 #include "enhance/scene_input.h"
-#include "enhance/synth_close.h"
+#include "enhance/datasets/synth_close.h"
 #include "gs/image_io.h"
-#include "gs/rasterizer.h"
-#include "gs/scene_io.h"
+#include "gs/raster/rasterizer.h"
+#include "gs/formats/scene_io.h"
 #include "tests/test_support.h"
 
 namespace macro {

@@ -6,7 +6,7 @@
 #include "attention/nets/taesd.h"
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "test_support.h"
 
 using namespace macro;

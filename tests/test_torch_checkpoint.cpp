@@ -1,4 +1,4 @@
-// PyTorch zip checkpoints (attention/runtime/torch_checkpoint.h) through SafeTensors::open_torch and
+// PyTorch zip checkpoints (attention/runtime/io/torch_checkpoint.h) through SafeTensors::open_torch and
 // open_checkpoint. Fixtures: data/fixtures/torch/, written without torch by
 // tests/fixtures/make_torch_checkpoints.py in torch.save's layout; the values below are the ones
 // that script stores (exact in their dtype).
@@ -11,8 +11,8 @@
 #include <fstream>
 #include <iterator>
 
-#include "attention/runtime/safetensors.h"
-#include "attention/runtime/torch_checkpoint.h"
+#include "attention/runtime/io/safetensors.h"
+#include "attention/runtime/io/torch_checkpoint.h"
 #include "tests/test_support.h"
 
 using namespace macro;

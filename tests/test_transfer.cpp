@@ -1,4 +1,4 @@
-// The weight-free transfer enhancer (enhance/transfer.h): on synthetic textures with a known
+// The weight-free transfer enhancer (enhance/transfer/transfer.h): on synthetic textures with a known
 // answer (GT = a random texture, render = GT blurred, sources = shifted copies of the texture),
 // the transfer improves PSNR vs GT, is bit-identical for 1 and 2 threads, leaves a region with no
 // match unchanged, and respects the plane mask; plus the CLI path on a synthetic scene folder.
@@ -9,8 +9,8 @@
 #include <filesystem>
 #include <fstream>
 
-#include "enhance/metrics.h"
-#include "enhance/transfer.h"
+#include "enhance/metrics/metrics.h"
+#include "enhance/transfer/transfer.h"
 #include "enhance_fixture.h"
 #include "gs/image_io.h"
 #include "test_support.h"

@@ -8,7 +8,7 @@
 #include "attention/nets/nn_run.h"
 #include "attention/nets/synthetic_checkpoint.h"
 #include "attention/nets/vae.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "golden_tensors.h"
 #include "test_support.h"
 

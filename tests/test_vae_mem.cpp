@@ -7,7 +7,7 @@
 #include "attention/nets/vae.h"
 #include "attention/runtime/conv.h"
 #include "attention/runtime/cpu.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "golden_tensors.h"
 #include "test_support.h"
 

@@ -12,7 +12,7 @@
 
 #include "attention/nets/vit.h"
 #include "attention/runtime/cpu.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "test_support.h"
 #include "vit_reference.h"
 

@@ -1,4 +1,4 @@
-// The backward-warp ablation (enhance/warp.h).
+// The backward-warp ablation (enhance/macro/warp.h).
 //  - Geometry, analytically: a ray-cast scene (a textured background plane and a nearer occluding
 //    square, no Gaussians) seen by a close-up and a reference with other intrinsics, size and
 //    pose. Where the reference sees the point, the warp equals the close-up's ground truth (bound
@@ -15,7 +15,7 @@
 
 #include "attention/runtime/file_io.h"
 #include "enhance/enhance.h"
-#include "enhance/warp.h"
+#include "enhance/macro/warp.h"
 #include "enhance_fixture.h"
 #include "test_support.h"
 

@@ -13,7 +13,7 @@
 #include "attention/nets/synthetic_checkpoint.h"
 #include "attention/nets/weights.h"
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/tensor.h"
 #include "attention/runtime/thread_pool.h"
 #include "test_support.h"

@@ -7,7 +7,7 @@
 #include "attention/nets/clip_text.h"
 #include "attention/nets/difix.h"
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/tensor.h"
 
 namespace macro::nets {

@@ -18,7 +18,7 @@
 #include <string>
 
 #include "attention/nets/taesd.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/status.h"
 #include "attention/runtime/tensor.h"
 #include "attention/runtime/thread_pool.h"

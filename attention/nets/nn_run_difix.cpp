@@ -13,7 +13,7 @@
 #include "attention/nets/difix.h"
 #include "attention/nets/nn_run.h"
 #include "attention/runtime/attention_mask.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 
 namespace macro::nets {
 namespace {

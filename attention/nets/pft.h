@@ -46,7 +46,7 @@
 #include "attention/runtime/conv.h"
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/gemm.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/status.h"
 #include "attention/runtime/thread_pool.h"
 

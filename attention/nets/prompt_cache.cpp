@@ -11,7 +11,7 @@
 #include "attention/nets/clip_text.h"
 #include "attention/nets/clip_tokenizer.h"
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 
 namespace macro::nets {
 namespace {

@@ -8,7 +8,7 @@
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/half.h"
 #include "attention/runtime/progress.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/thread_pool.h"
 
 namespace macro::nets {

@@ -28,7 +28,7 @@
 
 #include "attention/nets/precision.h"
 #include "attention/runtime/conv.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/status.h"
 #include "attention/runtime/tensor.h"
 #include "attention/runtime/thread_pool.h"

@@ -25,7 +25,7 @@
 #include <string>
 #include <vector>
 
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/status.h"
 
 namespace macro::nets {

@@ -3,7 +3,7 @@
 // The path is chosen once, at first use: the best the machine supports, or the one forced by the
 // environment variable MACRO_ISA=scalar|avx2|avx512|avx512bf16|amx (the CLI's --isa flag sets the
 // same). Forcing a path the machine lacks is an error reported by set_isa(). Kernel tables
-// (attention/runtime/kernels.h, gs/raster_kernels.h) are filled from active_isa().
+// (attention/runtime/kernels.h, gs/raster/raster_kernels.h) are filled from active_isa().
 #pragma once
 
 #include <string>

@@ -21,7 +21,7 @@
 #include <vector>
 
 #include "attention/runtime/half.h"
-#include "attention/runtime/safetensors.h"  // DType, dtype_name, dtype_size
+#include "attention/runtime/io/safetensors.h"  // DType, dtype_name, dtype_size
 #include "attention/runtime/status.h"
 
 namespace macro {

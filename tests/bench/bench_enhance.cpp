@@ -1,6 +1,6 @@
 // bench enhance: `macro enhance` end to end for one close-up, stage by stage (enhance/enhance.h).
 //
-// Full size (default): a synthetic 960x540 scene (gs/synth.h generator, 120k Gaussians, 8
+// Full size (default): a synthetic 960x540 scene (gs/synth/synth.h generator, 120k Gaussians, 8
 // reference candidates) written as a DL3DV-Closeup folder, K = P = 3, model size 960x536, on the
 // synthetic full-size Difix pipeline (SD-Turbo U-Net + Difix VAE, random weights with the real
 // names and shapes, attention/nets/synthetic_checkpoint.h; written once to
@@ -41,10 +41,10 @@
 #include "attention/nets/synthetic_checkpoint.h"
 #include "attention/runtime/attention.h"
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "bench_registry.h"
 #include "enhance/enhance.h"
-#include "enhance/synth_scene_folder.h"
+#include "enhance/datasets/synth_scene_folder.h"
 
 namespace macro::bench {
 namespace {

@@ -15,7 +15,7 @@
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/progress.h"
 #include "bench_registry.h"
-#include "gs/scene_io.h"
+#include "gs/formats/scene_io.h"
 
 namespace macro::bench {
 namespace {

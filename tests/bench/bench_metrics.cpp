@@ -17,11 +17,11 @@
 #include <cstring>
 #include <string>
 
-#include "attention/runtime/safetensors.h"
+#include "attention/runtime/io/safetensors.h"
 #include "bench_registry.h"
-#include "enhance/feature_metrics.h"
-#include "enhance/lpips.h"
-#include "enhance/metrics.h"
+#include "enhance/metrics/feature_metrics.h"
+#include "enhance/metrics/lpips.h"
+#include "enhance/metrics/metrics.h"
 
 namespace macro::bench {
 namespace {

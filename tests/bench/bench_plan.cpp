@@ -1,4 +1,4 @@
-// bench plan: MACRO planning stage on a synthetic DL3DV-Closeup folder (enhance/plan.h).
+// bench plan: MACRO planning stage on a synthetic DL3DV-Closeup folder (enhance/macro/plan.h).
 // Per close-up: time of the whole plan (median), and what the options change: --planes auto
 // (views and attention pairs vs P = 3) and --crop tight (view pixels vs full crops).
 // Baseline: the released defaults (K = 3, P = 3, full crops), measured in the same run.
@@ -8,8 +8,8 @@
 #include <string>
 
 #include "bench_registry.h"
-#include "enhance/plan.h"
-#include "enhance/synth_scene_folder.h"
+#include "enhance/macro/plan.h"
+#include "enhance/datasets/synth_scene_folder.h"
 
 namespace macro::bench {
 namespace {

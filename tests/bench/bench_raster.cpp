@@ -1,4 +1,4 @@
-// bench raster: ms/frame of the tile rasterizer on seeded random scenes (gs/random_scene.h: depth
+// bench raster: ms/frame of the tile rasterizer on seeded random scenes (gs/synth/random_scene.h: depth
 // 2-12, log scales N(-4.5, 0.5), opacity U(0.05, 1), SH degree 3) at 960x540, fx = 600, per stage
 // and in total, for 1 and 2 threads; medians of several frames. Baseline measured in the same run:
 // the naive tiled version (bounding-box tile lists, plain scalar per-pixel loop over each tile's
@@ -17,8 +17,8 @@
 #include <vector>
 
 #include "bench_registry.h"
-#include "gs/random_scene.h"
-#include "gs/rasterizer.h"
+#include "gs/synth/random_scene.h"
+#include "gs/raster/rasterizer.h"
 
 namespace {
 

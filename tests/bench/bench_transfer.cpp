@@ -1,4 +1,4 @@
-// bench transfer: the weight-free transfer enhancer (enhance/transfer.h) end to end on a
+// bench transfer: the weight-free transfer enhancer (enhance/transfer/transfer.h) end to end on a
 // synthetic 960x536 close-up, K = P = 3: render + plan + transfer, wall and process CPU medians,
 // with the stage split of the last run. Baseline in the same run: the raw 3DGS render alone
 // (method 3dgs), so the ratio is what the enhancer costs on top of rendering.
@@ -12,7 +12,7 @@
 #include "attention/runtime/progress.h"
 #include "bench_registry.h"
 #include "enhance/enhance.h"
-#include "enhance/synth_scene_folder.h"
+#include "enhance/datasets/synth_scene_folder.h"
 
 namespace macro::bench {
 namespace {

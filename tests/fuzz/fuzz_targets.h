@@ -25,13 +25,13 @@
 
 #include "attention/nets/clip_tokenizer.h"
 #include "attention/nets/diffusers_config.h"
-#include "attention/runtime/safetensors.h"
-#include "attention/runtime/torch_checkpoint.h"
+#include "attention/runtime/io/safetensors.h"
+#include "attention/runtime/io/torch_checkpoint.h"
 #include "attention/runtime/status.h"
-#include "gs/camera.h"
-#include "gs/colmap_points.h"
+#include "gs/cameras/camera.h"
+#include "gs/cameras/colmap_points.h"
 #include "gs/image_io.h"
-#include "gs/scene_io.h"
+#include "gs/formats/scene_io.h"
 
 namespace macro::fuzz {
 

@@ -1,0 +1,671 @@
+// The evaluation harness: work list, methods, records, resume, shards, merge (bench_harness.h).
+#include "enhance/bench/bench_harness.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <nlohmann/json.hpp>
+
+#include "attention/runtime/file_io.h"
+#include "attention/runtime/progress.h"
+#include "enhance/enhance.h"
+#include "enhance/macro/plane_masks.h"
+#include "gs/raster/rasterizer.h"
+
+namespace macro::enhance {
+namespace fs = std::filesystem;
+using Json = nlohmann::ordered_json;
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+uint64_t fnv1a64(const std::string& s) {
+  uint64_t h = 1469598103934665603ull;
+  for (unsigned char c : s) {
+    h ^= c;
+    h *= 1099511628211ull;
+  }
+  return h;
+}
+
+}  // namespace
+
+// ---- Methods -----------------------------------------------------------------------------------
+Status MethodRegistry::add(BenchMethod method) {
+  if (method.name.empty()) return Status::error("bench method: empty name");
+  if (!method.run) return Status::error("bench method '" + method.name + "': no run function");
+  if (methods_.count(method.name))
+    return Status::error("bench method '" + method.name + "' registered twice");
+  std::string name = method.name;
+  methods_.emplace(std::move(name), std::move(method));
+  return Status::ok();
+}
+
+const BenchMethod* MethodRegistry::find(const std::string& name) const {
+  auto it = methods_.find(name);
+  return it == methods_.end() ? nullptr : &it->second;
+}
+
+std::vector<std::string> MethodRegistry::names() const {
+  std::vector<std::string> out;
+  for (const auto& [name, m] : methods_) out.push_back(name);
+  return out;
+}
+
+Result<MethodOutput> run_3dgs_method(const MethodContext& context) {
+  const auto t0 = std::chrono::steady_clock::now();
+  gs::RenderOptions ro;  // classic, black background, SH degree 3 (gsplat's render defaults)
+  MACRO_ASSIGN_OR_RETURN(gs::RenderResult r,
+                         gs::render(context.inputs.cloud, context.inputs.closeup, ro));
+  MethodOutput out;
+  out.image = gs::Image(r.width, r.height, 3);
+  out.image.data = std::move(r.color);
+  // The released pipeline saves the render as an 8-bit PNG and scores the file: quantise exactly
+  // as gs::write_png + gs::read_image would (round half up, then level * (1 / 255)).
+  for (float& v : out.image.data) {
+    const int level = !(v > 0.f) ? 0 : v >= 1.f ? 255 : int(v * 255.f + 0.5f);
+    v = float(level) * (1.f / 255.f);
+  }
+  out.stages.push_back({"render", seconds_since(t0)});
+  return out;
+}
+
+namespace {
+
+// BenchOptions -> EnhanceOptions; errors name the option and the value.
+Result<EnhanceOptions> enhance_options(EnhanceMethod method, const BenchOptions& o,
+                                       const BenchMethodSettings& settings) {
+  EnhanceOptions e;
+  e.method = method;
+  e.weights = settings.difix_weights;
+  e.ctx_path = settings.ctx_path;
+  if (auto it = o.find("K"); it != o.end()) {
+    char* end = nullptr;
+    const long k = std::strtol(it->second.c_str(), &end, 10);
+    if (it->second.empty() || *end || k < 1 || k > 64)
+      return Status::error("option K: expected an integer in [1, 64], found '" + it->second + "'");
+    e.plan.refs = int(k);
+  }
+  if (auto it = o.find("P"); it != o.end()) {
+    if (it->second == "auto") {
+      e.plan.planes.automatic = true;
+      e.plan.planes.planes = 5;
+    } else {
+      char* end = nullptr;
+      const long p = std::strtol(it->second.c_str(), &end, 10);
+      if (it->second.empty() || *end || p < 1 || p > 64)
+        return Status::error("option P: expected an integer in [1, 64] or auto, found '" +
+                             it->second + "'");
+      e.plan.planes.planes = int(p);
+    }
+  }
+  if (auto it = o.find("mask"); it != o.end()) {
+    const std::string m = it->second == "on"    ? "released"
+                          : it->second == "off" ? "none"
+                                                : it->second;
+    MACRO_ASSIGN_OR_RETURN(e.plan.mask, parse_mask_mode(m));
+  }
+  if (auto it = o.find("precision"); it != o.end()) {
+    MACRO_ASSIGN_OR_RETURN(e.precision, nets::parse_precision(it->second));
+  }
+  if (auto it = o.find("crop"); it != o.end()) {
+    MACRO_ASSIGN_OR_RETURN(e.plan.crops.crop, parse_crop_mode(it->second));
+  }
+  if (auto it = o.find("upsampler"); it != o.end()) {
+    MACRO_TRY(make_upsampler(it->second).status());
+    e.upsampler = it->second;
+  }
+  return e;
+}
+
+MethodFn enhance_method_fn(EnhanceMethod method, BenchMethodSettings settings) {
+  return [method, settings](const MethodContext& c) -> Result<MethodOutput> {
+    MACRO_ASSIGN_OR_RETURN(EnhanceOptions e, enhance_options(method, c.options, settings));
+    MACRO_ASSIGN_OR_RETURN(EnhanceResult r, enhance_closeup(c.inputs, e));
+    MethodOutput out;
+    out.image = std::move(r.image);
+    const EnhanceTimings& t = r.timings;
+    const std::pair<const char*, double> stages[] = {
+        {"render", t.ms_render}, {"plan", t.ms_plan},     {"views", t.ms_views},
+        {"ctx", t.ms_ctx},       {"encode", t.ms_encode}, {"unet", t.ms_unet},
+        {"decode", t.ms_decode}, {"resize", t.ms_resize}};
+    for (const auto& [name, ms] : stages) out.stages.push_back({name, ms / 1000.0, true});
+    out.stages.push_back({"weights_load", t.ms_load / 1000.0, false});
+    return out;
+  };
+}
+
+// The transfer enhancer as a bench method (options K, P as macro) from crops or whole references.
+MethodFn transfer_method_fn(TransferSource source) {
+  return [source](const MethodContext& c) -> Result<MethodOutput> {
+    MACRO_ASSIGN_OR_RETURN(EnhanceOptions e,
+                           enhance_options(EnhanceMethod::kMacro, c.options, BenchMethodSettings{}));
+    e.enhancer = Enhancer::kTransfer;
+    e.transfer.source = source;
+    MACRO_ASSIGN_OR_RETURN(EnhanceResult r, enhance_closeup(c.inputs, e));
+    MethodOutput out;
+    out.image = std::move(r.image);
+    const EnhanceTimings& t = r.timings;
+    out.stages.push_back({"render", t.ms_render / 1000.0, true});
+    out.stages.push_back({"plan", t.ms_plan / 1000.0, true});
+    out.stages.push_back({"transfer", t.ms_transfer / 1000.0, true});
+    return out;
+  };
+}
+
+}  // namespace
+
+Status register_enhance_bench_methods(MethodRegistry& registry,
+                                      const BenchMethodSettings& settings) {
+  MACRO_TRY(registry.add({"difix",
+                          "Difix-ref, K = 1 whole reference, no planes, no mask",
+                          {"precision"},
+                          enhance_method_fn(EnhanceMethod::kDifix, settings)}));
+  MACRO_TRY(registry.add({"macro",
+                          "MACRO: scale-matched crops, depth-masked attention",
+                          {"K", "P", "mask", "precision", "crop", "upsampler"},
+                          enhance_method_fn(EnhanceMethod::kMacro, settings)}));
+  MACRO_TRY(registry.add({"transfer",
+                          "weight-free detail transfer (transfer.h) from the plan's scale-matched "
+                          "crops under the plane mask",
+                          {"K", "P"},
+                          transfer_method_fn(TransferSource::kCrops)}));
+  MACRO_TRY(registry.add({"transfer-whole",
+                          "the same transfer from the K references whole (scale-mismatched, no "
+                          "crops, no planes): the ablation",
+                          {"K", "P"},
+                          transfer_method_fn(TransferSource::kWhole)}));
+  MACRO_TRY(registry.add({"macro-unmasked",
+                          "MACRO without the plane mask",
+                          {"K", "P", "precision", "crop", "upsampler"},
+                          enhance_method_fn(EnhanceMethod::kMacroUnmasked, settings)}));
+  return Status::ok();
+}
+
+MethodRegistry default_method_registry(const BenchMethodSettings& settings) {
+  MethodRegistry r;
+  MACRO_CHECK(r.add({"3dgs", "the raw 3DGS close-up render", {}, run_3dgs_method}).is_ok());
+  const Status s = register_enhance_bench_methods(r, settings);
+  MACRO_CHECK(s.is_ok());
+  return r;
+}
+
+// ---- Work list ---------------------------------------------------------------------------------
+std::string canonical_options(const BenchOptions& options) {
+  std::string s;
+  for (const auto& [k, v] : options) {
+    if (!s.empty()) s += ',';
+    s += k + "=" + v;
+  }
+  return s;
+}
+
+std::string options_hash(const BenchOptions& options) {
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016llx",
+                static_cast<unsigned long long>(fnv1a64(canonical_options(options))));
+  return buf;
+}
+
+std::string record_key(const std::string& scene, const std::string& closeup_frame,
+                       const std::string& method, const std::string& hash) {
+  return scene + "\t" + closeup_frame + "\t" + method + "\t" + hash;
+}
+
+std::string BenchWorkItem::key() const {
+  return record_key(pair.scene, pair.pair.closeup_frame, method, options_hash);
+}
+std::string BenchRecord::key() const {
+  return record_key(scene, closeup_frame, method, options_hash);
+}
+
+Result<std::vector<std::string>> list_scene_dirs(const std::string& root) {
+  std::error_code ec;
+  if (!fs::is_directory(root, ec)) return Status::error(root + ": benchmark root not found");
+  if (fs::exists(fs::path(root) / "split.json", ec)) return std::vector<std::string>{root};
+  std::vector<std::string> dirs;
+  for (fs::directory_iterator it(root, ec), end; !ec && it != end; it.increment(ec)) {
+    if (it->is_directory(ec) && fs::exists(it->path() / "split.json", ec))
+      dirs.push_back(it->path().string());
+  }
+  if (ec) return Status::error(root + ": cannot list: " + ec.message());
+  if (dirs.empty())
+    return Status::error(root +
+                         ": no scene folder (expected split.json in it or in its "
+                         "sub-folders)");
+  std::sort(dirs.begin(), dirs.end());
+  return dirs;
+}
+
+std::vector<BenchOptions> expand_option_grid(
+    const std::map<std::string, std::vector<std::string>>& grid) {
+  std::vector<BenchOptions> out = {{}};
+  for (const auto& [key, values] : grid) {
+    if (values.empty()) continue;
+    std::vector<BenchOptions> next;
+    for (const BenchOptions& o : out)
+      for (const std::string& v : values) {
+        BenchOptions n = o;
+        n[key] = v;
+        next.push_back(std::move(n));
+      }
+    out = std::move(next);
+  }
+  return out;
+}
+
+namespace {
+bool work_order(const BenchWorkItem& a, const BenchWorkItem& b) {
+  if (a.pair.scene != b.pair.scene) return a.pair.scene < b.pair.scene;
+  if (a.pair.pair_index != b.pair.pair_index) return a.pair.pair_index < b.pair.pair_index;
+  if (a.method != b.method) return a.method < b.method;
+  return canonical_options(a.options) < canonical_options(b.options);
+}
+bool record_order(const BenchRecord& a, const BenchRecord& b) {
+  if (a.scene != b.scene) return a.scene < b.scene;
+  if (a.pair_index != b.pair_index) return a.pair_index < b.pair_index;
+  if (a.method != b.method) return a.method < b.method;
+  return canonical_options(a.options) < canonical_options(b.options);
+}
+}  // namespace
+
+Result<std::vector<BenchWorkItem>> build_work_list(const std::string& root,
+                                                   const std::vector<std::string>& methods,
+                                                   const std::vector<BenchOptions>& option_sets,
+                                                   const MethodRegistry& registry) {
+  if (methods.empty()) return Status::error("--methods: no method given");
+  for (const std::string& m : methods) {
+    if (!registry.find(m)) {
+      std::string known;
+      for (const std::string& n : registry.names()) known += (known.empty() ? "" : ", ") + n;
+      return Status::error("--methods: unknown method '" + m + "' (known: " + known + ")");
+    }
+  }
+  MACRO_ASSIGN_OR_RETURN(std::vector<std::string> dirs, list_scene_dirs(root));
+  std::vector<BenchWorkItem> items;
+  for (const std::string& dir : dirs) {
+    const std::string split_path = (fs::path(dir) / "split.json").string();
+    MACRO_ASSIGN_OR_RETURN(gs::CloseupSplit split, gs::load_closeup_split(split_path));
+    const std::string scene = fs::path(dir).filename().string();
+    for (size_t p = 0; p < split.closeup_eval_pairs.size(); ++p) {
+      BenchPair bp{scene, dir, int(p), split.closeup_eval_pairs[p]};
+      for (const std::string& m : methods) {
+        const BenchMethod* method = registry.find(m);
+        std::set<std::string> seen;
+        for (const BenchOptions& o : option_sets) {
+          BenchOptions used;
+          for (const std::string& k : method->option_keys)
+            if (auto it = o.find(k); it != o.end()) used[k] = it->second;
+          if (!seen.insert(canonical_options(used)).second) continue;
+          items.push_back({bp, m, used, options_hash(used)});
+        }
+      }
+    }
+  }
+  std::stable_sort(items.begin(), items.end(), work_order);
+  // Repeated --methods entries would give the same key twice.
+  items.erase(std::unique(items.begin(), items.end(),
+                          [](const BenchWorkItem& a, const BenchWorkItem& b) {
+                            return a.key() == b.key();
+                          }),
+              items.end());
+  return items;
+}
+
+Result<Shard> parse_shard(const std::string& text) {
+  const size_t slash = text.find('/');
+  const auto bad = [&]() {
+    return Status::error("--shard: expected i/N with 0 <= i < N, found '" + text + "'");
+  };
+  if (slash == std::string::npos) return bad();
+  const std::string a = text.substr(0, slash), b = text.substr(slash + 1);
+  const auto digits = [](const std::string& s) {
+    return !s.empty() && s.size() <= 6 &&
+           std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
+  };
+  if (!digits(a) || !digits(b)) return bad();
+  Shard s{std::stoi(a), std::stoi(b)};
+  if (s.count < 1 || s.index >= s.count) return bad();
+  return s;
+}
+
+std::vector<BenchWorkItem> take_shard(const std::vector<BenchWorkItem>& items, Shard shard) {
+  std::vector<BenchWorkItem> out;
+  for (size_t i = 0; i < items.size(); ++i)
+    if (int(i % size_t(shard.count)) == shard.index) out.push_back(items[i]);
+  return out;
+}
+
+// ---- Records -----------------------------------------------------------------------------------
+std::string record_to_json_line(const BenchRecord& r) {
+  Json j;
+  j["scene"] = r.scene;
+  j["pair_index"] = r.pair_index;
+  j["training_frame"] = r.training_frame;
+  j["closeup_frame"] = r.closeup_frame;
+  j["depth_ratio"] = r.depth_ratio;
+  j["method"] = r.method;
+  Json opts = Json::object();
+  for (const auto& [k, v] : r.options) opts[k] = v;
+  j["options"] = opts;
+  j["options_hash"] = r.options_hash;
+  j["status"] = r.ok ? "ok" : "skipped";
+  j["reason"] = r.reason;
+  Json metrics = Json::object(), not_computed = Json::object();
+  for (const MetricValue& m : r.metrics) {
+    if (!m.computed) {
+      not_computed[m.name] = m.reason;
+    } else if (std::isfinite(m.value)) {
+      metrics[m.name] = m.value;
+    } else {
+      metrics[m.name] = m.value > 0 ? "inf" : "-inf";
+    }
+  }
+  j["metrics"] = metrics;
+  j["not_computed"] = not_computed;
+  Json secs = Json::object();
+  for (const MethodStage& s : r.seconds) secs[s.name] = s.seconds;
+  j["seconds"] = secs;
+  j["seconds_per_closeup"] = r.seconds_per_closeup;
+  j["width"] = r.width;
+  j["height"] = r.height;
+  return j.dump() + "\n";
+}
+
+Result<BenchRecord> record_from_json(const std::string& line, const std::string& where) {
+  Json j = Json::parse(line, nullptr, /*allow_exceptions=*/false);
+  if (j.is_discarded() || !j.is_object()) return Status::error(where + ": not a JSON object");
+  BenchRecord r;
+  const auto str = [&](const char* k, std::string& out) -> Status {
+    if (!j.contains(k) || !j[k].is_string())
+      return Status::error(where + ": field '" + k + "': expected a string");
+    out = j[k].get<std::string>();
+    return Status::ok();
+  };
+  const auto num = [&](const Json& v, const std::string& k, double& out) -> Status {
+    if (v.is_number()) {
+      out = v.get<double>();
+    } else if (v.is_string() && (v == "inf" || v == "-inf")) {
+      out = v == "inf" ? std::numeric_limits<double>::infinity()
+                       : -std::numeric_limits<double>::infinity();
+    } else {
+      return Status::error(where + ": field '" + k + "': expected a number");
+    }
+    return Status::ok();
+  };
+  MACRO_TRY(str("scene", r.scene));
+  MACRO_TRY(str("closeup_frame", r.closeup_frame));
+  MACRO_TRY(str("method", r.method));
+  MACRO_TRY(str("options_hash", r.options_hash));
+  std::string status;
+  MACRO_TRY(str("status", status));
+  if (status != "ok" && status != "skipped")
+    return Status::error(where + ": field 'status': expected \"ok\" or \"skipped\", found \"" +
+                         status + "\"");
+  r.ok = status == "ok";
+  if (j.contains("training_frame") && j["training_frame"].is_string())
+    r.training_frame = j["training_frame"].get<std::string>();
+  if (j.contains("reason") && j["reason"].is_string()) r.reason = j["reason"].get<std::string>();
+  double d = 0;
+  if (j.contains("pair_index")) {
+    MACRO_TRY(num(j["pair_index"], "pair_index", d));
+    r.pair_index = int(d);
+  }
+  if (j.contains("depth_ratio")) MACRO_TRY(num(j["depth_ratio"], "depth_ratio", r.depth_ratio));
+  if (j.contains("options") && j["options"].is_object())
+    for (auto& [k, v] : j["options"].items())
+      r.options[k] = v.is_string() ? v.get<std::string>() : v.dump();
+  if (j.contains("metrics") && j["metrics"].is_object())
+    for (auto& [k, v] : j["metrics"].items()) {
+      MetricValue m;
+      m.name = k;
+      m.computed = true;
+      MACRO_TRY(num(v, "metrics." + k, m.value));
+      r.metrics.push_back(m);
+    }
+  if (j.contains("not_computed") && j["not_computed"].is_object())
+    for (auto& [k, v] : j["not_computed"].items()) {
+      MetricValue m;
+      m.name = k;
+      m.reason = v.is_string() ? v.get<std::string>() : v.dump();
+      r.metrics.push_back(m);
+    }
+  if (j.contains("seconds") && j["seconds"].is_object())
+    for (auto& [k, v] : j["seconds"].items()) {
+      MethodStage s{k, 0};
+      MACRO_TRY(num(v, "seconds." + k, s.seconds));
+      r.seconds.push_back(s);
+    }
+  if (j.contains("seconds_per_closeup"))
+    MACRO_TRY(num(j["seconds_per_closeup"], "seconds_per_closeup", r.seconds_per_closeup));
+  if (j.contains("width") && j["width"].is_number_integer()) r.width = j["width"].get<int>();
+  if (j.contains("height") && j["height"].is_number_integer()) r.height = j["height"].get<int>();
+  return r;
+}
+
+Result<std::vector<BenchRecord>> read_records(const std::string& path) {
+  std::vector<BenchRecord> out;
+  if (path.empty() || !file_exists(path)) return out;
+  MACRO_ASSIGN_OR_RETURN(std::string text, read_text_file(path));
+  size_t pos = 0;
+  int line_no = 0;
+  while (pos < text.size()) {
+    const size_t nl = text.find('\n', pos);
+    ++line_no;
+    if (nl == std::string::npos) break;  // torn last line: ignored
+    const std::string line = text.substr(pos, nl - pos);
+    pos = nl + 1;
+    if (line.empty()) continue;
+    MACRO_ASSIGN_OR_RETURN(BenchRecord r,
+                           record_from_json(line, path + " line " + std::to_string(line_no)));
+    out.push_back(std::move(r));
+  }
+  return out;
+}
+
+RecordAppender::~RecordAppender() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+Status RecordAppender::open(const std::string& path) {
+  path_ = path;
+  fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  if (fd_ < 0) return Status::error(path + ": cannot open for appending: " + std::strerror(errno));
+  // Cut a torn last line (no newline) so the next record starts on a line of its own.
+  const off_t size = ::lseek(fd_, 0, SEEK_END);
+  if (size > 0) {
+    off_t keep = size;
+    char buf[4096];
+    bool found = false;
+    while (keep > 0 && !found) {
+      const off_t chunk = std::min<off_t>(keep, off_t(sizeof buf));
+      if (::pread(fd_, buf, size_t(chunk), keep - chunk) != chunk)
+        return Status::error(path + ": read failed: " + std::strerror(errno));
+      for (off_t i = chunk; i > 0; --i)
+        if (buf[i - 1] == '\n') {
+          keep = keep - chunk + i;
+          found = true;
+          break;
+        }
+      if (!found) keep -= chunk;
+    }
+    if (keep != size) {
+      log_info("bench",
+               path + ": dropping a torn last line (" + std::to_string(size - keep) + " bytes)");
+      if (::ftruncate(fd_, keep) != 0)
+        return Status::error(path +
+                             ": cannot truncate the torn last line: " + std::strerror(errno));
+    }
+  }
+  return Status::ok();
+}
+
+Status RecordAppender::append(const BenchRecord& record) {
+  if (fd_ < 0) return Status::error("bench results: append before open");
+  const std::string line = record_to_json_line(record);
+  const ssize_t n = ::write(fd_, line.data(), line.size());
+  if (n != ssize_t(line.size()))
+    return Status::error(
+        path_ + ": write failed: " + (n < 0 ? std::string(std::strerror(errno)) : "short write"));
+  if (::fsync(fd_) != 0) return Status::error(path_ + ": fsync failed: " + std::strerror(errno));
+  return Status::ok();
+}
+
+std::vector<BenchRecord> merge_records(const std::vector<std::vector<BenchRecord>>& inputs) {
+  std::map<std::string, BenchRecord> by_key;
+  for (const auto& list : inputs)
+    for (const BenchRecord& r : list) {
+      auto it = by_key.find(r.key());
+      if (it == by_key.end()) {
+        by_key.emplace(r.key(), r);
+      } else if (!it->second.ok && r.ok) {
+        it->second = r;
+      }
+    }
+  std::vector<BenchRecord> out;
+  for (auto& [k, r] : by_key) out.push_back(std::move(r));
+  std::stable_sort(out.begin(), out.end(), record_order);
+  return out;
+}
+
+Status write_records_atomic(const std::string& path, const std::vector<BenchRecord>& records) {
+  std::string text;
+  for (const BenchRecord& r : records) text += record_to_json_line(r);
+  return write_file_atomic(path, text);
+}
+
+// ---- Running -----------------------------------------------------------------------------------
+BenchRecord run_work_item(const BenchWorkItem& item, const MethodRegistry& registry,
+                          const MetricOptions& metric_options, PairInputsCache* cache) {
+  BenchRecord r;
+  r.scene = item.pair.scene;
+  r.pair_index = item.pair.pair_index;
+  r.training_frame = item.pair.pair.training_frame;
+  r.closeup_frame = item.pair.pair.closeup_frame;
+  r.depth_ratio = item.pair.pair.depth_ratio;
+  r.method = item.method;
+  r.options = item.options;
+  r.options_hash = item.options_hash;
+  const auto skip = [&](const std::string& reason) {
+    r.ok = false;
+    r.reason = reason;
+    return r;
+  };
+  const BenchMethod* method = registry.find(item.method);
+  if (!method) return skip("unknown method '" + item.method + "'");
+
+  // GT first: a missing GT skips the pair before anything is loaded.
+  const std::string gt_path =
+      (fs::path(item.pair.scene_dir) / "closeup_gt" / item.pair.pair.closeup_frame).string();
+  if (!file_exists(gt_path)) return skip("missing GT: " + gt_path);
+  auto t0 = std::chrono::steady_clock::now();
+  Result<gs::Image> gt = gs::read_image(gt_path);
+  if (!gt) return skip("unreadable GT: " + gt.status().message());
+  r.width = gt->width;
+  r.height = gt->height;
+
+  const std::string pair_key = item.pair.scene_dir + "\t" + item.pair.pair.closeup_frame;
+  PairInputsCache local;
+  if (!cache) cache = &local;
+  if (cache->key != pair_key || !cache->inputs) {
+    cache->key.clear();
+    cache->inputs.reset();
+    SceneInputOptions so;
+    so.scene_dir = item.pair.scene_dir;
+    so.closeup = item.pair.pair.closeup_frame;
+    Result<SceneInputs> inputs = load_scene_inputs(so);
+    if (!inputs) return skip("missing pose or scene input: " + inputs.status().message());
+    cache->inputs = std::move(*inputs);
+    cache->key = pair_key;
+  }
+  r.seconds.push_back({"load", seconds_since(t0)});  // GT read (+ scene load when not cached)
+
+  const MethodContext context{item.pair, *cache->inputs, item.options};
+  Result<MethodOutput> out = method->run(context);
+  if (!out) return skip("no output: " + out.status().message());
+  if (out->image.data.empty()) return skip("no output: the method produced an empty image");
+  for (const MethodStage& s : out->stages) {
+    r.seconds.push_back(s);
+    if (s.per_closeup) r.seconds_per_closeup += s.seconds;
+  }
+
+  t0 = std::chrono::steady_clock::now();
+  Result<std::vector<MetricValue>> metrics = compute_metrics(out->image, *gt, metric_options);
+  if (!metrics) return skip("metrics failed: " + metrics.status().message());
+  r.seconds.push_back({"metrics", seconds_since(t0)});
+  r.metrics = std::move(*metrics);
+  {
+    // Sharpness against the GT (metrics.h gradient_energy_ratio), on the prediction at GT size.
+    MetricValue g{"grad_ratio", false, 0.0, "", ""};
+    Result<gs::Image> sized = match_size(out->image, gt->width, gt->height);
+    Result<double> ratio = sized ? gradient_energy_ratio(*sized, *gt) : Result<double>(sized.status());
+    if (ratio) {
+      g.computed = true;
+      g.value = *ratio;
+    } else {
+      g.reason = ratio.status().message();
+    }
+    r.metrics.push_back(g);
+  }
+  r.ok = true;
+  return r;
+}
+
+Result<BenchRunSummary> run_benchmark(const BenchRunOptions& options,
+                                      const MethodRegistry& registry) {
+  if (options.results.empty()) return Status::error("--results: a results file is required");
+  MACRO_ASSIGN_OR_RETURN(
+      std::vector<BenchWorkItem> all,
+      build_work_list(options.root, options.methods, options.option_sets, registry));
+  const std::vector<BenchWorkItem> items = take_shard(all, options.shard);
+  BenchRunSummary summary;
+  summary.work_items = items.size();
+
+  RecordAppender appender;
+  MACRO_TRY(appender.open(options.results));  // cuts a torn last line first
+  MACRO_ASSIGN_OR_RETURN(std::vector<BenchRecord> existing, read_records(options.results));
+  std::set<std::string> done;
+  for (const BenchRecord& r : existing) done.insert(r.key());
+
+  std::vector<const BenchWorkItem*> todo;
+  for (const BenchWorkItem& it : items) {
+    if (done.count(it.key())) {
+      ++summary.already_done;
+    } else {
+      todo.push_back(&it);
+    }
+  }
+  if (options.limit > 0 && todo.size() > size_t(options.limit)) todo.resize(size_t(options.limit));
+
+  if (todo.empty()) return summary;
+  Progress progress("bench", todo.size());
+  PairInputsCache cache;
+  for (const BenchWorkItem* it : todo) {
+    BenchRecord r = run_work_item(*it, registry, options.metrics, &cache);
+    MACRO_TRY(appender.append(r));
+    ++summary.ran;
+    if (r.ok) {
+      ++summary.ok;
+    } else {
+      ++summary.skipped;
+      log_info("bench",
+               r.scene + " " + r.closeup_frame + " " + r.method + ": skipped: " + r.reason);
+    }
+    progress.advance();
+  }
+  progress.finish();
+  return summary;
+}
+
+}  // namespace macro::enhance

@@ -1,0 +1,109 @@
+// Benchmark tables and charts from harness records (enhance/bench/bench_harness.h).
+//
+// Protocol (macro-method.md §7, scripts/aggregate_results.py): for each configuration (method +
+// option set), each scene's mean over its "ok" pairs, then the mean of the scene means. A metric
+// that was never computed for a pair is not part of that pair's contribution; a scene with no
+// computed value of a metric has no scene mean for it, and a configuration whose scenes have none
+// prints "n/c" (never a number). Skipped pairs never enter a mean (they are counted).
+//
+// Outputs of write_report(DIR):
+//   table.md, table.csv          methods as rows; PSNR (up), SSIM (up), LPIPS (down), DINOv2 and
+//                                DreamSim (down; columns only when some configuration computed
+//                                them), seconds per close-up, scenes, pairs ok / skipped
+//   time_vs_<metric>.svg/.png    seconds per close-up (x) vs the metric (y), one labelled point
+//                                per configuration
+//   zoom_<metric>.svg/.png       the metric vs the pair's zoom factor (depth_ratio), per-pair
+//                                points and a line per configuration through zoom-bin means
+//   scenes_<metric>.svg/.png     per-scene bars (scene means), one bar per configuration
+// SVG is written by hand; PNG is the same drawing rasterised here (lines, circles, rectangles and
+// text in a built-in 3x5 bitmap font drawn at 2x, upper case) and written with gs/image_io.h.
+#pragma once
+
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "attention/runtime/status.h"
+#include "enhance/bench/bench_harness.h"
+#include "gs/image_io.h"
+
+namespace macro::enhance {
+
+// The metrics in table order, with their column titles and direction.
+struct MetricColumn {
+  const char* name;   // record name: "psnr", "ssim", "lpips_alex", "dinov2", "dreamsim"
+  const char* title;  // "PSNR", ...
+  bool higher_better;
+  bool optional;  // a column only when computed somewhere (DINOv2, DreamSim)
+  bool target_one = false;  // best at 1 (grad_ratio: gradient energy / the GT's)
+};
+const std::vector<MetricColumn>& metric_columns();
+
+struct ConfigResult {
+  std::string method, options_text, options_hash;
+  std::string label;  // "3dgs" or "macro K=3,P=4"
+  // metric name -> mean of scene means (absent = not computed anywhere)
+  std::map<std::string, double> metric;
+  std::optional<double> seconds_per_closeup;
+  // scene -> metric name -> scene mean ("seconds_per_closeup" included)
+  std::map<std::string, std::map<std::string, double>> scene_means;
+  size_t scenes = 0;  // scenes with at least one ok pair
+  size_t pairs_ok = 0, pairs_skipped = 0;
+  // (depth_ratio, metric name -> value) of every ok pair
+  std::vector<std::pair<double, std::map<std::string, double>>> pairs;
+};
+
+// Configurations in order of first appearance in the (work-list ordered) records... sorted by
+// method then options text.
+std::vector<ConfigResult> aggregate_records(const std::vector<BenchRecord>& records);
+
+// "16.22" style formatting per metric (PSNR 2 decimals, others 3, seconds 2) or "n/c".
+std::string format_metric(const std::string& name, std::optional<double> value);
+
+std::string table_markdown(const std::vector<ConfigResult>& configs);
+std::string table_csv(const std::vector<ConfigResult>& configs);
+
+// ---- Charts ------------------------------------------------------------------------------------
+// A drawing as a list of primitives in pixel coordinates (origin top left), rendered to SVG text
+// or rasterised to an RGB image.
+struct Chart {
+  struct Line {
+    double x0, y0, x1, y1;
+    uint32_t rgb;
+    double width;
+  };
+  struct Circle {
+    double x, y, r;
+    uint32_t rgb;
+  };
+  struct Rect {
+    double x, y, w, h;
+    uint32_t rgb;
+  };
+  struct Text {
+    double x, y;
+    std::string text;
+    uint32_t rgb;
+    int anchor;
+  };  // -1 left 0 mid 1 right
+  int width = 640, height = 420;
+  std::vector<Line> lines;
+  std::vector<Circle> circles;
+  std::vector<Rect> rects;
+  std::vector<Text> texts;
+};
+
+std::string chart_to_svg(const Chart& chart);
+gs::Image rasterize_chart(const Chart& chart);
+
+Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const MetricColumn& metric);
+Chart chart_metric_vs_zoom(const std::vector<ConfigResult>& configs, const MetricColumn& metric);
+Chart chart_scene_bars(const std::vector<ConfigResult>& configs, const MetricColumn& metric);
+
+// Writes every file listed at the top into `dir` (created if missing), atomically. `written`
+// receives the paths.
+Status write_report(const std::vector<BenchRecord>& records, const std::string& dir,
+                    std::vector<std::string>* written = nullptr);
+
+}  // namespace macro::enhance

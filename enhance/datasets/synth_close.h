@@ -1,0 +1,118 @@
+// SynthClose: a synthetic close-up benchmark with exact ground truth (`macro bench synth`).
+//
+// Each scene is a gs/synth/synth.h layout (textured planes at three depths, a background plane, spheres
+// and rods on even scenes, a training rig and close-ups zoomed 1.5x-6x onto the planes) with two
+// Gaussian clouds:
+//   - the ground truth (GT): the planes re-sampled densely, with a fine texture layer (grain,
+//     hatching, scratches, specks at 0.1-1 training pixel) on top of gs/synth's texture. The
+//     sampling spacing of each 2 cm tile follows the finest view that sees it (train_spacing_px
+//     training pixels, closeup_spacing_px close-up pixels), and each fine feature is faded out
+//     where the spacing cannot carry it (band limit), so the detail exists wherever some view can
+//     resolve it and the cloud stays a few million Gaussians. The GT renders the photos: images/
+//     (training views) and closeup_gt/, supersampled (s x s samples per pixel, filtered by a tent
+//     of radius one pixel, as a sensor with a little optical blur integrates), so detail below a
+//     training pixel averages out in images/ but is sharp up close.
+//   - the "reconstruction": the GT merged into fewer, larger Gaussians, as 3DGS trained on the far
+//     views would be: per surface, clusters of recon_cell_px training pixels (planes: square cells
+//     in the plane's (u, v); spheres and rods: cubic voxels), each moment-matched (merge_clusters).
+//     It renders close to the photos at the training views and blurry up close.
+//
+// Scene folder (the DL3DV-Closeup layout enhance/datasets/synth_scene_folder.h writes; `macro bench run`
+// renders scene.ply, which enhance/scene_input.h find_scene_ply takes before any other .ply):
+//   images/, closeup_gt/, sparse/0/, split.json (depth_ratio = the zoom), geometry.json (Gaussian
+//   ranges in scene.ply order), scene.ply (reconstruction), gt.ply (GT; omitted for the demo size),
+//   synthclose.json (generator parameters and counts).
+// The benchmark root DIR holds synthclose_00, synthclose_01, ...; the same options give
+// byte-identical files (no threads in the generator; the rasteriser's output does not depend on the
+// thread count).
+//
+// What it does not model: view-dependent colour, exposure changes between photos, camera noise,
+// or 3DGS floaters; the "reconstruction" is blurry, never wrong.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "attention/runtime/status.h"
+#include "gs/gaussians.h"
+#include "gs/synth/synth.h"
+
+namespace macro::enhance {
+
+enum class SynthCloseSize { kTiny, kDemo, kFull };
+Result<SynthCloseSize> parse_synthclose_size(const std::string& text);  // tiny, demo, full
+const char* synthclose_size_name(SynthCloseSize size);
+
+// One scene's generation parameters (synthclose_params gives them per size).
+struct SynthCloseParams {
+  uint64_t seed = 1;
+  gs::SynthKind kind = gs::SynthKind::kMixed;
+  bool background = true;         // the large backdrop plane (the demo has none: folder size)
+  int width = 960, height = 536;  // every photo
+  int training_views = 10;
+  int closeup_views = 5;
+  int closeup_cycle_start = 0;      // gs::SynthParams::closeup_cycle_start
+  size_t base_gaussians = 600'000;  // gs/synth budget: spheres and rods keep its sampling
+  int supersample = 2;              // photo samples per pixel side
+  bool tent_filter = true;          // photo pixels: tent of radius 1 px over the samples (else box)
+  double train_spacing_px = 0.7;    // GT spacing <= this many training pixels (where seen)
+  double closeup_spacing_px = 0.75;    // ... and <= this many close-up pixels (where seen)
+  double background_spacing_px = 1.5;  // the background plane: training pixels only (a backdrop)
+  double min_spacing = 0.0006;         // m, floor of the GT spacing
+  double tile = 0.02;                  // m, sampling tile (background: 4x)
+  double recon_cell_px = 1.5;          // reconstruction cluster, training pixels at the surface
+  double recon_cover = 0.7;            // merged in-surface sigma >= this x the cluster size
+};
+
+// Defaults of a size: full 960x536, 10 training views, 5 close-ups; demo 640x360, 6 + 3, no
+// background plane; tiny 160x96, 4 + 3. `scene_index` varies the kind, the close-up cycle and the
+// seed.
+SynthCloseParams synthclose_params(SynthCloseSize size, uint64_t seed, int scene_index);
+
+struct SynthCloseScene {
+  gs::SynthScene layout;  // geometry, cameras; layout.cloud = the reconstruction
+  gs::GaussianCloud gt;   // the ground truth
+  // Per surface (planes, spheres, rods in geometry order):
+  std::vector<std::string> surface_names;
+  std::vector<double> recon_cell;  // cluster size (m)
+  std::vector<size_t> gt_count, recon_count;
+};
+
+Result<SynthCloseScene> make_synthclose_scene(const SynthCloseParams& params);
+
+// Moment-matched merge: Gaussians with equal cluster id (ids sorted ascending, contiguous; order[k]
+// is the Gaussian with id ids[k]) become one, in id order. Weights w = opacity * (product of the
+// two largest scales); mean = weighted mean; covariance = weighted mean of (Sigma_i + d_i d_i^T),
+// d_i = x_i - mean; SH = weighted mean; opacity = 1 - prod(1 - o_i), capped at max(0.99, max o_i).
+// Scales and rotation from the covariance's eigen decomposition. Then the two largest standard
+// deviations are raised to at least cover[k] (the cluster's first entry): a box of side c
+// moment-matches sigma = c / sqrt(12), which leaves the surface see-through between neighbouring
+// clusters, whereas trained splats overlap (the GT uses sigma = spacing; SynthClose 0.8 c).
+gs::GaussianCloud merge_clusters(const gs::GaussianCloud& cloud,
+                                 const std::vector<uint64_t>& sorted_ids,
+                                 const std::vector<uint32_t>& order,
+                                 const std::vector<float>& cover);
+
+struct SynthCloseOptions {
+  SynthCloseSize size = SynthCloseSize::kFull;
+  int scenes = 0;  // 0 = the size's default: full 10, demo 1, tiny 2
+  uint64_t seed = 1;
+  bool write_gt_ply = true;  // the demo size never writes it (folder size)
+  // Called with (units done, units total) as the work advances (one unit per photo, one per scene
+  // generated, one per scene saved).
+  std::function<void(size_t done, size_t total)> progress;
+};
+
+struct SynthCloseSummary {
+  int scenes = 0, pairs = 0;
+  size_t gt_gaussians = 0, recon_gaussians = 0;  // totals
+  std::vector<std::string> scene_dirs;
+};
+
+// Writes DIR/synthclose_NN (or, for the demo size, the scene folder DIR itself).
+Result<SynthCloseSummary> write_synthclose(const std::string& dir,
+                                           const SynthCloseOptions& options);
+
+}  // namespace macro::enhance

@@ -1,0 +1,165 @@
+// COLMAP sparse models: the camera model table, joining images with cameras, and finding the
+// files in a folder. Text and binary parsing live in cameras_colmap_text.cpp and
+// cameras_colmap_binary.cpp, the writer in cameras_colmap_writer.cpp.
+#include "gs/cameras/cameras_colmap.h"
+
+#include <algorithm>
+#include <climits>
+#include <cmath>
+#include <cstdio>
+#include <unordered_map>
+
+#include "attention/runtime/file_io.h"
+
+namespace macro::gs::detail {
+namespace {
+
+// COLMAP src/colmap/sensor/models.h: model ids and parameter counts.
+constexpr ColmapModelInfo kModels[] = {
+    {0, "SIMPLE_PINHOLE", 3, true},          // f cx cy
+    {1, "PINHOLE", 4, true},                 // fx fy cx cy
+    {2, "SIMPLE_RADIAL", 4, false},          // f cx cy k
+    {3, "RADIAL", 5, false},                 // f cx cy k1 k2
+    {4, "OPENCV", 8, true},                  // fx fy cx cy k1 k2 p1 p2
+    {5, "OPENCV_FISHEYE", 8, true},          // fx fy cx cy k1 k2 k3 k4
+    {6, "FULL_OPENCV", 12, false},           // fx fy cx cy k1 k2 p1 p2 k3 k4 k5 k6
+    {7, "FOV", 5, false},                    // fx fy cx cy omega
+    {8, "SIMPLE_RADIAL_FISHEYE", 4, false},  // f cx cy k
+    {9, "RADIAL_FISHEYE", 5, false},         // f cx cy k1 k2
+    {10, "THIN_PRISM_FISHEYE", 12, false},
+    {11, "RAD_TAN_THIN_PRISM_FISHEYE", 16, false},
+};
+
+std::string num(double v) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.9g", v);
+  return buf;
+}
+
+}  // namespace
+
+const ColmapModelInfo* colmap_model_by_id(int64_t id) {
+  for (const auto& m : kModels) {
+    if (m.id == id) return &m;
+  }
+  return nullptr;
+}
+
+const ColmapModelInfo* colmap_model_by_name(const std::string& name) {
+  for (const auto& m : kModels) {
+    if (name == m.name) return &m;
+  }
+  return nullptr;
+}
+
+std::string colmap_supported_models() {
+  return "SIMPLE_PINHOLE, PINHOLE, OPENCV, OPENCV_FISHEYE";
+}
+
+Result<CameraSet> assemble_colmap(const std::vector<ColmapCameraRecord>& cameras,
+                                  const std::vector<ColmapImageRecord>& images,
+                                  const std::string& cameras_path, const std::string& source) {
+  std::unordered_map<int64_t, const ColmapCameraRecord*> by_id;
+  for (const ColmapCameraRecord& c : cameras) {
+    MACRO_CHECK(c.model && c.model->supported && int(c.params.size()) == c.model->num_params);
+    if (!by_id.emplace(c.id, &c).second) {
+      return Status::error(c.where + ": camera id " + std::to_string(c.id) + " appears twice");
+    }
+    if (c.width <= 0 || c.height <= 0 || c.width > INT_MAX || c.height > INT_MAX) {
+      return Status::error(c.where + ": camera " + std::to_string(c.id) + ": size " +
+                           std::to_string(c.width) + "x" + std::to_string(c.height) +
+                           ": expected width and height in 1.." + std::to_string(INT_MAX));
+    }
+  }
+
+  CameraSet set;
+  set.source = source;
+  set.cameras.reserve(images.size());
+  std::unordered_map<int64_t, int> seen_image_ids;
+  for (const ColmapImageRecord& im : images) {
+    const std::string where = im.where + " (image " + std::to_string(im.id) + " '" + im.name + "')";
+    if (!seen_image_ids.emplace(im.id, 0).second) {
+      return Status::error(where + ": image id " + std::to_string(im.id) + " appears twice");
+    }
+    auto it = by_id.find(im.camera_id);
+    if (it == by_id.end()) {
+      std::string ids;
+      int shown = 0;
+      for (const ColmapCameraRecord& c : cameras) {
+        if (shown++ == 5) {
+          ids += ", ...";
+          break;
+        }
+        ids += (ids.empty() ? "" : ", ") + std::to_string(c.id);
+      }
+      return Status::error(where + ": camera id " + std::to_string(im.camera_id) + " is not in " +
+                           cameras_path + " (its ids: " + (ids.empty() ? "none" : ids) + ")");
+    }
+    const double qn =
+        std::sqrt(im.q[0] * im.q[0] + im.q[1] * im.q[1] + im.q[2] * im.q[2] + im.q[3] * im.q[3]);
+    if (!(std::abs(qn - 1.0) <= 1e-3)) {
+      return Status::error(where + ": quaternion (QW QX QY QZ) = (" + num(im.q[0]) + ", " +
+                           num(im.q[1]) + ", " + num(im.q[2]) + ", " + num(im.q[3]) +
+                           ") has norm " + num(qn) + ", expected a unit quaternion");
+    }
+    const ColmapCameraRecord& rec = *it->second;
+    const std::vector<double>& p = rec.params;
+    Camera cam;
+    cam.name = im.name;
+    cam.file_path = im.name;
+    cam.width = static_cast<int>(rec.width);
+    cam.height = static_cast<int>(rec.height);
+    const std::string model = rec.model->name;
+    if (model == "SIMPLE_PINHOLE") {
+      cam.fx = cam.fy = p[0];
+      cam.cx = p[1];
+      cam.cy = p[2];
+    } else {
+      cam.fx = p[0];
+      cam.fy = p[1];
+      cam.cx = p[2];
+      cam.cy = p[3];
+      if (model == "OPENCV" || model == "OPENCV_FISHEYE") {
+        cam.model = model == "OPENCV" ? CameraModel::kOpenCV : CameraModel::kOpenCVFisheye;
+        cam.distortion.assign(p.begin() + 4, p.end());
+      }
+    }
+    cam.R = rotation_from_quaternion_wxyz(im.q[0], im.q[1], im.q[2], im.q[3]);
+    cam.t = Eigen::Vector3d(im.t[0], im.t[1], im.t[2]);
+    MACRO_TRY(cam.validate().with_context(im.where));
+    set.cameras.push_back(std::move(cam));
+  }
+  // Image ids are arbitrary; like the Inria and gsplat parsers, order by name.
+  std::stable_sort(set.cameras.begin(), set.cameras.end(),
+                   [](const Camera& a, const Camera& b) { return a.name < b.name; });
+  return set;
+}
+
+}  // namespace macro::gs::detail
+
+namespace macro::gs {
+
+Result<CameraSet> load_colmap_sparse(const std::string& folder, CameraFormat* format) {
+  const std::string dir = folder.empty() || folder.back() == '/' ? folder : folder + "/";
+  const bool cb = file_exists(dir + "cameras.bin"), ib = file_exists(dir + "images.bin");
+  const bool ct = file_exists(dir + "cameras.txt"), it = file_exists(dir + "images.txt");
+  if (cb && ib) {
+    if (format) *format = CameraFormat::kColmapBinary;
+    return load_colmap_binary(dir + "cameras.bin", dir + "images.bin");
+  }
+  if (ct && it) {
+    if (format) *format = CameraFormat::kColmapText;
+    return load_colmap_text(dir + "cameras.txt", dir + "images.txt");
+  }
+  if (cb || ct)
+    return Status::error(folder + ": has " + (cb ? "cameras.bin" : "cameras.txt") + " but no " +
+                         (cb ? "images.bin" : "images.txt"));
+  if (ib || it)
+    return Status::error(folder + ": has " + (ib ? "images.bin" : "images.txt") + " but no " +
+                         (ib ? "cameras.bin" : "cameras.txt"));
+  return Status::error(folder +
+                       ": no COLMAP model (expected cameras.bin + images.bin or "
+                       "cameras.txt + images.txt)");
+}
+
+}  // namespace macro::gs

@@ -1,0 +1,56 @@
+// Internal to gs/: the per-format decoders and encoders behind load_scene / save_scene
+// (gs/formats/scene_io.h). Each works on bytes in memory and names `file` in its messages.
+//
+// Decoders fill an activated GaussianCloud (gs/gaussians.h) in the RDF frame. They do not drop or
+// repair anything themselves: a Gaussian whose raw values are not finite gets a NaN opacity, and
+// load_scene's sanitize pass (scene_io.cpp) drops it, repairs quaternions and scales, and counts.
+// Encoders take a cloud that passed that pass (finite, unit quaternions, positive scales).
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "attention/runtime/status.h"
+#include "gs/gaussians.h"
+#include "gs/formats/ply_reader.h"
+#include "gs/formats/scene_io.h"
+
+namespace macro::gs::formats {
+
+// Inria/gsplat .ply (also point-cloud .ply with red/green/blue and no f_dc).
+Result<GaussianCloud> decode_ply(const ply::Header& header, const uint8_t* data, size_t size,
+                                 const std::string& file, const LoadLimits& limits,
+                                 LoadReport& report);
+Result<std::vector<uint8_t>> encode_ply(const GaussianCloud& cloud, const std::string& file);
+
+// SuperSplat / splat-transform compressed .ply (elements chunk, vertex, optional sh).
+bool is_compressed_ply(const ply::Header& header);
+Result<GaussianCloud> decode_compressed_ply(const ply::Header& header, const uint8_t* data,
+                                            size_t size, const std::string& file,
+                                            const LoadLimits& limits, LoadReport& report);
+
+// antimatter15 .splat: 32-byte records, no header.
+Result<GaussianCloud> decode_splat(const uint8_t* data, size_t size, const std::string& file,
+                                   const LoadLimits& limits);
+Result<std::vector<uint8_t>> encode_splat(const GaussianCloud& cloud, const std::string& file);
+
+// Niantic .spz, versions 2 and 3 (gzip).
+bool is_gzip(const uint8_t* data, size_t size);
+Result<GaussianCloud> decode_spz(const uint8_t* data, size_t size, const std::string& file,
+                                 const LoadLimits& limits, LoadReport& report);
+Result<std::vector<uint8_t>> encode_spz(const GaussianCloud& cloud, const std::string& file);
+
+// Shared numeric helpers.
+inline float sigmoid(float x) {
+  return 1.f / (1.f + std::exp(-x));
+}
+// Degree whose (K-1) coefficients per channel fit in `per_channel` rest values (0..3).
+inline int sh_degree_for_rest(size_t per_channel) {
+  int d = 0;
+  while (d < 3 && static_cast<size_t>((d + 2) * (d + 2) - 1) <= per_channel) ++d;
+  return d;
+}
+
+}  // namespace macro::gs::formats
