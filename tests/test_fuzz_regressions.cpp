@@ -22,7 +22,7 @@ using namespace macro;
 
 namespace {
 
-const std::string kRegressions = std::string(MACRO_SOURCE_DIR) + "/tests/fuzz/regressions";
+const std::string kRegressions = macro::test::source_dir() + "/tests/fuzz/regressions";
 
 std::vector<uint8_t> read_bytes(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);

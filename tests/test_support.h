@@ -17,19 +17,22 @@
 
 namespace macro::test {
 
+// The source and build trees (tests/test_paths.cpp, the one file compiled with those paths).
+std::string source_dir();
+std::string binary_dir();
+
 // ../shared/golden beside the clone, or a copy under data/golden; MACRO_GOLDEN overrides.
 inline std::string golden_dir() {
   if (const char* env = std::getenv("MACRO_GOLDEN"); env && *env) return env;
   namespace fs = std::filesystem;
   for (const char* rel : {"/../shared/golden", "/data/golden"}) {
-    std::string p = std::string(MACRO_SOURCE_DIR) + rel;
+    std::string p = source_dir() + rel;
     if (fs::is_directory(p)) return fs::weakly_canonical(p).string();
   }
-  return std::string(MACRO_SOURCE_DIR) + "/../shared/golden";
+  return source_dir() + "/../shared/golden";
 }
 inline std::string shared_dir() { return golden_dir() + "/.."; }
-inline std::string source_dir() { return MACRO_SOURCE_DIR; }
-inline std::string macro_exe() { return std::string(MACRO_BINARY_DIR) + "/macro"; }
+inline std::string macro_exe() { return binary_dir() + "/macro"; }
 
 // A fresh empty folder under the build tree, removed when the object dies.
 struct TempDir {
@@ -37,7 +40,7 @@ struct TempDir {
   explicit TempDir(const std::string& tag) {
     namespace fs = std::filesystem;
     static int counter = 0;
-    path = std::string(MACRO_BINARY_DIR) + "/test-tmp/" + tag + "-" + std::to_string(::getpid()) +
+    path = binary_dir() + "/test-tmp/" + tag + "-" + std::to_string(::getpid()) +
            "-" + std::to_string(counter++);
     fs::remove_all(path);
     fs::create_directories(path);
