@@ -1,6 +1,6 @@
 // The source tree's architecture as a test: which folders may include which (docs/architecture.md
 // "Include rules"), every quoted include resolves to a file in the repository, and every document a
-// comment cites (docs/NAME.md, with its § sections) exists in the repository.
+// comment cites (docs/<name>.md, with its § sections) exists in the repository.
 #include <catch2/catch.hpp>
 
 #include <filesystem>
@@ -124,7 +124,7 @@ std::set<std::string> doc_sections(const fs::path& md) {
   return out;
 }
 
-// The documents and sections one comment line cites: "docs/x.md §2.1, §3" cites x.md sections 2.1
+// The documents and sections one comment line cites: "docs/<name>.md §2.1, §3" cites sections 2.1
 // and 3. Only docs/ paths and the names of the specification notes count as citations (other .md
 // names in comments are outputs such as report/table.md).
 struct Citation {
