@@ -1,4 +1,4 @@
-// MACRO enhancement of one close-up (macro-method.md §0, §4, §5, §6): the planning stage
+// MACRO enhancement of one close-up (docs/spec/macro-method.md §0, §4, §5, §6): the planning stage
 // (enhance/macro/plan.h), then one Difix-ref step (attention/nets/difix.h) over the views
 // [close-up, crops...] with the plan's attention masks, then the close-up decoded, quantised to
 // 8 bits (as the released pipeline's PIL output) and Lanczos-resized back to the render size.
@@ -8,7 +8,7 @@
 // first, then references in greedy order; --crop composite: one composite view per reference,
 // V = 1 + K), Dc = the U-Net's cross-attention width.
 //
-// Methods (macro-method.md §6):
+// Methods (docs/spec/macro-method.md §6):
 //   3dgs            the raw render, no network;
 //   difix           K = 1 greedy reference, the whole reference image Lanczos-resized to the model
 //                   size, no planes, no mask (Difix's native joint attention), V = 2;

@@ -1,7 +1,7 @@
 // MACRO inputs for one close-up: the trained splat, the reference candidates (cameras + images) and
 // the close-up camera, from a scene folder in the DL3DV-Closeup layout or from explicit paths.
 //
-// Scene folder (DL3DV-Closeup, macro-method.md §7):
+// Scene folder (DL3DV-Closeup, docs/spec/macro-method.md §7):
 //   images/            the training images (reference candidates)
 //   sparse/0/          COLMAP model (or transforms.json; gs/cameras/camera.h load_cameras order)
 //   split.json         training_frames, closeup_eval_pairs, closeup_poses (OpenGL c2w), intrinsics

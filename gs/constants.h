@@ -1,5 +1,5 @@
 // Tuning constants of the splat rasterizer, each named once with where it comes from.
-// (docs/gs-rasterizer.md §1 has the derivations; docs/rasterizer.md the conventions.)
+// (docs/spec/gs-rasterizer.md §1 has the derivations; docs/rasterizer.md the conventions.)
 #pragma once
 
 namespace macro::gs::raster {

@@ -6,7 +6,7 @@
 // runs collapsed to one space and trimmed, lower-cased. Pre-tokenisation splits into the special
 // tokens, the contractions 's 't 're 've 'm 'll 'd, runs of letters, single digits, and runs of other
 // non-space characters. Letters/digits outside ASCII and Latin-1 are classified by code-point range
-// (an approximation of Unicode \p{L} / \p{N}; see docs/networks.md); ftfy's mojibake repair is not done.
+// (an approximation of Unicode \p{L} / \p{N}; see docs/spec/difix-spec.md §1.3); ftfy's mojibake repair is not done.
 #pragma once
 
 #include <cstdint>

@@ -1,6 +1,6 @@
 // PFT-SR, the Progressive Focused Transformer for single-image super-resolution (Long et al.,
 // CVPR 2025; LabShuHangGU/PFT-SR basicsr/archs/pft_arch.py), fp32 inference. MACRO upsamples its
-// reference crops with the light x4 / x2 models (macro-method.md §3, docs/pft.md).
+// reference crops with the light x4 / x2 models (docs/spec/macro-method.md §3, docs/pft.md).
 //
 // Legend: H x W input pixels, Hp x Wp padded to multiples of the window ws, N = Hp*Wp tokens,
 // C embed width, Hd heads, d = C / Hd head width, n = ws*ws tokens per window, s upscale,

@@ -7,7 +7,7 @@
 
 namespace macro::nets {
 namespace {
-constexpr float kVaeEps = 1e-6f;  // every VAE GroupNorm (difix-spec 5.1)
+constexpr float kVaeEps = 1e-6f;  // every VAE GroupNorm (docs/spec/difix-spec.md §5 item 1)
 }
 
 void VaeBlock::visit(const std::string& prefix, ParamVisitor& v) {

@@ -1,4 +1,4 @@
-// The evaluation harness (macro-method.md §7): enumerate the close-up pairs of a benchmark root,
+// The evaluation harness (docs/spec/macro-method.md §7): enumerate the close-up pairs of a benchmark root,
 // run each method and option set on each pair, score it against closeup_gt/<frame>, and append one
 // JSON record per (pair, method, options) to a results file that a later run resumes.
 //

@@ -1,6 +1,6 @@
 // Benchmark tables and charts from harness records (enhance/bench/bench_harness.h).
 //
-// Protocol (macro-method.md §7, scripts/aggregate_results.py): for each configuration (method +
+// Protocol (docs/spec/macro-method.md §7, scripts/aggregate_results.py): for each configuration (method +
 // option set), each scene's mean over its "ok" pairs, then the mean of the scene means. A metric
 // that was never computed for a pair is not part of that pair's contribution; a scene with no
 // computed value of a metric has no scene mean for it, and a configuration whose scenes have none

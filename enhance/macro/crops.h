@@ -1,4 +1,4 @@
-// MACRO scale-matched reference crops (macro-method.md §3), one per (plane, reference).
+// MACRO scale-matched reference crops (docs/spec/macro-method.md §3), one per (plane, reference).
 //
 // Legend: close-up W x H (its render size), reference W_r x H_r, plane p with median close-up
 // depth d_in, crop box [x0, y0, x1, y1) in reference pixels (may extend past the image: padding).

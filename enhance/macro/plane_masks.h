@@ -1,4 +1,4 @@
-// MACRO attention masks per U-Net token grid (macro-method.md §1 "Masks", §4).
+// MACRO attention masks per U-Net token grid (docs/spec/macro-method.md §1 "Masks", §4).
 //
 // Legend: V = 1 + n views [close-up, crop_0 .. crop_{n-1}] (view-major tokens), P planes,
 // level l token grid H_l x W_l, N_l = H_l * W_l tokens per view.

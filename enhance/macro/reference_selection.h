@@ -1,4 +1,4 @@
-// MACRO reference selection (macro-method.md §2): greedy set cover of a 256x256 grid over the
+// MACRO reference selection (docs/spec/macro-method.md §2): greedy set cover of a 256x256 grid over the
 // close-up by each candidate's reprojected depth pixels.
 //
 // Legend: a DepthView is a camera and its MACRO depth [H,W] at the camera's size (the

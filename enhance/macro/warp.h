@@ -1,11 +1,11 @@
-// The paper's backward-warp ablation ("Warp" row of the ablation table; macro-method.md §6): each
+// The paper's backward-warp ablation ("Warp" row of the ablation table; docs/spec/macro-method.md §6): each
 // selected reference is backward-warped into the close-up with the close-up's depth, and the
 // warped full frames take the place of the scale-matched crops in the one Difix step.
 //
 // Legend: close-up W x H (its render size), reference W_r x H_r, model size Wm x Hm, K selected
 // references, n views after the close-up (one per surviving (plane, reference) pair of the plan).
 //
-// Released behaviour (config key ref_warp, macro-method.md §6):
+// Released behaviour (config key ref_warp, docs/spec/macro-method.md §6):
 //  - every close-up pixel (j + 0.5, i + 0.5) with depth z > 0 is unprojected at z and projected
 //    into the reference: (u, v, z_ref); valid if z_ref > 0 and 0 <= u < W_r, 0 <= v < H_r (the
 //    backward projection of the crops, §3, with no occlusion test);
@@ -16,7 +16,7 @@
 //    size and clamped to [0, 1];
 //  - the plane (bin) mask is ignored when warping, so every plane's view of a reference holds the
 //    same warped image; the views keep the plan's bin-major order and eliminations.
-// Where macro-method.md is silent we follow the paper (Warp row: K = 3 with the depth-aware
+// Where docs/spec/macro-method.md is silent we follow the paper (Warp row: K = 3 with the depth-aware
 // mask): the attention masks are the plan's mask mode with each view's validity = the warp's
 // validity (nearest-resized to the model size), so the close-up never attends to zeroed pixels.
 // Option (the paper's occlusion handling, off by default): with the reference's own depth a

@@ -1,6 +1,6 @@
 // DreamSim (Fu et al. 2023), the default ensemble, as MACRO's evaluation calls it:
 // `dreamsim(pretrained=True)` (normalize_embeds=True), its own PIL preprocessing, score = the
-// DreamSim distance between prediction and ground truth (macro-method.md §7). Facts from the public
+// DreamSim distance between prediction and ground truth (docs/spec/macro-method.md §7). Facts from the public
 // ssundaram21/dreamsim sources (dreamsim/model.py, config.py, feature_extraction/*), re-implemented;
 // docs/dreamsim.md has the citations, the weight file layout and the recipe that writes it.
 //

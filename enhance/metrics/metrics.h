@@ -4,7 +4,7 @@
 //
 // Legend: H x W pixels, C channels; images row-major [H,W,C] (gs::Image), values in [0, 1].
 //
-// Definitions (macro-method.md §7; torchmetrics, which MACRO's metrics.py calls):
+// Definitions (docs/spec/macro-method.md §7; torchmetrics, which MACRO's metrics.py calls):
 //  - PSNR = 10 log10(R^2 / MSE), R = data range 1, MSE over every pixel and channel of one image;
 //    identical images give +inf.
 //  - SSIM (torchmetrics / scikit-image with gaussian_weights): per channel, local statistics under

@@ -105,7 +105,7 @@ Result<CameraSet> load_colmap_text(const std::string& cameras_txt, const std::st
 Result<CameraSet> load_colmap_binary(const std::string& cameras_bin, const std::string& images_bin);
 Result<CameraSet> load_nerfstudio(const std::string& path, const CameraLoadOptions& options = {});
 
-// ---- DL3DV-Closeup split JSON (macro-method.md §7)
+// ---- DL3DV-Closeup split JSON (docs/spec/macro-method.md §7)
 // ------------------------------------------------
 struct CloseupEvalPair {
   std::string training_frame;

@@ -1,4 +1,4 @@
-// DL3DV-Closeup / MobileClose split JSON (macro-method.md §7):
+// DL3DV-Closeup / MobileClose split JSON (docs/spec/macro-method.md §7):
 //   scene, data_factor, intrinsics {w, h, fl_x, fl_y, cx, cy, k1, k2, p1, p2, camera_model},
 //   training_frames (MobileClose: train_frames), optional closeup_frames,
 //   closeup_eval_pairs [{training_frame, closeup_frame, depth_ratio, iou, angle_deg, pair_score}],

@@ -1,7 +1,7 @@
 // Project stage: every Gaussian -> screen-space conic, opacity, colour, depth and tile count.
 //
 // Legend: N Gaussians; K = (degree+1)^2 SH coefficients per channel.
-// Math (gsplat fully_fused_projection, docs/gs-rasterizer.md §1.2, §1.5, §1.7):
+// Math (gsplat fully_fused_projection, docs/spec/gs-rasterizer.md §1.2, §1.5, §1.7):
 //   t = R p + t_cam; culled unless near < t.z < far
 //   Sigma = (R_q S)(R_q S)^T; Sigma_2D = J W Sigma W^T J^T, J at the clamped tx/tz, ty/tz
 //   dilation eps (0.3, mip 0.1); det <= 0 culled; conic = inverse

@@ -1,4 +1,4 @@
-// Seeded random splat scenes for tests and benchmarks (the scene of docs/gs-rasterizer.md §3):
+// Seeded random splat scenes for tests and benchmarks (the scene of docs/spec/gs-rasterizer.md §3):
 // Gaussians spread over a camera's view at depths U(depth_min, depth_max), log scales
 // N(log_scale_mean, log_scale_std), opacity U(opacity_min, opacity_max), random rotations, SH of
 // the requested degree (DC ~ N(0, 1), higher bands ~ N(0, sh_rest_std)). The generator is our own

@@ -3,7 +3,7 @@
 // with the exact tensor names and shapes of the release, from shared/golden/manifests).
 //
 // Per stage: wall and process-CPU time (all threads; the machine is shared, so CPU time is what
-// the code cost), GFLOP/s counted with the formulas of difix-spec 4.5 for the actual shapes, and
+// the code cost), GFLOP/s counted with the formulas of docs/spec/difix-spec.md §4.5 for the actual shapes, and
 // the fraction of the machine's fp32 FMA peak measured in the same run (kernels().probe_fma, at the
 // same thread count, probed before the stages; the step row uses the mean of the probes before and
 // after; the bf16 dot-product peak, about twice the FMA peak, is printed beside it). Peak RSS is
@@ -93,7 +93,7 @@ Timing fma_peak(int threads, bool bf16 = false) {
   return {r.wall, r.cpu};
 }
 
-// ---- FLOP counts (difix-spec 4.5: 1 MAC = 2 FLOP; norms, softmax, elementwise ignored) ---------
+// ---- FLOP counts (docs/spec/difix-spec.md §4.5: 1 MAC = 2 FLOP; norms, softmax, elementwise ignored) ---------
 
 double resnet_macs(double n, double cin, double cout) {
   return n * 9 * cout * (cin + cout) + (cin != cout ? n * cin * cout : 0);
