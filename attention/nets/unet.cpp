@@ -1,4 +1,16 @@
 // UNet2DConditionModel (see unet.h): module tree from the config, the weight walk, the forward.
+//
+// Legend (the letters of unet.h): V views (the batch; one scene's views, attended jointly), Vc
+// context views (V or 1), C channels, C_L = block_out_channels[L] (SD-Turbo: 320, 640, 1280, 1280),
+// C0 = C_0, Cin / Cout latent channels in / out (4), Cs a popped skip's channels, h x w latent
+// (H/8 x W/8 of an H x W image), h_L x w_L the grid of level L (ceil halves of h x w; h/2^L when
+// h, w are multiples of 8), HW = h_L*w_L tokens per view, M = V*HW token rows, heads x D head
+// slices (D = C/heads = 64), Lc context tokens (77), Dc context width (1024), T = 4*C0
+// time-embedding width (1280).
+//
+// Layouts: between blocks NCHW [V, C, h_L, w_L] (= [V, C, HW]); inside a transformer token-major
+// [M, C] = [V, HW, C], row v*HW + y*w_L + x (view-major, row-major within a view), the multi-view
+// joint layout attn1 attends over as one sequence.
 #include "attention/nets/unet.h"
 
 #include <algorithm>
@@ -97,22 +109,24 @@ void BasicTransformerBlock::forward(const Run& r, float* x, int64_t views, int64
   float* kv = r.alloc(ctx_views * lc * 2 * c);  // cross k|v [Vc*Lc, 2C]
 
   // attn1: joint self-attention over all views' tokens (view-major), optionally masked.
-  norm1.forward(r, n, x, m);
-  attn1.qkv.forward(r, m, n, c, big, 3 * c);  // [M, 3C]
+  norm1.forward(r, n, x, m);                  // [M, C]
+  attn1.qkv.forward(r, m, n, c, big, 3 * c);  // [M, 3C] = q | k | v, each [M, heads, D]
   round_if_bf16(r, big, m * 3 * c);
+  // One sequence of M = V*HW tokens: q, k, v [M, heads, D] -> n [M, heads*D = C]; mask M x M.
   AttentionArgs a1 = packed_qkv_attention(big, n, m, c, heads);
   a1.mask = mask;
   run_attention(r, a1);
-  attn1.to_out.forward(r, m, n, c, x, c, /*residual=*/x);
+  attn1.to_out.forward(r, m, n, c, x, c, /*residual=*/x);  // x [M, C] += to_out(n)
 
   // attn2: per-view cross-attention to the text context.
-  norm2.forward(r, n, x, m);
-  attn2.to_q.forward(r, m, n, c, big, c);                    // [M, C]
-  attn2.qkv.forward(r, ctx_views * lc, ctx, dc, kv, 2 * c);  // [Vc*Lc, 2C]
+  norm2.forward(r, n, x, m);                                 // [M, C]
+  attn2.to_q.forward(r, m, n, c, big, c);                    // q [M, C]
+  attn2.qkv.forward(r, ctx_views * lc, ctx, dc, kv, 2 * c);  // ctx [Vc*Lc, Dc] -> k | v [Vc*Lc, 2C]
   round_if_bf16(r, big, m * c);
   round_if_bf16(r, kv, ctx_views * lc * 2 * c);
   for (int64_t v = 0; v < views; ++v) {
-    const float* kv_v = kv + (ctx_views == 1 ? 0 : v) * lc * 2 * c;
+    // View v: q [HW, heads, D] (rows v*HW..) x k, v [Lc, heads, D] of its context -> n [HW, C].
+    const float* kv_v = kv + (ctx_views == 1 ? 0 : v) * lc * 2 * c;  // k | v [Lc, 2C]
     AttentionArgs a2;
     a2.q = big + v * hw * c;
     a2.k = kv_v;
@@ -127,14 +141,15 @@ void BasicTransformerBlock::forward(const Run& r, float* x, int64_t views, int64
     a2.head_dim = int(c / heads);
     run_attention(r, a2);
   }
-  attn2.to_out.forward(r, m, n, c, x, c, x);
+  attn2.to_out.forward(r, m, n, c, x, c, x);  // x [M, C] += to_out(n)
 
   // Feed-forward: GEGLU (value = first half, gate = second half, exact-erf GELU), by row chunks.
-  norm3.forward(r, n, x, m);
+  norm3.forward(r, n, x, m);  // [M, C]
   for (int64_t r0 = 0; r0 < m; r0 += ff_rows) {
     const int64_t rows = std::min(ff_rows, m - r0);
-    ff_proj.forward(r, rows, n + r0 * c, c, proj, 8 * c);    // [rows, 8C]
+    ff_proj.forward(r, rows, n + r0 * c, c, proj, 8 * c);    // [rows, 8C] = value | gate
     if (!r.planning()) geglu(g, proj, rows, 4 * c, r.pool);  // [rows, 4C]
+    // x rows [rows, C] += ff_out(g)
     ff_out.forward(r, rows, g, 4 * c, x + r0 * c, c, x + r0 * c);
   }
 }
@@ -167,12 +182,14 @@ void Transformer2D::forward(const Run& r, float* x, int64_t views, int64_t hw, c
   ScratchFrame frame(r);
   float* g = r.alloc(m * c);  // GN(x) NCHW, later proj_out tokens [M, C]
   float* t = r.alloc(m * c);  // tokens [M, C]
+  // g = GN(x) [V, C, HW]
   norm.forward(r, g, x, views, hw, false);
   for (int64_t v = 0; v < views; ++v)  // NCHW plane read transposed: tokens [HW, C]
     proj_in.forward(r, hw, g + v * c * hw, hw, t + v * hw * c, c, nullptr, /*trans_x=*/true);
-  block.forward(r, t, views, hw, ctx, ctx_views, lc, mask);
-  proj_out.forward(r, m, t, c, g, c);
-  tokens_to_nchw_add(r, x, x, g, c, views, c, hw);
+  // t [M, C] = [V, HW, C], view-major: the joint token layout of attn1.
+  block.forward(r, t, views, hw, ctx, ctx_views, lc, mask);  // [M, C] in place
+  proj_out.forward(r, m, t, c, g, c);                        // g: tokens [M, C]
+  tokens_to_nchw_add(r, x, x, g, c, views, c, hw);           // x [V, C, HW] += g^T per view
 }
 
 // ---- blocks ------------------------------------------------------------------------------------
@@ -326,7 +343,7 @@ size_t UNet2DConditionModel::weight_bytes() const {
 
 std::vector<std::pair<int64_t, int64_t>> UNet2DConditionModel::level_grids(int64_t h,
                                                                            int64_t w) const {
-  std::vector<std::pair<int64_t, int64_t>> g;
+  std::vector<std::pair<int64_t, int64_t>> g;  // (h_L, w_L): h x w, then ceil halves
   for (size_t i = 0; i < down_blocks.size(); ++i) {
     g.emplace_back(h, w);
     if (down_blocks[i].has_down) down_blocks[i].downsampler.out_size(h, w, &h, &w);
@@ -347,7 +364,8 @@ void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t vi
                                         int64_t w, float t, const float* ctx, int64_t ctx_views,
                                         int64_t lc, const UNetMasks& masks, float* eps,
                                         const UNetTap& tap) const {
-  const auto grids = level_grids(h, w);
+  // z [V, Cin, h, w], ctx [Vc, Lc, Dc] -> eps [V, Cout, h, w].
+  const auto grids = level_grids(h, w);  // (h_L, w_L) per level
   const int n = levels();
   const int64_t c0 = cfg_.block_out_channels[0], temb = cfg_.time_embed_dim();
   auto mask_at = [&](int level) -> const BlockSparseMask* {
@@ -358,64 +376,70 @@ void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t vi
   };
 
   // Time embedding: SiLU(linear_2(SiLU(linear_1(sinusoid(t))))) — the SiLU every resnet applies.
-  float* sinus = r.alloc(c0);
-  float* e1 = r.alloc(temb);
-  float* emb = r.alloc(temb);
+  float* sinus = r.alloc(c0);  // [C0] (320)
+  float* e1 = r.alloc(temb);   // [T] (1280)
+  float* emb = r.alloc(temb);  // [T], one for all views
   if (!r.planning()) {
     TimestepEmbeddingParams tp;
     tp.dim = int(c0);
     tp.flip_sin_to_cos = cfg_.flip_sin_to_cos;
     tp.freq_shift = float(cfg_.freq_shift);
-    timestep_embedding(sinus, &t, 1, tp);
+    timestep_embedding(sinus, &t, 1, tp);  // [1, C0] = cos | sin
   }
-  time_linear_1.forward(r, 1, sinus, c0, e1, temb);
+  time_linear_1.forward(r, 1, sinus, c0, e1, temb);  // [1, C0] -> [1, T]
   if (!r.planning()) activation(e1, e1, temb, Act::kSilu, nullptr);
-  time_linear_2.forward(r, 1, e1, temb, emb, temb);
+  time_linear_2.forward(r, 1, e1, temb, emb, temb);  // [1, T] -> [1, T]
   if (!r.planning()) activation(emb, emb, temb, Act::kSilu, nullptr);
 
   // Down path: every resnet/transformer output and every downsample is a skip (kept until popped).
+  // SD-Turbo's 12 skips: [V, 320, h, w] x3, [V, 320, h/2, w/2], [V, 640, h/2, w/2] x2,
+  // [V, 640, h/4, w/4], [V, 1280, h/4, w/4] x2, [V, 1280, h/8, w/8] x3.
   std::vector<Skip> skips;
   int64_t hh = grids[0].first, ww = grids[0].second, cc = c0;
   float* cur = r.alloc(views * c0 * hh * ww);
-  conv_in.forward_same(r, z, views, hh, ww, cur);  // [V, C0, h, w]
+  conv_in.forward_same(r, z, views, hh, ww, cur);  // [V, Cin, h, w] -> [V, C0, h, w]
   emit("conv_in", cur, cc, hh, ww);
-  skips.push_back({cur, cc, hh, ww});
+  skips.push_back({cur, cc, hh, ww});  // [V, C0, h, w]
   for (int i = 0; i < n; ++i) {
-    const UNetBlock& b = down_blocks[size_t(i)];
+    const UNetBlock& b = down_blocks[size_t(i)];  // level i: hh x ww = h_i x w_i
     for (size_t j = 0; j < b.resnets.size(); ++j) {
       float* o = r.alloc(views * b.c_out * hh * ww);
+      // [V, C_{i-1} (j = 0; C_0 at i = 0) or C_i, h_i, w_i] -> o [V, C_i, h_i, w_i]
       b.resnets[j].forward(r, cur, views, hh, ww, emb, o);
       cc = b.c_out;
-      if (!b.attentions.empty())
+      if (!b.attentions.empty())  // in place on [V, C_i, h_i*w_i]; tokens [V*h_i*w_i, C_i]
         b.attentions[j].forward(r, o, views, hh * ww, ctx, ctx_views, lc, mask_at(i));
       cur = o;
-      skips.push_back({cur, cc, hh, ww});
+      skips.push_back({cur, cc, hh, ww});  // [V, C_i, h_i, w_i]
     }
-    if (b.has_down) {
+    if (b.has_down) {  // stride 2, pad 1: [V, C_i, h_i, w_i] -> [V, C_i, h_{i+1}, w_{i+1}]
       int64_t oh, ow;
-      b.downsampler.out_size(hh, ww, &oh, &ow);
+      b.downsampler.out_size(hh, ww, &oh, &ow);  // ceil(h_i/2), ceil(w_i/2)
       float* o = r.alloc(views * cc * oh * ow);
       b.downsampler.forward(r, cur, views, hh, ww, o);
       cur = o;
       hh = oh, ww = ow;
-      skips.push_back({cur, cc, hh, ww});
+      skips.push_back({cur, cc, hh, ww});  // [V, C_i, h_{i+1}, w_{i+1}]
     }
     emit("down_blocks." + std::to_string(i), cur, cc, hh, ww);
   }
 
-  // Mid block at the last level.
+  // Mid block at the last level: [V, C_{n-1}, h_{n-1}, w_{n-1}] throughout ([V, 1280, h/8, w/8]).
   {
     const UNetBlock& b = mid_block;
-    float* a = r.alloc(views * cc * hh * ww);
+    float* a = r.alloc(views * cc * hh * ww);  // [V, C, hh, ww]
     b.resnets[0].forward(r, cur, views, hh, ww, emb, a);
+    // In place; tokens [V*hh*ww, C], attn1 over all of them.
     b.attentions[0].forward(r, a, views, hh * ww, ctx, ctx_views, lc, mask_at(n - 1));
-    float* o = r.alloc(views * cc * hh * ww);
+    float* o = r.alloc(views * cc * hh * ww);  // [V, C, hh, ww]
     b.resnets[1].forward(r, a, views, hh, ww, emb, o);
     cur = o;
     emit("mid_block", cur, cc, hh, ww);
   }
 
   // Up path: ping-pong buffers sized for the largest level, one concat buffer.
+  // max_h: the largest [V, c_out, h_L, w_L] of a block, before or after its upsample;
+  // max_cat: the largest resnet input [V, C + Cs, h_L, w_L].
   int64_t max_h = 0, max_cat = 0;
   {
     for (int i = 0; i < n; ++i) {
@@ -433,29 +457,33 @@ void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t vi
   float* hbuf[2] = {r.alloc(max_h), r.alloc(max_h)};
   float* cat = r.alloc(max_cat);
   int which = 0;
+  // SD-Turbo (C + Cs -> c_out per resnet): up0 @ h/8: 2560, 2560, 2560 -> 1280; up1 @ h/4:
+  // 2560, 2560, 1920 -> 1280; up2 @ h/2: 1920, 1280, 960 -> 640; up3 @ h: 960, 640, 640 -> 320.
   for (int i = 0; i < n; ++i) {
     const UNetBlock& b = up_blocks[size_t(i)];
-    const int level = n - 1 - i;
+    const int level = n - 1 - i;  // hh x ww = h_level x w_level
     for (size_t j = 0; j < b.resnets.size(); ++j) {
       MACRO_CHECK(!skips.empty());
-      const Skip s = skips.back();
+      const Skip s = skips.back();  // [V, Cs, hh, ww] (LIFO)
       skips.pop_back();
       MACRO_CHECK(s.h == hh && s.w == ww && cc + s.c == b.resnets[j].c_in);
       const int64_t hw = hh * ww;
       for (int64_t v = 0; v < views; ++v) {  // cat[v] = [h[v], skip[v]] on channels
         copy_floats(r, cat + v * (cc + s.c) * hw, cur + v * cc * hw, cc * hw);
         copy_floats(r, cat + v * (cc + s.c) * hw + cc * hw, s.data + v * s.c * hw, s.c * hw);
-      }
+      }  // cat [V, C + Cs, hh, ww]
       float* o = hbuf[which];
       which ^= 1;
+      // [V, C + Cs, hh, ww] -> [V, c_out, hh, ww]
       b.resnets[j].forward(r, cat, views, hh, ww, emb, o, /*x_is_scratch=*/true);
       cc = b.c_out;
-      if (!b.attentions.empty())
+      if (!b.attentions.empty())  // in place on [V, c_out, hw]; tokens [V*hw, c_out]
         b.attentions[j].forward(r, o, views, hw, ctx, ctx_views, lc, mask_at(level));
       cur = o;
     }
     if (b.has_up) {
       // diffusers upsamples to the next skip's size (forward_upsample_size for odd latents).
+      // [V, C, h_L, w_L] -> [V, C, oh, ow] = [V, C, h_{L-1}, w_{L-1}] (2*h_L, or 2*h_L - 1)
       const int64_t oh = skips.empty() ? 2 * hh : skips.back().h;
       const int64_t ow = skips.empty() ? 2 * ww : skips.back().w;
       MACRO_CHECK(cur == hbuf[which ^ 1]);  // both buffers hold max_h: resize into the other one
@@ -466,9 +494,9 @@ void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t vi
   }
 
   // Output: conv_out(SiLU(GN(h))).
-  float* t2 = r.alloc(views * cc * hh * ww);
-  conv_norm_out.forward(r, t2, cur, views, hh * ww, /*silu=*/true);
-  conv_out.forward_scratch(r, t2, views, hh, ww, eps, nullptr, 1, 1, 1, 1, 1);
+  float* t2 = r.alloc(views * cc * hh * ww);                                    // [V, C0, h, w]
+  conv_norm_out.forward(r, t2, cur, views, hh * ww, /*silu=*/true);             // [V, C0, h, w]
+  conv_out.forward_scratch(r, t2, views, hh, ww, eps, nullptr, 1, 1, 1, 1, 1);  // [V, Cout, h, w]
 }
 
 size_t UNet2DConditionModel::workspace_bytes(int64_t views, int64_t h, int64_t w,
@@ -487,7 +515,7 @@ Result<Tensor> UNet2DConditionModel::forward(const TensorView& z, float timestep
       z.dim(0) < 1 || z.dim(2) < 1 || z.dim(3) < 1)
     return Status::error("unet: z: expected contiguous F32 [V," + std::to_string(cfg_.in_channels) +
                          ",h,w], found " + z.describe());
-  const int64_t views = z.dim(0), h = z.dim(2), w = z.dim(3);
+  const int64_t views = z.dim(0), h = z.dim(2), w = z.dim(3);  // z [V, Cin, h, w]
   if (ctx.dtype != DType::kF32 || ctx.rank != 3 || !ctx.is_contiguous() ||
       (ctx.dim(0) != views && ctx.dim(0) != 1) || ctx.dim(1) < 1 ||
       ctx.dim(2) != cfg_.cross_attention_dim)
@@ -501,7 +529,7 @@ Result<Tensor> UNet2DConditionModel::forward(const TensorView& z, float timestep
   for (size_t l = 0; l < masks.level.size(); ++l) {
     const BlockSparseMask* m = masks.level[l];
     if (!m) continue;
-    const int64_t tokens = views * grids[l].first * grids[l].second;
+    const int64_t tokens = views * grids[l].first * grids[l].second;  // M = V*h_l*w_l
     if (m->nq != tokens || m->nk != tokens)
       return Status::error("unet: mask level " + std::to_string(l) + ": expected " +
                            std::to_string(tokens) + " x " + std::to_string(tokens) +
@@ -509,7 +537,7 @@ Result<Tensor> UNet2DConditionModel::forward(const TensorView& z, float timestep
                            std::to_string(grids[l].second) + "), found " + std::to_string(m->nq) +
                            " x " + std::to_string(m->nk));
   }
-  Tensor eps = Tensor::f32({views, cfg_.out_channels, h, w});
+  Tensor eps = Tensor::f32({views, cfg_.out_channels, h, w});  // [V, Cout, h, w]
   Workspace plan;
   forward_impl(Run{&plan, pool, precision_}, nullptr, views, h, w, timestep, nullptr, ctx.dim(0),
                ctx.dim(1), masks, nullptr, tap);

@@ -1,4 +1,13 @@
 // The Difix VAE (see vae.h): module tree, weight walk, encode with skips, decode with skip adds.
+//
+// Legend (the letters of vae.h): N images (views; encode_impl / decode_impl run one image, so
+// their shapes drop the N), C channels, C_i = block_out_channels[i] (Difix: 128, 256, 512, 512),
+// n levels (4), Cin / Cout image channels (3), H x W image, H_i x W_i = H/2^i x W/2^i (encoder
+// level i, decoder up block n-1-i), h x w = H_{n-1} x W_{n-1} latent (H/8 x W/8), L latent
+// channels (4; the moments have 2L), K images whose skips are kept, Cs a skip's channels, HW
+// tokens of the mid attention (one head of C). S_i, the skip entering encoder down block i:
+// S_0 [C_0, H, W], S_i [C_{i-1}, H_i, W_i] (Difix: [128, H, W], [128, H/2, W/2],
+// [256, H/4, W/4], [512, H/8, W/8]). Activations are NCHW.
 #include "attention/nets/vae.h"
 
 #include <algorithm>
@@ -43,9 +52,9 @@ void VaeMidBlock::pack(Precision p) {
 
 void VaeMidBlock::forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* a,
                           float* out) const {
-  resnet0.forward(r, x, n, h, w, nullptr, a);
-  attention.forward(r, a, n, h * w);
-  resnet1.forward(r, a, n, h, w, nullptr, out);
+  resnet0.forward(r, x, n, h, w, nullptr, a);    // a [N, C, H, W]
+  attention.forward(r, a, n, h * w);             // in place; tokens [HW, C] per image
+  resnet1.forward(r, a, n, h, w, nullptr, out);  // out [N, C, H, W]
 }
 
 int64_t DifixVae::skip_channels(int i) const {
@@ -208,9 +217,11 @@ void store_bf16(const Run& r, uint16_t* dst, const float* src, int64_t n) {
 
 void DifixVae::encode_impl(const Run& r, const float* x, int64_t h, int64_t w, float* moments,
                            const std::vector<SkipOut>& skip_out) const {
+  // One image: x [Cin, H, W] (this h, w are the image's H, W) -> moments [2L, H/8, W/8];
+  // skip_out[i] receives S_i.
   const int n = levels();
   const auto& boc = cfg_.block_out_channels;
-  // Ping-pong buffers for the largest level activation.
+  // Ping-pong buffers for the largest level activation: max over i of [max(c_in, c_out), H_i, W_i].
   int64_t max_act = 0;
   {
     int64_t hh = h, ww = w;
@@ -229,41 +240,45 @@ void DifixVae::encode_impl(const Run& r, const float* x, int64_t h, int64_t w, f
   auto other = [&](const float* cur) { return cur == buf[0] ? buf[1] : buf[0]; };
   int64_t hh = h, ww = w, cc = boc[0];
   float* cur = skip_out[0].f32 ? skip_out[0].f32 : buf[0];
-  enc_conv_in.forward_same(r, x, 1, hh, ww, cur);  // S_0
+  enc_conv_in.forward_same(r, x, 1, hh, ww, cur);  // S_0: [Cin, H, W] -> [C_0, H, W]
   if (skip_out[0].bf16) store_bf16(r, skip_out[0].bf16, cur, cc * hh * ww);
-  for (int i = 0; i < n; ++i) {
+  for (int i = 0; i < n; ++i) {  // cur = S_i (hh x ww = H_i x W_i)
     const VaeBlock& b = down_blocks[size_t(i)];
     if (i == 0 && lean) {
       if (cur != buf[0] && cur != buf[1]) {  // S_0 is the caller's skip: work on a copy
         copy_floats(r, buf[0], cur, cc * hh * ww);
         cur = buf[0];
       }
+      // [C_0, H, W] in place, by bands (t2 [C_0, H, W] in the other buffer)
       for (const ResnetBlock2D& rb : b.resnets) rb.forward_lean(r, cur, hh, ww, other(cur), rows);
     } else {
       for (const ResnetBlock2D& rb : b.resnets) {
         float* o = other(cur);
+        // [rb.c_in, H_i, W_i] -> o [C_i, H_i, W_i]
         rb.forward(r, cur, 1, hh, ww, nullptr, o, /*x_is_scratch=*/false,
                    /*out_capacity=*/lean ? max_act : 0);
         cur = o;
         cc = rb.c_out;
       }
     }
-    if (b.has_down) {
+    if (b.has_down) {  // pad right/bottom 1, stride 2: [C_i, H_i, W_i] -> [C_i, H_i/2, W_i/2]
       int64_t oh, ow;
       b.downsampler.out_size(hh, ww, &oh, &ow);
       const SkipOut& so = skip_out[size_t(i + 1)];
-      float* o = so.f32 ? so.f32 : other(cur);  // S_{i+1}
+      float* o = so.f32 ? so.f32 : other(cur);  // S_{i+1} [C_i, H_{i+1}, W_{i+1}]
       b.downsampler.forward(r, cur, 1, hh, ww, o);
       cur = o;
       hh = oh, ww = ow;
       if (so.bf16) store_bf16(r, so.bf16, cur, cc * hh * ww);
     }
   }
+  // Here hh x ww = h x w (H/8 x W/8) and cur [C_{n-1}, h, w] ([512, h, w]).
   float* a = other(cur);
-  float* mid = r.alloc(cc * hh * ww);
-  enc_mid.forward(r, cur, 1, hh, ww, a, mid);
-  enc_norm_out.forward(r, a, mid, 1, hh * ww, /*silu=*/true);
-  float* e = r.alloc(2 * cfg_.latent_channels * hh * ww);
+  float* mid = r.alloc(cc * hh * ww);                          // [C_{n-1}, h, w]
+  enc_mid.forward(r, cur, 1, hh, ww, a, mid);                  // [C_{n-1}, h, w]
+  enc_norm_out.forward(r, a, mid, 1, hh * ww, /*silu=*/true);  // a [C_{n-1}, h, w]
+  float* e = r.alloc(2 * cfg_.latent_channels * hh * ww);      // [2L, h, w]
+  // 3x3: a [C_{n-1}, h, w] -> e [2L, h, w]; 1x1: moments [2L, h, w] = mean [L] | logvar [L]
   enc_conv_out.forward_scratch(r, a, 1, hh, ww, e, nullptr, 1, 1, 1, 1, 1);
   quant_conv.forward_scratch(r, e, 1, hh, ww, moments, nullptr, 1, 0, 0, 0, 0);
 }
@@ -297,14 +312,14 @@ Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skip
   if (bf16_skips && precision_ != Precision::kBf16)
     return Status::error("vae: bf16 skips need a bf16 model, this one is " +
                          std::string(precision_name(precision_)));
-  const int64_t h = H / f, w = W / f, lat = cfg_.latent_channels;
+  const int64_t h = H / f, w = W / f, lat = cfg_.latent_channels;  // images [N, Cin, H, W]
   VaeEncoding enc;
-  enc.moments = Tensor::f32({n, 2 * lat, h, w});
-  enc.z = Tensor::f32({n, lat, h, w});
+  enc.moments = Tensor::f32({n, 2 * lat, h, w});  // [N, 2L, h, w]
+  enc.z = Tensor::f32({n, lat, h, w});            // [N, L, h, w]
   {
     int64_t hh = H, ww = W;
     for (int i = 0; i < levels(); ++i) {
-      const Shape shape{keep_skips, skip_channels(i), hh, ww};
+      const Shape shape{keep_skips, skip_channels(i), hh, ww};  // S_i [K, Cs, H_i, W_i]
       enc.skips.push_back(bf16_skips ? Tensor(DType::kBF16, shape) : Tensor::f32(shape));
       if (down_blocks[size_t(i)].has_down)
         down_blocks[size_t(i)].downsampler.out_size(hh, ww, &hh, &ww);
@@ -315,7 +330,7 @@ Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skip
     if (img < keep_skips)
       for (int i = 0; i < levels(); ++i) {
         Tensor& s = enc.skips[size_t(i)];
-        const int64_t off = img * (s.numel() / keep_skips);
+        const int64_t off = img * (s.numel() / keep_skips);  // image img's S_i [Cs, H_i, W_i]
         if (bf16_skips)
           p[size_t(i)].bf16 = s.view().u16() + off;
         else
@@ -328,14 +343,14 @@ Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skip
               std::vector<SkipOut>(size_t(levels())));
   Arena local;
   Arena& a = prepare_arena(arena, local, plan.peak());
-  const int64_t in_img = cfg_.in_channels * H * W;
+  const int64_t in_img = cfg_.in_channels * H * W;  // one image [Cin, H, W]
   for (int64_t img = 0; img < n; ++img) {
     Workspace ws(&a);
     encode_impl(Run{&ws, pool, precision_}, images.f32() + img * in_img, H, W,
                 enc.moments.f32() + img * 2 * lat * h * w, skip_ptrs(img));
     a.reset();
   }
-  // z = scaling * mean (first L channels of the moments).
+  // z = scaling * mean (first L channels of the moments): [N, L, h, w] from [N, 2L, h, w].
   const float s = float(cfg_.scaling_factor);
   for (int64_t img = 0; img < n; ++img)
     scale(enc.z.f32() + img * lat * h * w, enc.moments.f32() + img * 2 * lat * h * w, s,
@@ -347,6 +362,7 @@ Result<VaeEncoding> DifixVae::encode(const TensorView& images, int64_t keep_skip
 
 void DifixVae::add_skip(const Run& r, const Conv2d& sc, const SkipIn& s, int64_t hh, int64_t ww,
                         float* h) const {
+  // h [C, hh, ww] += 1x1 conv of S [Cs, hh, ww] (C = sc.c_out, Cs = sc.c_in).
   if (!s.bf16) {  // h += skip_conv(S): the residual is h itself
     sc.forward(r, s.f32, 1, hh, ww, h, /*residual=*/h, 1, 0, 0, 0, 0);
     return;
@@ -355,8 +371,8 @@ void DifixVae::add_skip(const Run& r, const Conv2d& sc, const SkipIn& s, int64_t
   const int64_t rows = std::max<int64_t>(1, band_rows(ww) > 0 ? band_rows(ww) : hh);
   const int64_t bh = std::min(rows, hh);
   ScratchFrame frame(r);
-  float* in = r.alloc(sc.c_in * bh * ww);
-  float* yb = r.alloc(sc.c_out * bh * ww);
+  float* in = r.alloc(sc.c_in * bh * ww);   // band of S widened [Cs, bh, ww]
+  float* yb = r.alloc(sc.c_out * bh * ww);  // band of h [C, bh, ww]
   if (r.planning()) return;
   for (int64_t y0 = 0; y0 < hh; y0 += bh) {
     const int64_t y1 = std::min(hh, y0 + bh), n = (y1 - y0) * ww;
@@ -370,6 +386,10 @@ void DifixVae::add_skip(const Run& r, const Conv2d& sc, const SkipIn& s, int64_t
 
 void DifixVae::decode_impl(const Run& r, const float* z, int64_t h, int64_t w,
                            const std::vector<SkipIn>& skips, float* out) const {
+  // One image: z [L, h, w] (this h, w are the latent's) with S_i [Cs, H_i, W_i]
+  // -> out [Cout, H, W], H = h*2^(n-1). Up block i runs at H_{n-1-i} x W_{n-1-i} = h*2^i x w*2^i,
+  // in channels C_{n-i} (C_{n-1} for i = 0), out C_{n-1-i}: Difix 512 -> 512 @ h,
+  // 512 -> 512 @ 2h, 512 -> 256 @ 4h, 256 -> 128 @ 8h = H.
   const int n = levels();
   const int64_t lat = cfg_.latent_channels;
   // Banded full-resolution level (the last): the transition upsample goes by bands from a copy
@@ -392,7 +412,9 @@ void DifixVae::decode_impl(const Run& r, const float* z, int64_t h, int64_t w,
   float* buf[2];
   if (lean) {
     const VaeBlock& last = up_blocks[size_t(n - 1)];
-    const int64_t full = (h << (n - 1)) * (w << (n - 1));
+    const int64_t full = (h << (n - 1)) * (w << (n - 1));  // H*W
+    // R holds the lower levels' two max_act halves, then [last.c_in, H, W] ([256, H, W]), then
+    // the result and t2, 2 x [last.c_out, H, W] (2 x [128, H, W]).
     const int64_t region = std::max({2 * max_act, last.c_in * full, 2 * last.c_out * full});
     buf[0] = r.alloc(region);
     buf[1] = r.planning() ? nullptr : buf[0] + max_act;
@@ -401,22 +423,24 @@ void DifixVae::decode_impl(const Run& r, const float* z, int64_t h, int64_t w,
     buf[1] = r.alloc(max_act);
   }
   auto other = [&](const float* cur) { return cur == buf[0] ? buf[1] : buf[0]; };
-  float* d = r.alloc(lat * h * w);
-  float* p = r.alloc(lat * h * w);
+  float* d = r.alloc(lat * h * w);  // [L, h, w]
+  float* p = r.alloc(lat * h * w);  // [L, h, w]
   if (!r.planning()) scale(d, z, float(1.0 / cfg_.scaling_factor), lat * h * w, nullptr);
-  post_quant_conv.forward_scratch(r, d, 1, h, w, p, nullptr, 1, 0, 0, 0, 0);
+  post_quant_conv.forward_scratch(r, d, 1, h, w, p, nullptr, 1, 0, 0, 0, 0);  // 1x1 [L, h, w]
   float* cur = buf[0];
-  dec_conv_in.forward_scratch(r, p, 1, h, w, cur, nullptr, 1, 1, 1, 1, 1);
+  dec_conv_in.forward_scratch(r, p, 1, h, w, cur, nullptr, 1, 1, 1, 1, 1);  // [C_{n-1}, h, w]
   dec_mid.forward(r, cur, 1, h, w, other(cur), cur);  // in place: x is dead after resnet0
-  int64_t hh = h, ww = w, cc = up_blocks[0].c_in;
+  int64_t hh = h, ww = w, cc = up_blocks[0].c_in;     // cur [C_{n-1}, h, w] ([512, h, w])
   for (int i = 0; i < n; ++i) {
-    const VaeBlock& b = up_blocks[size_t(i)];
+    const VaeBlock& b = up_blocks[size_t(i)];  // hh x ww = H_{n-1-i} x W_{n-1-i}
     // h += skip_conv_{i+1}(gamma * S_{n-1-i}); gamma is in the weights
+    // cur [b.c_in, hh, ww] += 1x1 conv of S_{n-1-i} [Cs, hh, ww]
     if (!cfg_.ignore_skip)
       add_skip(r, skip_convs[size_t(i)], skips[size_t(n - 1 - i)], hh, ww, cur);
     if (lean && i == n - 1) {
-      for (const ResnetBlock2D& rb : b.resnets) {
+      for (const ResnetBlock2D& rb : b.resnets) {  // [rb.c_in, H, W] -> [rb.c_out, H, W]
         MACRO_CHECK(cur == buf[0]);
+        // Without a shortcut, t2 [rb.c_out, H, W] goes right behind the result in R.
         float* t2 = rb.has_shortcut || r.planning() ? nullptr : cur + rb.c_out * hh * ww;
         rb.forward_lean(r, cur, hh, ww, t2, rows);  // the result replaces x
         cc = rb.c_out;
@@ -427,13 +451,15 @@ void DifixVae::decode_impl(const Run& r, const float* z, int64_t h, int64_t w,
       float* o = other(cur);
       // At the full-resolution level the ping-pong buffers (sized for the widest upsampled
       // tensor) have room for conv1's output behind the block output.
+      // [rb.c_in, hh, ww] -> o [C_{n-1-i}, hh, ww]
       rb.forward(r, cur, 1, hh, ww, nullptr, o, /*x_is_scratch=*/true, /*out_capacity=*/max_act);
       cur = o;
       cc = rb.c_out;
     }
+    // Upsample (nearest x2, 3x3 conv): [C_{n-1-i}, hh, ww] -> [C_{n-1-i}, 2 hh, 2 ww]
     if (b.has_up && lean && i == n - 2) {  // into R by bands, from a copy of the input
       ScratchFrame frame(r);
-      float* src = r.alloc(cc * hh * ww);
+      float* src = r.alloc(cc * hh * ww);  // [C, H/2, W/2]
       copy_floats(r, src, cur, cc * hh * ww);
       b.upsampler.forward_lean(r, src, cc, hh, ww, 2 * hh, 2 * ww, buf[0], rows);
       cur = buf[0];
@@ -444,14 +470,15 @@ void DifixVae::decode_impl(const Run& r, const float* z, int64_t h, int64_t w,
       hh *= 2, ww *= 2;
     }
   }
+  // Here cur [C_0, H, W] ([128, H, W]); out [Cout, H, W].
   if (lean) {  // in place: GroupNorm reads each group whole before writing it
-    dec_norm_out.forward(r, cur, cur, 1, hh * ww, /*silu=*/true);
-    dec_conv_out.forward_scratch(r, cur, 1, hh, ww, out, nullptr, 1, 1, 1, 1, 1);
+    dec_norm_out.forward(r, cur, cur, 1, hh * ww, /*silu=*/true);                  // [C_0, H, W]
+    dec_conv_out.forward_scratch(r, cur, 1, hh, ww, out, nullptr, 1, 1, 1, 1, 1);  // [Cout, H, W]
     return;
   }
   float* t = other(cur);
-  dec_norm_out.forward(r, t, cur, 1, hh * ww, /*silu=*/true);
-  dec_conv_out.forward_scratch(r, t, 1, hh, ww, out, nullptr, 1, 1, 1, 1, 1);
+  dec_norm_out.forward(r, t, cur, 1, hh * ww, /*silu=*/true);                  // [C_0, H, W]
+  dec_conv_out.forward_scratch(r, t, 1, hh, ww, out, nullptr, 1, 1, 1, 1, 1);  // [Cout, H, W]
 }
 
 Result<Tensor> DifixVae::decode(const TensorView& z, const std::vector<TensorView>& skips,
@@ -461,7 +488,7 @@ Result<Tensor> DifixVae::decode(const TensorView& z, const std::vector<TensorVie
       z.dim(1) != lat || z.dim(2) < 1 || z.dim(3) < 1)
     return Status::error("vae: z: expected contiguous F32 [1," + std::to_string(lat) +
                          ",h,w], found " + z.describe());
-  const int64_t h = z.dim(2), w = z.dim(3);
+  const int64_t h = z.dim(2), w = z.dim(3);  // z [1, L, h, w]
   if (int(skips.size()) != levels())
     return Status::error("vae: expected " + std::to_string(levels()) + " skip tensors, found " +
                          std::to_string(skips.size()));
@@ -469,7 +496,7 @@ Result<Tensor> DifixVae::decode(const TensorView& z, const std::vector<TensorVie
   std::vector<SkipIn> ptrs;
   for (int i = 0; i < levels(); ++i) {
     const TensorView& s = skips[size_t(i)];
-    const int64_t scale_i = f >> i;  // S_i is at H / 2^i
+    const int64_t scale_i = f >> i;  // S_i [1, Cs, H/2^i, W/2^i] = [1, Cs, h*scale_i, w*scale_i]
     const bool dtype_ok = s.dtype == DType::kF32 || (bf16_ok && s.dtype == DType::kBF16);
     if (!dtype_ok || s.rank != 4 || !s.is_contiguous() || s.dim(0) != 1 ||
         s.dim(1) != skip_channels(i) || s.dim(2) != h * scale_i || s.dim(3) != w * scale_i)
@@ -484,7 +511,7 @@ Result<Tensor> DifixVae::decode(const TensorView& z, const std::vector<TensorVie
       in.bf16 = s.u16();
     ptrs.push_back(in);
   }
-  Tensor out = Tensor::f32({1, cfg_.out_channels, h * f, w * f});
+  Tensor out = Tensor::f32({1, cfg_.out_channels, h * f, w * f});  // [1, Cout, H, W]
   Workspace plan;
   decode_impl(Run{&plan, pool, precision_}, nullptr, h, w, ptrs, nullptr);
   Arena local;
