@@ -18,10 +18,7 @@
 namespace macro::enhance {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
+using Clock = std::chrono::steady_clock;  // ms_since: attention/runtime/progress.h
 
 constexpr const char* kStage = "enhance";
 constexpr const char* kDownloadHint =
