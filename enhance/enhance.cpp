@@ -10,8 +10,8 @@
 
 #include "attention/nets/difix.h"
 #include "attention/nets/scheduler.h"
-#include "attention/runtime/progress.h"
 #include "attention/runtime/io/safetensors.h"
+#include "attention/runtime/progress.h"
 #include "enhance/macro/warp.h"
 #include "gs/raster/rasterizer.h"
 
@@ -36,8 +36,7 @@ void note(const char* what, double ms, const std::string& extra = "") {
 Result<Tensor> read_ctx_file(const std::string& path) {
   MACRO_ASSIGN_OR_RETURN(SafeTensors st, SafeTensors::open(path));
   const TensorEntry* e = st.find("ctx");
-  if (!e)
-    return Status::error(path + ": tensor 'ctx' (the text embedding [1, 77, D]) not found");
+  if (!e) return Status::error(path + ": tensor 'ctx' (the text embedding [1, 77, D]) not found");
   if (e->shape.size() != 3 || e->shape[0] != 1 || e->shape[1] < 1 || e->shape[2] < 1)
     return Status::error(path + ": tensor 'ctx': expected shape [1, L, D], found rank " +
                          std::to_string(e->shape.size()));
@@ -64,11 +63,11 @@ Result<Tensor> to_network_batch(const std::vector<gs::Image>& views, Size2 model
     const gs::Image& im = views[size_t(v)];
     if (im.width != model.w || im.height != model.h || im.channels != 3)
       return Status::error("view " + std::to_string(v) + ": expected " + std::to_string(model.w) +
-                           "x" + std::to_string(model.h) + "x3, found " +
-                           std::to_string(im.width) + "x" + std::to_string(im.height) + "x" +
-                           std::to_string(im.channels));
+                           "x" + std::to_string(model.h) + "x3, found " + std::to_string(im.width) +
+                           "x" + std::to_string(im.height) + "x" + std::to_string(im.channels));
     for (int64_t p = 0; p < hw; ++p)
-      for (int c = 0; c < 3; ++c) dst[(v * 3 + c) * hw + p] = 2.f * im.data[size_t(p) * 3 + c] - 1.f;
+      for (int c = 0; c < 3; ++c)
+        dst[(v * 3 + c) * hw + p] = 2.f * im.data[size_t(p) * 3 + c] - 1.f;
   }
   return t;
 }
@@ -77,11 +76,16 @@ Result<Tensor> to_network_batch(const std::vector<gs::Image>& views, Size2 model
 
 const char* method_name(EnhanceMethod m) {
   switch (m) {
-    case EnhanceMethod::k3dgs: return "3dgs";
-    case EnhanceMethod::kDifix: return "difix";
-    case EnhanceMethod::kMacro: return "macro";
-    case EnhanceMethod::kMacroUnmasked: return "macro-unmasked";
-    case EnhanceMethod::kWarp: return "warp";
+    case EnhanceMethod::k3dgs:
+      return "3dgs";
+    case EnhanceMethod::kDifix:
+      return "difix";
+    case EnhanceMethod::kMacro:
+      return "macro";
+    case EnhanceMethod::kMacroUnmasked:
+      return "macro-unmasked";
+    case EnhanceMethod::kWarp:
+      return "warp";
   }
   return "?";
 }
@@ -102,7 +106,8 @@ Status check_difix_weights(const std::string& folder) {
     return Status::error("Difix weights folder '" + folder + "' does not exist: " + kDownloadHint);
   std::string missing;
   for (const char* part : {"model_index.json", "unet/config.json", "vae/config.json"}) {
-    if (!fs::exists(fs::path(folder) / part, ec)) missing += std::string(missing.empty() ? "" : ", ") + part;
+    if (!fs::exists(fs::path(folder) / part, ec))
+      missing += std::string(missing.empty() ? "" : ", ") + part;
   }
   if (!missing.empty())
     return Status::error("Difix weights folder '" + folder + "' lacks " + missing + ": " +
@@ -110,7 +115,9 @@ Status check_difix_weights(const std::string& folder) {
   return Status::ok();
 }
 
-const char* enhancer_name(Enhancer e) { return e == Enhancer::kTransfer ? "transfer" : "difix"; }
+const char* enhancer_name(Enhancer e) {
+  return e == Enhancer::kTransfer ? "transfer" : "difix";
+}
 
 Result<Enhancer> parse_enhancer(const std::string& text) {
   if (text == "transfer") return Enhancer::kTransfer;
@@ -124,8 +131,9 @@ namespace {
 Result<EnhanceResult> enhance_by_transfer(const SceneInputs& in, const EnhanceOptions& o,
                                           ThreadPool* pool, Clock::time_point t_all) {
   if (o.method == EnhanceMethod::kWarp)
-    return Status::error("--method warp needs --enhancer difix (the transfer enhancer takes its "
-                         "detail from crops or whole references)");
+    return Status::error(
+        "--method warp needs --enhancer difix (the transfer enhancer takes its "
+        "detail from crops or whole references)");
   EnhanceResult res;
   PlanOptions po = o.plan;
   po.pool = pool;
@@ -150,10 +158,10 @@ Result<EnhanceResult> enhance_by_transfer(const SceneInputs& in, const EnhanceOp
                          plan_transfer_sources(plan, in, tp.source, *pool));
   if (o.method == EnhanceMethod::kMacroUnmasked)
     for (TransferSourceImage& s : sources) s.plane = -1;
-  MACRO_ASSIGN_OR_RETURN(TransferResult tr,
-                         transfer_detail(res.render, plan.planes.labels,
-                                         std::max(1, int(plan.planes.planes.size())), sources, tp,
-                                         *pool));
+  MACRO_ASSIGN_OR_RETURN(
+      TransferResult tr,
+      transfer_detail(res.render, plan.planes.labels, std::max(1, int(plan.planes.planes.size())),
+                      sources, tp, *pool));
   res.image = std::move(tr.image);
   res.views = int(sources.size());
   res.transfer_confidence = tr.mean_confidence;
@@ -210,11 +218,10 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
     MACRO_ASSIGN_OR_RETURN(ctx, read_ctx_file(o.ctx_path));
     res.ctx_source = o.ctx_path;
   } else if (!text_encoder) {
-    return Status::error("Difix weights folder '" + o.weights +
-                         "' has no text_encoder/ + tokenizer/ to embed the prompt \"" +
-                         nets::kDifixPrompt +
-                         "\", and no --ctx FILE.safetensors (tensor 'ctx' [1, 77, D]) was given: " +
-                         kDownloadHint);
+    return Status::error(
+        "Difix weights folder '" + o.weights +
+        "' has no text_encoder/ + tokenizer/ to embed the prompt \"" + nets::kDifixPrompt +
+        "\", and no --ctx FILE.safetensors (tensor 'ctx' [1, 77, D]) was given: " + kDownloadHint);
   }
 
   // 1. Plan (its first stage is the close-up render).
