@@ -1,4 +1,12 @@
 // MACRO enhancement of one close-up (see enhance.h).
+//
+// enhance_closeup is a short driver over one EnhanceWork, in stages: check_options (upsampler),
+// then by method: render_only (3dgs), enhance_by_transfer (the weight-free enhancer), or the Difix
+// path check_network_inputs (weights, text context) -> plan_closeup (render + plan) ->
+// build_network_views (the method's views and masks, the network batch) -> load_network
+// (pipeline, masked levels, prompt context) -> difix_step (one step, stage notes from its
+// observer) -> decode_output (8 bits, Lanczos to the render size). Each stage prints its
+// progress line through note().
 #include "enhance/enhance.h"
 
 #include <algorithm>
@@ -7,21 +15,19 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <memory>
 
 #include "attention/nets/difix.h"
 #include "attention/nets/scheduler.h"
-#include "attention/runtime/progress.h"
 #include "attention/runtime/io/safetensors.h"
+#include "attention/runtime/progress.h"
 #include "enhance/macro/warp.h"
 #include "gs/raster/rasterizer.h"
 
 namespace macro::enhance {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
+using Clock = std::chrono::steady_clock;  // ms_since: attention/runtime/progress.h
 
 constexpr const char* kStage = "enhance";
 constexpr const char* kDownloadHint =
@@ -39,8 +45,7 @@ void note(const char* what, double ms, const std::string& extra = "") {
 Result<Tensor> read_ctx_file(const std::string& path) {
   MACRO_ASSIGN_OR_RETURN(SafeTensors st, SafeTensors::open(path));
   const TensorEntry* e = st.find("ctx");
-  if (!e)
-    return Status::error(path + ": tensor 'ctx' (the text embedding [1, 77, D]) not found");
+  if (!e) return Status::error(path + ": tensor 'ctx' (the text embedding [1, 77, D]) not found");
   if (e->shape.size() != 3 || e->shape[0] != 1 || e->shape[1] < 1 || e->shape[2] < 1)
     return Status::error(path + ": tensor 'ctx': expected shape [1, L, D], found rank " +
                          std::to_string(e->shape.size()));
@@ -67,11 +72,11 @@ Result<Tensor> to_network_batch(const std::vector<gs::Image>& views, Size2 model
     const gs::Image& im = views[size_t(v)];
     if (im.width != model.w || im.height != model.h || im.channels != 3)
       return Status::error("view " + std::to_string(v) + ": expected " + std::to_string(model.w) +
-                           "x" + std::to_string(model.h) + "x3, found " +
-                           std::to_string(im.width) + "x" + std::to_string(im.height) + "x" +
-                           std::to_string(im.channels));
+                           "x" + std::to_string(model.h) + "x3, found " + std::to_string(im.width) +
+                           "x" + std::to_string(im.height) + "x" + std::to_string(im.channels));
     for (int64_t p = 0; p < hw; ++p)
-      for (int c = 0; c < 3; ++c) dst[(v * 3 + c) * hw + p] = 2.f * im.data[size_t(p) * 3 + c] - 1.f;
+      for (int c = 0; c < 3; ++c)
+        dst[(v * 3 + c) * hw + p] = 2.f * im.data[size_t(p) * 3 + c] - 1.f;
   }
   return t;
 }
@@ -80,11 +85,16 @@ Result<Tensor> to_network_batch(const std::vector<gs::Image>& views, Size2 model
 
 const char* method_name(EnhanceMethod m) {
   switch (m) {
-    case EnhanceMethod::k3dgs: return "3dgs";
-    case EnhanceMethod::kDifix: return "difix";
-    case EnhanceMethod::kMacro: return "macro";
-    case EnhanceMethod::kMacroUnmasked: return "macro-unmasked";
-    case EnhanceMethod::kWarp: return "warp";
+    case EnhanceMethod::k3dgs:
+      return "3dgs";
+    case EnhanceMethod::kDifix:
+      return "difix";
+    case EnhanceMethod::kMacro:
+      return "macro";
+    case EnhanceMethod::kMacroUnmasked:
+      return "macro-unmasked";
+    case EnhanceMethod::kWarp:
+      return "warp";
   }
   return "?";
 }
@@ -105,7 +115,8 @@ Status check_difix_weights(const std::string& folder) {
     return Status::error("Difix weights folder '" + folder + "' does not exist: " + kDownloadHint);
   std::string missing;
   for (const char* part : {"model_index.json", "unet/config.json", "vae/config.json"}) {
-    if (!fs::exists(fs::path(folder) / part, ec)) missing += std::string(missing.empty() ? "" : ", ") + part;
+    if (!fs::exists(fs::path(folder) / part, ec))
+      missing += std::string(missing.empty() ? "" : ", ") + part;
   }
   if (!missing.empty())
     return Status::error("Difix weights folder '" + folder + "' lacks " + missing + ": " +
@@ -113,7 +124,9 @@ Status check_difix_weights(const std::string& folder) {
   return Status::ok();
 }
 
-const char* enhancer_name(Enhancer e) { return e == Enhancer::kTransfer ? "transfer" : "difix"; }
+const char* enhancer_name(Enhancer e) {
+  return e == Enhancer::kTransfer ? "transfer" : "difix";
+}
 
 Result<Enhancer> parse_enhancer(const std::string& text) {
   if (text == "transfer") return Enhancer::kTransfer;
@@ -127,8 +140,9 @@ namespace {
 Result<EnhanceResult> enhance_by_transfer(const SceneInputs& in, const EnhanceOptions& o,
                                           ThreadPool* pool, Clock::time_point t_all) {
   if (o.method == EnhanceMethod::kWarp)
-    return Status::error("--method warp needs --enhancer difix (the transfer enhancer takes its "
-                         "detail from crops or whole references)");
+    return Status::error(
+        "--method warp needs --enhancer difix (the transfer enhancer takes its "
+        "detail from crops or whole references)");
   EnhanceResult res;
   PlanOptions po = o.plan;
   po.pool = pool;
@@ -153,10 +167,10 @@ Result<EnhanceResult> enhance_by_transfer(const SceneInputs& in, const EnhanceOp
                          plan_transfer_sources(plan, in, tp.source, *pool));
   if (o.method == EnhanceMethod::kMacroUnmasked)
     for (TransferSourceImage& s : sources) s.plane = -1;
-  MACRO_ASSIGN_OR_RETURN(TransferResult tr,
-                         transfer_detail(res.render, plan.planes.labels,
-                                         std::max(1, int(plan.planes.planes.size())), sources, tp,
-                                         *pool));
+  MACRO_ASSIGN_OR_RETURN(
+      TransferResult tr,
+      transfer_detail(res.render, plan.planes.labels, std::max(1, int(plan.planes.planes.size())),
+                      sources, tp, *pool));
   res.image = std::move(tr.image);
   res.views = int(sources.size());
   res.transfer_confidence = tr.mean_confidence;
@@ -172,15 +186,34 @@ Result<EnhanceResult> enhance_by_transfer(const SceneInputs& in, const EnhanceOp
   res.timings.ms_total = ms_since(t_all);
   return res;
 }
-}  // namespace
 
-Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOptions& o) {
-  ThreadPool* pool = o.pool ? o.pool : &ThreadPool::global();
-  const auto t_all = Clock::now();
+// What the stages of enhance_closeup share: the inputs, the result being filled and, on the Difix
+// path, the plan, the views and masks, the network and its output.
+struct EnhanceWork {
+  const SceneInputs& in;
+  const EnhanceOptions& o;
+  ThreadPool* pool;
+  Clock::time_point t_all;  // the start of enhance_closeup (ms_total)
+  int W = 0, H = 0;         // the close-up render size
+
+  std::unique_ptr<Upsampler> upsampler;  // check_options
   EnhanceResult res;
-  const int W = in.closeup.width, H = in.closeup.height;
-  MACRO_ASSIGN_OR_RETURN(std::unique_ptr<Upsampler> upsampler,
-                         make_upsampler(o.upsampler, o.upsampler_weights));
+  Tensor ctx;      // [1, Lc, Dc] from --ctx (check_network_inputs) or the prompt (load_network)
+  PlanOptions po;  // the plan's options as the method sets them (plan_closeup)
+  MacroPlan plan;  // plan_closeup
+  std::vector<gs::Image> views;  // [V] of [Hm, Wm, 3] (build_network_views)
+  nets::UNetMasks masks;         // per level; points into plan.masks or warp.masks
+  WarpViews warp;  // --method warp: its views and masks (the masks must outlive the U-Net)
+  Tensor batch;    // [V, 3, Hm, Wm] in [-1, 1]
+  std::unique_ptr<nets::DifixPipeline> pipe;  // load_network
+  Tensor image;                               // [1, 3, Hm, Wm] in [-1, 1] (difix_step)
+};
+
+// The upsampler, and whether it goes with the enhancer.
+Status check_options(EnhanceWork& work) {
+  const EnhanceOptions& o = work.o;
+  MACRO_ASSIGN_OR_RETURN(work.upsampler, make_upsampler(o.upsampler, o.upsampler_weights));
+  const std::unique_ptr<Upsampler>& upsampler = work.upsampler;
   // The transfer enhancer reads detail from the crops at their own resolution; a super-resolution
   // upsampler would be loaded and then not used, so say so instead.
   if (o.method != EnhanceMethod::k3dgs && o.enhancer == Enhancer::kTransfer &&
@@ -190,39 +223,53 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
                          "resolution and does not upsample them; use it with --enhancer difix "
                          "--weights DIR, or leave --upsampler at lanczos");
   if (o.method != EnhanceMethod::k3dgs) MACRO_TRY(upsampler->ready());
+  return Status::ok();
+}
 
-  if (o.method == EnhanceMethod::k3dgs) {
-    auto t0 = Clock::now();
-    gs::Rasterizer raster;
-    gs::RenderResult r;
-    MACRO_TRY(raster.render_into(in.cloud, in.closeup, o.plan.render, &r, *pool)
-                  .with_context("close-up '" + in.closeup.name + "'"));
-    res.render = render_image(r.color, W, H);
-    res.image = res.render;
-    res.timings.ms_render = ms_since(t0);
-    note("render", res.timings.ms_render, std::to_string(W) + "x" + std::to_string(H));
-    res.timings.ms_total = ms_since(t_all);
-    return res;
-  }
-  if (o.enhancer == Enhancer::kTransfer) return enhance_by_transfer(in, o, pool, t_all);
-  // Everything the network needs is checked before any work.
+// --method 3dgs: the close-up render is the result.
+Status render_only(EnhanceWork& work) {
+  const SceneInputs& in = work.in;
+  const int W = work.W, H = work.H;
+  EnhanceResult& res = work.res;
+  auto t0 = Clock::now();
+  gs::Rasterizer raster;
+  gs::RenderResult r;
+  MACRO_TRY(raster.render_into(in.cloud, in.closeup, work.o.plan.render, &r, *work.pool)
+                .with_context("close-up '" + in.closeup.name + "'"));
+  res.render = render_image(r.color, W, H);
+  res.image = res.render;
+  res.timings.ms_render = ms_since(t0);
+  note("render", res.timings.ms_render, std::to_string(W) + "x" + std::to_string(H));
+  res.timings.ms_total = ms_since(work.t_all);
+  return Status::ok();
+}
+
+// Everything the network needs is checked before any work: the weights, and the text context
+// (--ctx, or a text encoder in the weights folder).
+Status check_network_inputs(EnhanceWork& work) {
+  const EnhanceOptions& o = work.o;
   MACRO_TRY(check_difix_weights(o.weights));
   const bool text_encoder = nets::has_text_encoder(o.weights);
-  Tensor ctx;
   if (!o.ctx_path.empty()) {
-    MACRO_ASSIGN_OR_RETURN(ctx, read_ctx_file(o.ctx_path));
-    res.ctx_source = o.ctx_path;
+    MACRO_ASSIGN_OR_RETURN(work.ctx, read_ctx_file(o.ctx_path));
+    work.res.ctx_source = o.ctx_path;
   } else if (!text_encoder) {
-    return Status::error("Difix weights folder '" + o.weights +
-                         "' has no text_encoder/ + tokenizer/ to embed the prompt \"" +
-                         nets::kDifixPrompt +
-                         "\", and no --ctx FILE.safetensors (tensor 'ctx' [1, 77, D]) was given: " +
-                         kDownloadHint);
+    return Status::error(
+        "Difix weights folder '" + o.weights +
+        "' has no text_encoder/ + tokenizer/ to embed the prompt \"" + nets::kDifixPrompt +
+        "\", and no --ctx FILE.safetensors (tensor 'ctx' [1, 77, D]) was given: " + kDownloadHint);
   }
+  return Status::ok();
+}
 
-  // 1. Plan (its first stage is the close-up render).
-  PlanOptions po = o.plan;
-  po.pool = pool;
+// 1. Plan (its first stage is the close-up render), with the method's options.
+Status plan_closeup(EnhanceWork& work) {
+  const EnhanceOptions& o = work.o;
+  const int W = work.W, H = work.H;
+  EnhanceResult& res = work.res;
+  PlanOptions& po = work.po;
+  po = o.plan;
+  po.pool = work.pool;
   if (o.method == EnhanceMethod::kDifix) {
     po.refs = 1;
     po.mask = MaskMode::kNone;
@@ -231,8 +278,8 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
   } else if (o.method == EnhanceMethod::kWarp) {
     po.crops.crop = CropMode::kFull;  // whole warped frames replace the crops (warp.h)
   }
-  auto t0 = Clock::now();
-  MACRO_ASSIGN_OR_RETURN(MacroPlan plan, build_plan(in, po));
+  MACRO_ASSIGN_OR_RETURN(work.plan, build_plan(work.in, po));
+  const MacroPlan& plan = work.plan;
   res.timings.ms_render = plan.timings.ms_closeup;
   res.timings.ms_plan = plan.timings.ms_total - plan.timings.ms_closeup;
   res.render = render_image(plan.closeup_color, W, H);
@@ -245,12 +292,21 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
                   crop_mode_name(plan.options.crops.crop), plan.model.w, plan.model.h);
     note("plan", res.timings.ms_plan, buf);
   }
+  return Status::ok();
+}
 
-  // 2. Views [V] at the model size and the masks.
-  t0 = Clock::now();
-  std::vector<gs::Image> views;
-  nets::UNetMasks masks;
-  WarpViews warp;  // --method warp: its views and masks (the masks must outlive the U-Net)
+// 2. Views [V] at the model size and the masks, by method; the network batch.
+Status build_network_views(EnhanceWork& work) {
+  const SceneInputs& in = work.in;
+  const EnhanceOptions& o = work.o;
+  const MacroPlan& plan = work.plan;
+  const PlanOptions& po = work.po;
+  ThreadPool* pool = work.pool;
+  EnhanceResult& res = work.res;
+  std::vector<gs::Image>& views = work.views;
+  nets::UNetMasks& masks = work.masks;
+  WarpViews& warp = work.warp;
+  auto t0 = Clock::now();
   if (o.method == EnhanceMethod::kWarp) {
     WarpOptions wo;
     wo.occlusion = po.occlusion;
@@ -265,23 +321,31 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
     MACRO_ASSIGN_OR_RETURN(gs::Image ref, load_candidate_image(in, plan.ref_candidates[0]));
     views.push_back(resize_lanczos(ref, plan.model.w, plan.model.h, *pool));
   } else {
-    MACRO_ASSIGN_OR_RETURN(PlanViews pv, build_views(plan, in, *upsampler));
+    MACRO_ASSIGN_OR_RETURN(PlanViews pv, build_views(plan, in, *work.upsampler));
     views = std::move(pv.images);
     if (!plan.masks_built)
       return Status::error("the plan's views differ in size, so it has no attention masks");
     for (const BlockSparseMask& m : plan.masks.masks) masks.level.push_back(&m);
   }
-  MACRO_ASSIGN_OR_RETURN(Tensor batch, to_network_batch(views, plan.model));
+  MACRO_ASSIGN_OR_RETURN(work.batch, to_network_batch(views, plan.model));
   res.views = int(views.size());
   res.timings.ms_views = ms_since(t0);
   note("views", res.timings.ms_views,
        std::to_string(res.views) + " views" +
            (masks.level.empty() ? ", no mask"
                                 : std::string(", mask '") + mask_mode_name(plan.masks.mode) + "'"));
+  return Status::ok();
+}
 
-  // 3. The pipeline and the text context.
-  t0 = Clock::now();
-  MACRO_ASSIGN_OR_RETURN(auto pipe, nets::DifixPipeline::load(o.weights, o.precision));
+// 3. The pipeline, the masked levels it has, and the text context (from the prompt when no --ctx).
+Status load_network(EnhanceWork& work) {
+  const EnhanceOptions& o = work.o;
+  EnhanceResult& res = work.res;
+  nets::UNetMasks& masks = work.masks;
+  Tensor& ctx = work.ctx;
+  auto t0 = Clock::now();
+  MACRO_ASSIGN_OR_RETURN(work.pipe, nets::DifixPipeline::load(o.weights, o.precision));
+  const nets::DifixPipeline* pipe = work.pipe.get();
   res.timings.ms_load = ms_since(t0);
   note("load", res.timings.ms_load, std::string(nets::precision_name(o.precision)));
   if (masks.level.size() > size_t(pipe->unet().levels()))
@@ -290,7 +354,7 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
   if (ctx.numel() == 0) {
     t0 = Clock::now();
     nets::PromptCacheInfo info;
-    MACRO_ASSIGN_OR_RETURN(ctx, pipe->prompt_context(nets::kDifixPrompt, pool, &info));
+    MACRO_ASSIGN_OR_RETURN(ctx, pipe->prompt_context(nets::kDifixPrompt, work.pool, &info));
     res.ctx_source = std::string("text_encoder (") + (info.hit ? "cache hit" : "computed") + ")";
     res.timings.ms_ctx = ms_since(t0);
     note("prompt", res.timings.ms_ctx, res.ctx_source);
@@ -300,9 +364,14 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
     return Status::error((res.ctx_source.empty() ? std::string("ctx") : res.ctx_source) +
                          ": tensor 'ctx': expected width " + std::to_string(dc) +
                          " (the unet's cross_attention_dim), found " + std::to_string(ctx.dim(2)));
+  return Status::ok();
+}
 
-  // 4. One Difix step (DifixPipeline::step: the pipeline's arena, bf16 skips for a bf16 model),
-  // timed stage by stage.
+// 4. One Difix step (DifixPipeline::step: the pipeline's arena, bf16 skips for a bf16 model),
+// timed stage by stage through its observer.
+Status difix_step(EnhanceWork& work) {
+  const EnhanceOptions& o = work.o;
+  EnhanceResult& res = work.res;
   auto on_stage = [&](const char* stage, double ms) {
     if (std::strcmp(stage, "encode") == 0) {
       res.timings.ms_encode = ms;
@@ -316,13 +385,21 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
       note("decode", ms);
     }
   };
-  MACRO_ASSIGN_OR_RETURN(nets::DifixOutputs step_out,
-                         pipe->step(batch, ctx, masks, pool, o.timestep, on_stage));
-  Tensor image = std::move(step_out.image);
+  MACRO_ASSIGN_OR_RETURN(
+      nets::DifixOutputs step_out,
+      work.pipe->step(work.batch, work.ctx, work.masks, work.pool, o.timestep, on_stage));
+  work.image = std::move(step_out.image);
+  return Status::ok();
+}
 
-  // 5. [1,3,Hm,Wm] in [-1,1] -> 8-bit (x/2 + 1/2 clamped, x255 rounded, as the pipeline's PIL
-  // output) -> Pillow 8-bit Lanczos to the render size.
-  t0 = Clock::now();
+// 5. [1,3,Hm,Wm] in [-1,1] -> 8-bit (x/2 + 1/2 clamped, x255 rounded, as the pipeline's PIL
+// output) -> Pillow 8-bit Lanczos to the render size.
+Status decode_output(EnhanceWork& work) {
+  const int W = work.W, H = work.H;
+  const MacroPlan& plan = work.plan;
+  const Tensor& image = work.image;
+  EnhanceResult& res = work.res;
+  auto t0 = Clock::now();
   const int hm = plan.model.h, wm = plan.model.w;
   if (image.dim(2) != hm || image.dim(3) != wm)
     return Status::error("decoded image: expected " + std::to_string(wm) + "x" +
@@ -338,13 +415,33 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
       u8[p * 3 + size_t(c)] = uint8_t(std::lround(v * 255.f));
     }
   std::vector<uint8_t> out =
-      (W == wm && H == hm) ? u8 : resize_lanczos_u8(u8.data(), wm, hm, 3, W, H, *pool);
+      (W == wm && H == hm) ? u8 : resize_lanczos_u8(u8.data(), wm, hm, 3, W, H, *work.pool);
   res.image = gs::Image(W, H, 3);
   for (size_t i = 0; i < out.size(); ++i) res.image.data[i] = float(out[i]) / 255.f;
   res.timings.ms_resize = ms_since(t0);
-  res.timings.ms_total = ms_since(t_all);
+  res.timings.ms_total = ms_since(work.t_all);
   note("resize", res.timings.ms_resize, std::to_string(W) + "x" + std::to_string(H));
-  return res;
+  return Status::ok();
+}
+
+}  // namespace
+
+Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOptions& o) {
+  EnhanceWork work{in, o, o.pool ? o.pool : &ThreadPool::global(), Clock::now()};
+  work.W = in.closeup.width, work.H = in.closeup.height;
+  MACRO_TRY(check_options(work));
+  if (o.method == EnhanceMethod::k3dgs) {
+    MACRO_TRY(render_only(work));
+    return std::move(work.res);
+  }
+  if (o.enhancer == Enhancer::kTransfer) return enhance_by_transfer(in, o, work.pool, work.t_all);
+  MACRO_TRY(check_network_inputs(work));
+  MACRO_TRY(plan_closeup(work));
+  MACRO_TRY(build_network_views(work));
+  MACRO_TRY(load_network(work));
+  MACRO_TRY(difix_step(work));
+  MACRO_TRY(decode_output(work));
+  return std::move(work.res);
 }
 
 Status write_side_by_side(const std::string& path, const std::string& scene_dir,
