@@ -200,7 +200,7 @@ TEST_CASE("layout: the include rules catch a forbidden include", "[layout]") {
 }
 
 TEST_CASE("layout: every include follows the rules and resolves", "[layout]") {
-  static const std::regex include(R"(^\s*#\s*include\s*"([^"]+)")");
+  static const std::regex include(R"re(^\s*#\s*include\s*"([^"]+)")re");
   const std::vector<SourceFile> files = source_files();
   REQUIRE(files.size() > 100);
   size_t includes = 0;
