@@ -11,6 +11,7 @@
 #include "apps/bench_commands.h"
 #include "attention/runtime/progress.h"
 #include "enhance/datasets/pair_construction.h"
+#include "enhance/datasets/scene_ranking.h"
 
 namespace macro::cli {
 namespace {

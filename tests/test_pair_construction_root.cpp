@@ -1,5 +1,5 @@
-// `macro bench pairs --root` (enhance/datasets/pair_construction.h rank_scenes): every COLMAP scene of a
-// folder ranked by its appendix D.4 score, on the analytic rigs of tests/pair_rig_fixture.h at
+// `macro bench pairs --root` (enhance/datasets/scene_ranking.h rank_scenes): every COLMAP scene
+// of a folder ranked by its appendix D.4 score, on the analytic rigs of tests/pair_rig_fixture.h at
 // known scales, with broken scenes, selection flags and the CLI.
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -14,12 +14,12 @@
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/thread_pool.h"
-#include "enhance/datasets/pair_construction.h"
+#include "enhance/datasets/scene_ranking.h"
 #include "gs/cameras/camera.h"
 #include "gs/cameras/colmap_points.h"
+#include "gs/formats/scene_io.h"
 #include "gs/image_io.h"
 #include "gs/synth/random_scene.h"
-#include "gs/formats/scene_io.h"
 #include "tests/pair_rig_fixture.h"
 #include "tests/test_support.h"
 

@@ -1,4 +1,5 @@
-// The evaluation harness: work list, methods, records, resume, shards, merge (bench_harness.h).
+// The evaluation harness: work list, records, resume, shards, merge (bench_harness.h); the
+// methods it runs are enhance/bench/methods.h.
 #include "enhance/bench/bench_harness.h"
 
 #include <fcntl.h>
@@ -8,7 +9,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <cstdlib>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <limits>
@@ -16,9 +17,6 @@
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/progress.h"
-#include "enhance/enhance.h"
-#include "enhance/macro/plane_masks.h"
-#include "gs/raster/rasterizer.h"
 
 namespace macro::enhance {
 namespace fs = std::filesystem;
@@ -40,166 +38,6 @@ uint64_t fnv1a64(const std::string& s) {
 }
 
 }  // namespace
-
-// ---- Methods -----------------------------------------------------------------------------------
-Status MethodRegistry::add(BenchMethod method) {
-  if (method.name.empty()) return Status::error("bench method: empty name");
-  if (!method.run) return Status::error("bench method '" + method.name + "': no run function");
-  if (methods_.count(method.name))
-    return Status::error("bench method '" + method.name + "' registered twice");
-  std::string name = method.name;
-  methods_.emplace(std::move(name), std::move(method));
-  return Status::ok();
-}
-
-const BenchMethod* MethodRegistry::find(const std::string& name) const {
-  auto it = methods_.find(name);
-  return it == methods_.end() ? nullptr : &it->second;
-}
-
-std::vector<std::string> MethodRegistry::names() const {
-  std::vector<std::string> out;
-  for (const auto& [name, m] : methods_) out.push_back(name);
-  return out;
-}
-
-Result<MethodOutput> run_3dgs_method(const MethodContext& context) {
-  const auto t0 = std::chrono::steady_clock::now();
-  gs::RenderOptions ro;  // classic, black background, SH degree 3 (gsplat's render defaults)
-  MACRO_ASSIGN_OR_RETURN(gs::RenderResult r,
-                         gs::render(context.inputs.cloud, context.inputs.closeup, ro));
-  MethodOutput out;
-  out.image = gs::Image(r.width, r.height, 3);
-  out.image.data = std::move(r.color);
-  // The released pipeline saves the render as an 8-bit PNG and scores the file: quantise exactly
-  // as gs::write_png + gs::read_image would (round half up, then level * (1 / 255)).
-  for (float& v : out.image.data) {
-    const int level = !(v > 0.f) ? 0 : v >= 1.f ? 255 : int(v * 255.f + 0.5f);
-    v = float(level) * (1.f / 255.f);
-  }
-  out.stages.push_back({"render", seconds_since(t0)});
-  return out;
-}
-
-namespace {
-
-// BenchOptions -> EnhanceOptions; errors name the option and the value.
-Result<EnhanceOptions> enhance_options(EnhanceMethod method, const BenchOptions& o,
-                                       const BenchMethodSettings& settings) {
-  EnhanceOptions e;
-  e.method = method;
-  e.weights = settings.difix_weights;
-  e.ctx_path = settings.ctx_path;
-  if (auto it = o.find("K"); it != o.end()) {
-    char* end = nullptr;
-    const long k = std::strtol(it->second.c_str(), &end, 10);
-    if (it->second.empty() || *end || k < 1 || k > 64)
-      return Status::error("option K: expected an integer in [1, 64], found '" + it->second + "'");
-    e.plan.refs = int(k);
-  }
-  if (auto it = o.find("P"); it != o.end()) {
-    if (it->second == "auto") {
-      e.plan.planes.automatic = true;
-      e.plan.planes.planes = 5;
-    } else {
-      char* end = nullptr;
-      const long p = std::strtol(it->second.c_str(), &end, 10);
-      if (it->second.empty() || *end || p < 1 || p > 64)
-        return Status::error("option P: expected an integer in [1, 64] or auto, found '" +
-                             it->second + "'");
-      e.plan.planes.planes = int(p);
-    }
-  }
-  if (auto it = o.find("mask"); it != o.end()) {
-    const std::string m = it->second == "on"    ? "released"
-                          : it->second == "off" ? "none"
-                                                : it->second;
-    MACRO_ASSIGN_OR_RETURN(e.plan.mask, parse_mask_mode(m));
-  }
-  if (auto it = o.find("precision"); it != o.end()) {
-    MACRO_ASSIGN_OR_RETURN(e.precision, nets::parse_precision(it->second));
-  }
-  if (auto it = o.find("crop"); it != o.end()) {
-    MACRO_ASSIGN_OR_RETURN(e.plan.crops.crop, parse_crop_mode(it->second));
-  }
-  if (auto it = o.find("upsampler"); it != o.end()) {
-    MACRO_TRY(make_upsampler(it->second).status());
-    e.upsampler = it->second;
-  }
-  return e;
-}
-
-MethodFn enhance_method_fn(EnhanceMethod method, BenchMethodSettings settings) {
-  return [method, settings](const MethodContext& c) -> Result<MethodOutput> {
-    MACRO_ASSIGN_OR_RETURN(EnhanceOptions e, enhance_options(method, c.options, settings));
-    MACRO_ASSIGN_OR_RETURN(EnhanceResult r, enhance_closeup(c.inputs, e));
-    MethodOutput out;
-    out.image = std::move(r.image);
-    const EnhanceTimings& t = r.timings;
-    const std::pair<const char*, double> stages[] = {
-        {"render", t.ms_render}, {"plan", t.ms_plan},     {"views", t.ms_views},
-        {"ctx", t.ms_ctx},       {"encode", t.ms_encode}, {"unet", t.ms_unet},
-        {"decode", t.ms_decode}, {"resize", t.ms_resize}};
-    for (const auto& [name, ms] : stages) out.stages.push_back({name, ms / 1000.0, true});
-    out.stages.push_back({"weights_load", t.ms_load / 1000.0, false});
-    return out;
-  };
-}
-
-// The transfer enhancer as a bench method (options K, P as macro) from crops or whole references.
-MethodFn transfer_method_fn(TransferSource source) {
-  return [source](const MethodContext& c) -> Result<MethodOutput> {
-    MACRO_ASSIGN_OR_RETURN(EnhanceOptions e,
-                           enhance_options(EnhanceMethod::kMacro, c.options, BenchMethodSettings{}));
-    e.enhancer = Enhancer::kTransfer;
-    e.transfer.source = source;
-    MACRO_ASSIGN_OR_RETURN(EnhanceResult r, enhance_closeup(c.inputs, e));
-    MethodOutput out;
-    out.image = std::move(r.image);
-    const EnhanceTimings& t = r.timings;
-    out.stages.push_back({"render", t.ms_render / 1000.0, true});
-    out.stages.push_back({"plan", t.ms_plan / 1000.0, true});
-    out.stages.push_back({"transfer", t.ms_transfer / 1000.0, true});
-    return out;
-  };
-}
-
-}  // namespace
-
-Status register_enhance_bench_methods(MethodRegistry& registry,
-                                      const BenchMethodSettings& settings) {
-  MACRO_TRY(registry.add({"difix",
-                          "Difix-ref, K = 1 whole reference, no planes, no mask",
-                          {"precision"},
-                          enhance_method_fn(EnhanceMethod::kDifix, settings)}));
-  MACRO_TRY(registry.add({"macro",
-                          "MACRO: scale-matched crops, depth-masked attention",
-                          {"K", "P", "mask", "precision", "crop", "upsampler"},
-                          enhance_method_fn(EnhanceMethod::kMacro, settings)}));
-  MACRO_TRY(registry.add({"transfer",
-                          "weight-free detail transfer (transfer.h) from the plan's scale-matched "
-                          "crops under the plane mask",
-                          {"K", "P"},
-                          transfer_method_fn(TransferSource::kCrops)}));
-  MACRO_TRY(registry.add({"transfer-whole",
-                          "the same transfer from the K references whole (scale-mismatched, no "
-                          "crops, no planes): the ablation",
-                          {"K", "P"},
-                          transfer_method_fn(TransferSource::kWhole)}));
-  MACRO_TRY(registry.add({"macro-unmasked",
-                          "MACRO without the plane mask",
-                          {"K", "P", "precision", "crop", "upsampler"},
-                          enhance_method_fn(EnhanceMethod::kMacroUnmasked, settings)}));
-  return Status::ok();
-}
-
-MethodRegistry default_method_registry(const BenchMethodSettings& settings) {
-  MethodRegistry r;
-  MACRO_CHECK(r.add({"3dgs", "the raw 3DGS close-up render", {}, run_3dgs_method}).is_ok());
-  const Status s = register_enhance_bench_methods(r, settings);
-  MACRO_CHECK(s.is_ok());
-  return r;
-}
 
 // ---- Work list ---------------------------------------------------------------------------------
 std::string canonical_options(const BenchOptions& options) {

@@ -33,7 +33,6 @@
 // `macro bench merge` is the documented way.
 #pragma once
 
-#include <functional>
 #include <map>
 #include <optional>
 #include <set>
@@ -41,82 +40,14 @@
 #include <vector>
 
 #include "attention/runtime/status.h"
+#include "enhance/bench/methods.h"
 #include "enhance/metrics/metrics.h"
 #include "enhance/scene_input.h"
 #include "gs/image_io.h"
 
 namespace macro::enhance {
 
-// ---- Methods -----------------------------------------------------------------------------------
-// An option set: name -> value text ("K" -> "3", "P" -> "4", "mask" -> "on", "precision" ->
-// "bf16").
-using BenchOptions = std::map<std::string, std::string>;
-
-struct BenchPair {
-  std::string scene, scene_dir;
-  int pair_index = 0;
-  gs::CloseupEvalPair pair;
-};
-
-struct MethodStage {
-  std::string name;  // "render", "enhance", ...
-  double seconds = 0;
-  bool per_closeup = true;  // counts towards seconds_per_closeup (false: e.g. loading weights)
-};
-
-struct MethodOutput {
-  gs::Image image;  // the prediction (any size; resized to the GT size for scoring)
-  std::vector<MethodStage> stages;
-};
-
-struct MethodContext {
-  const BenchPair& pair;
-  const SceneInputs& inputs;    // cloud, close-up camera (at the GT size), reference candidates
-  const BenchOptions& options;  // restricted to the method's option_keys
-};
-
-using MethodFn = std::function<Result<MethodOutput>(const MethodContext&)>;
-
-struct BenchMethod {
-  std::string name;
-  std::string summary;
-  std::vector<std::string> option_keys;  // which BenchOptions keys change the output
-  MethodFn run;
-};
-
-class MethodRegistry {
- public:
-  // Fails on a duplicate or empty name.
-  Status add(BenchMethod method);
-  const BenchMethod* find(const std::string& name) const;
-  std::vector<std::string> names() const;  // sorted
-
- private:
-  std::map<std::string, BenchMethod> methods_;
-};
-
-// Run-wide inputs of the network methods (not part of a record's key).
-struct BenchMethodSettings {
-  std::string difix_weights;  // Difix pipeline folder (enhance.h EnhanceOptions::weights)
-  std::string ctx_path;       // optional text context safetensors
-};
-
-// The registry with every method this build has: "3dgs" (the raw close-up render, classic
-// rasteriser, black background), then register_enhance_bench_methods.
-MethodRegistry default_method_registry(const BenchMethodSettings& settings = {});
-
-// HOOK for the enhancers: adds the `macro enhance` methods (enhance/enhance.h) "difix" (options
-// precision), "macro" (K, P, mask, precision) and "macro-unmasked" (K, P, precision). Option
-// values: K an integer; P an integer or "auto" (up to 5 planes); mask released|paper|none (also
-// on = released, off = none); precision fp32|bf16; crop full|tight|composite (macro and
-// macro-unmasked). A new method is one more registry.add here.
-// Also the weight-free "transfer" (K, P; crops under the plane mask) and "transfer-whole" (K, P;
-// the K references whole, the scale-mismatched ablation), enhance/transfer/transfer.h.
-Status register_enhance_bench_methods(MethodRegistry& registry,
-                                      const BenchMethodSettings& settings);
-
-// The 3dgs method on its own (tests and other methods reuse the render).
-Result<MethodOutput> run_3dgs_method(const MethodContext& context);
+// The methods (BenchOptions, BenchPair, MethodRegistry, ...): enhance/bench/methods.h.
 
 // ---- Work list ---------------------------------------------------------------------------------
 struct BenchWorkItem {

@@ -176,61 +176,6 @@ std::string table_csv(const std::vector<ConfigResult>& configs) {
 // ---- Charts ------------------------------------------------------------------------------------
 namespace {
 
-constexpr uint32_t kPalette[] = {0x1f77b4, 0xd62728, 0x2ca02c, 0xff7f0e, 0x9467bd,
-                                 0x8c564b, 0xe377c2, 0x17becf, 0xbcbd22, 0x7f7f7f};
-uint32_t palette(size_t i) {
-  return kPalette[i % (sizeof kPalette / sizeof kPalette[0])];
-}
-constexpr uint32_t kInk = 0x222222, kGrid = 0xdddddd;
-
-struct Frame {  // plot area and data ranges
-  double left = 70, top = 40, right = 20, bottom = 50;
-  double x0 = 0, x1 = 1, y0 = 0, y1 = 1;
-  int w = 640, h = 420;
-  double px(double x) const { return left + (x - x0) / (x1 - x0) * (w - left - right); }
-  double py(double y) const { return h - bottom - (y - y0) / (y1 - y0) * (h - top - bottom); }
-};
-
-void pad_range(double& lo, double& hi) {
-  if (!std::isfinite(lo) || !std::isfinite(hi)) lo = 0, hi = 1;
-  if (hi - lo < 1e-12) lo -= 0.5, hi += 0.5;
-  const double m = 0.08 * (hi - lo);
-  lo -= m, hi += m;
-}
-
-std::string tick_text(double v) {
-  char buf[32];
-  const double a = std::fabs(v);
-  std::snprintf(buf, sizeof buf,
-                a >= 100  ? "%.0f"
-                : a >= 10 ? "%.1f"
-                : a >= 1  ? "%.2f"
-                          : "%.3f",
-                v);
-  return buf;
-}
-
-void axes(Chart& c, const Frame& f, const std::string& title, const std::string& xlabel,
-          const std::string& ylabel, bool x_ticks) {
-  c.width = f.w, c.height = f.h;
-  c.rects.push_back({0, 0, double(f.w), double(f.h), 0xffffff});
-  for (int i = 0; i <= 4; ++i) {
-    const double y = f.y0 + (f.y1 - f.y0) * i / 4;
-    c.lines.push_back({f.left, f.py(y), f.w - f.right, f.py(y), kGrid, 1});
-    c.texts.push_back({f.left - 6, f.py(y) + 4, tick_text(y), kInk, 1});
-    if (x_ticks) {
-      const double x = f.x0 + (f.x1 - f.x0) * i / 4;
-      c.lines.push_back({f.px(x), double(f.top), f.px(x), f.h - f.bottom, kGrid, 1});
-      c.texts.push_back({f.px(x), f.h - f.bottom + 16, tick_text(x), kInk, 0});
-    }
-  }
-  c.lines.push_back({f.left, f.h - f.bottom, f.w - f.right, f.h - f.bottom, kInk, 1.5});
-  c.lines.push_back({f.left, double(f.top), f.left, f.h - f.bottom, kInk, 1.5});
-  c.texts.push_back({f.w / 2.0, 15, title, kInk, 0});
-  c.texts.push_back({(f.left + f.w - f.right) / 2, f.h - 12.0, xlabel, kInk, 0});
-  c.texts.push_back({8, f.top - 8, ylabel, kInk, -1});
-}
-
 std::string metric_axis_label(const MetricColumn& m) {
   if (m.target_one) return std::string(m.title) + " (1 is best)";
   return std::string(m.title) + (m.higher_better ? " (higher is better)" : " (lower is better)");
@@ -239,7 +184,7 @@ std::string metric_axis_label(const MetricColumn& m) {
 }  // namespace
 
 Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const MetricColumn& metric) {
-  Frame f;
+  PlotFrame f;
   double xlo = 1e300, xhi = -1e300, ylo = 1e300, yhi = -1e300;
   for (const ConfigResult& c : configs) {
     auto v = metric_of(c, metric.name);
@@ -252,17 +197,17 @@ Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const Metri
   pad_range(ylo, yhi);
   f.x0 = 0, f.x1 = xhi, f.y0 = ylo, f.y1 = yhi;
   Chart c;
-  axes(c, f, std::string("Seconds per close-up vs ") + metric.title, "seconds per close-up",
-       metric_axis_label(metric), true);
+  draw_axes(c, f, std::string("Seconds per close-up vs ") + metric.title, "seconds per close-up",
+            metric_axis_label(metric), true);
   for (size_t i = 0; i < configs.size(); ++i) {
     auto v = metric_of(configs[i], metric.name);
     if (!v || !configs[i].seconds_per_closeup || !std::isfinite(*v)) continue;
     const double x = f.px(*configs[i].seconds_per_closeup), y = f.py(*v);
-    c.circles.push_back({x, y, 5, palette(i)});
+    c.circles.push_back({x, y, 5, chart_palette(i)});
     // Labels right of the point in the left half, left of it in the right half.
     const bool right_half = x > f.w / 2.0;
-    c.texts.push_back(
-        {right_half ? x - 8 : x + 8, y - 6, configs[i].label, palette(i), right_half ? 1 : -1});
+    c.texts.push_back({right_half ? x - 8 : x + 8, y - 6, configs[i].label, chart_palette(i),
+                       right_half ? 1 : -1});
   }
   return c;
 }
@@ -275,7 +220,7 @@ static double legend_margin(const std::vector<ConfigResult>& configs) {
 }
 
 Chart chart_metric_vs_zoom(const std::vector<ConfigResult>& configs, const MetricColumn& metric) {
-  Frame f;
+  PlotFrame f;
   f.right = legend_margin(configs);
   f.w = int(640 + f.right - 150);
   double xlo = 1e300, xhi = -1e300, ylo = 1e300, yhi = -1e300;
@@ -291,8 +236,8 @@ Chart chart_metric_vs_zoom(const std::vector<ConfigResult>& configs, const Metri
   pad_range(ylo, yhi);
   f.x0 = xlo, f.x1 = xhi, f.y0 = ylo, f.y1 = yhi;
   Chart c;
-  axes(c, f, std::string(metric.title) + " vs zoom factor", "zoom factor (depth ratio)",
-       metric_axis_label(metric), true);
+  draw_axes(c, f, std::string(metric.title) + " vs zoom factor", "zoom factor (depth ratio)",
+            metric_axis_label(metric), true);
   constexpr int kBins = 6;
   for (size_t i = 0; i < configs.size(); ++i) {
     Accum bins[kBins];
@@ -300,7 +245,7 @@ Chart chart_metric_vs_zoom(const std::vector<ConfigResult>& configs, const Metri
     for (const auto& [zoom, values] : configs[i].pairs) {
       auto it = values.find(metric.name);
       if (it == values.end() || !std::isfinite(it->second)) continue;
-      c.circles.push_back({f.px(zoom), f.py(it->second), 2.5, palette(i)});
+      c.circles.push_back({f.px(zoom), f.py(it->second), 2.5, chart_palette(i)});
       const int b = std::clamp(int((zoom - f.x0) / (f.x1 - f.x0) * kBins), 0, kBins - 1);
       bins[b].add(it->second);
       zooms[b].add(zoom);
@@ -309,12 +254,13 @@ Chart chart_metric_vs_zoom(const std::vector<ConfigResult>& configs, const Metri
     for (int b = 0; b < kBins; ++b) {
       if (!bins[b].n) continue;
       const double x = f.px(zooms[b].mean()), y = f.py(bins[b].mean());
-      if (px >= 0) c.lines.push_back({px, py, x, y, palette(i), 2});
+      if (px >= 0) c.lines.push_back({px, py, x, y, chart_palette(i), 2});
       px = x, py = y;
     }
     const double ly = f.top + 14.0 + 18.0 * double(i);
-    c.lines.push_back({f.w - f.right + 10.0, ly - 3, f.w - f.right + 28.0, ly - 3, palette(i), 2});
-    c.texts.push_back({f.w - f.right + 32.0, ly + 1, configs[i].label, palette(i), -1});
+    c.lines.push_back(
+        {f.w - f.right + 10.0, ly - 3, f.w - f.right + 28.0, ly - 3, chart_palette(i), 2});
+    c.texts.push_back({f.w - f.right + 32.0, ly + 1, configs[i].label, chart_palette(i), -1});
   }
   return c;
 }
@@ -332,7 +278,7 @@ Chart chart_scene_bars(const std::vector<ConfigResult>& configs, const MetricCol
       }
     }
   const std::vector<std::string> scenes(scene_set.begin(), scene_set.end());
-  Frame f;
+  PlotFrame f;
   f.right = legend_margin(configs);
   f.bottom = 70;
   f.w = std::max(640, int(f.left + f.right) + int(scenes.size() * configs.size()) * 14 +
@@ -341,13 +287,13 @@ Chart chart_scene_bars(const std::vector<ConfigResult>& configs, const MetricCol
   f.y0 = ylo, f.y1 = yhi + 0.08 * (yhi - ylo + 1e-12);
   f.x0 = 0, f.x1 = double(std::max<size_t>(scenes.size(), 1));
   Chart c;
-  axes(c, f, std::string(metric.title) + " per scene (mean over pairs)", "scene",
-       metric_axis_label(metric), false);
+  draw_axes(c, f, std::string(metric.title) + " per scene (mean over pairs)", "scene",
+            metric_axis_label(metric), false);
   const double slot = f.px(1) - f.px(0);
   const double bar = slot * 0.8 / double(std::max<size_t>(configs.size(), 1));
   for (size_t s = 0; s < scenes.size(); ++s) {
     std::string name = scenes[s].size() > 10 ? scenes[s].substr(0, 8) + ".." : scenes[s];
-    c.texts.push_back({f.px(double(s) + 0.5), f.h - f.bottom + 16, name, kInk, 0});
+    c.texts.push_back({f.px(double(s) + 0.5), f.h - f.bottom + 16, name, kChartInk, 0});
     for (size_t i = 0; i < configs.size(); ++i) {
       auto sc = configs[i].scene_means.find(scenes[s]);
       if (sc == configs[i].scene_means.end()) continue;
@@ -356,243 +302,15 @@ Chart chart_scene_bars(const std::vector<ConfigResult>& configs, const MetricCol
       const double x = f.px(double(s)) + slot * 0.1 + bar * double(i);
       const double y_top = f.py(it->second), y_base = f.py(std::max(0.0, f.y0));
       c.rects.push_back(
-          {x, std::min(y_top, y_base), bar * 0.9, std::fabs(y_base - y_top), palette(i)});
+          {x, std::min(y_top, y_base), bar * 0.9, std::fabs(y_base - y_top), chart_palette(i)});
     }
   }
   for (size_t i = 0; i < configs.size(); ++i) {
     const double ly = f.top + 14.0 + 18.0 * double(i);
-    c.rects.push_back({f.w - f.right + 10.0, ly - 8, 12, 10, palette(i)});
-    c.texts.push_back({f.w - f.right + 28.0, ly + 1, configs[i].label, palette(i), -1});
+    c.rects.push_back({f.w - f.right + 10.0, ly - 8, 12, 10, chart_palette(i)});
+    c.texts.push_back({f.w - f.right + 28.0, ly + 1, configs[i].label, chart_palette(i), -1});
   }
   return c;
-}
-
-// ---- SVG ---------------------------------------------------------------------------------------
-namespace {
-std::string hex(uint32_t rgb) {
-  char buf[8];
-  std::snprintf(buf, sizeof buf, "#%06x", rgb & 0xffffff);
-  return buf;
-}
-std::string num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.2f", v);
-  return buf;
-}
-std::string xml_escape(const std::string& s) {
-  std::string o;
-  for (char ch : s) {
-    switch (ch) {
-      case '&':
-        o += "&amp;";
-        break;
-      case '<':
-        o += "&lt;";
-        break;
-      case '>':
-        o += "&gt;";
-        break;
-      case '"':
-        o += "&quot;";
-        break;
-      default:
-        o += ch;
-    }
-  }
-  return o;
-}
-}  // namespace
-
-std::string chart_to_svg(const Chart& c) {
-  std::string s = "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n";
-  s += "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" + std::to_string(c.width) +
-       "\" height=\"" + std::to_string(c.height) + "\" viewBox=\"0 0 " + std::to_string(c.width) +
-       " " + std::to_string(c.height) + "\" font-family=\"sans-serif\" font-size=\"12\">\n";
-  for (const auto& r : c.rects)
-    s += "<rect x=\"" + num(r.x) + "\" y=\"" + num(r.y) + "\" width=\"" + num(r.w) +
-         "\" height=\"" + num(r.h) + "\" fill=\"" + hex(r.rgb) + "\"/>\n";
-  for (const auto& l : c.lines)
-    s += "<line x1=\"" + num(l.x0) + "\" y1=\"" + num(l.y0) + "\" x2=\"" + num(l.x1) + "\" y2=\"" +
-         num(l.y1) + "\" stroke=\"" + hex(l.rgb) + "\" stroke-width=\"" + num(l.width) + "\"/>\n";
-  for (const auto& p : c.circles)
-    s += "<circle cx=\"" + num(p.x) + "\" cy=\"" + num(p.y) + "\" r=\"" + num(p.r) + "\" fill=\"" +
-         hex(p.rgb) + "\"/>\n";
-  for (const auto& t : c.texts) {
-    const char* anchor = t.anchor < 0 ? "start" : t.anchor > 0 ? "end" : "middle";
-    s += "<text x=\"" + num(t.x) + "\" y=\"" + num(t.y) + "\" fill=\"" + hex(t.rgb) +
-         "\" text-anchor=\"" + anchor + "\">" + xml_escape(t.text) + "</text>\n";
-  }
-  s += "</svg>\n";
-  return s;
-}
-
-// ---- Raster ------------------------------------------------------------------------------------
-namespace {
-
-// 3x5 glyphs, rows top to bottom, '#' = ink. Lower case is drawn as upper case; unknown
-// characters as a blank.
-const char* glyph(char ch) {
-  if (ch >= 'a' && ch <= 'z') ch = char(ch - 'a' + 'A');
-  switch (ch) {
-    case '0':
-      return "####.##.##.####";
-    case '1':
-      return ".#.##..#..#.###";
-    case '2':
-      return "###..#####..###";
-    case '3':
-      return "###..####..####";
-    case '4':
-      return "#.##.####..#..#";
-    case '5':
-      return "####..###..####";
-    case '6':
-      return "####..####.####";
-    case '7':
-      return "###..#..#..#..#";
-    case '8':
-      return "####.#####.####";
-    case '9':
-      return "####.####..####";
-    case 'A':
-      return ".#.#.#####.##.#";
-    case 'B':
-      return "##.#.###.#.###.";
-    case 'C':
-      return "####..#..#..###";
-    case 'D':
-      return "##.#.##.##.###.";
-    case 'E':
-      return "####..####..###";
-    case 'F':
-      return "####..####..#..";
-    case 'G':
-      return "####..#.##.####";
-    case 'H':
-      return "#.##.#####.##.#";
-    case 'I':
-      return "###.#..#..#.###";
-    case 'J':
-      return "..#..#..##.####";
-    case 'K':
-      return "#.##.###.#.##.#";
-    case 'L':
-      return "#..#..#..#..###";
-    case 'M':
-      return "#.#####.##.##.#";
-    case 'N':
-      return "##.#.##.##.##.#";
-    case 'O':
-      return "####.##.##.####";
-    case 'P':
-      return "####.#####..#..";
-    case 'Q':
-      return "####.##.####..#";
-    case 'R':
-      return "####.###.#.##.#";
-    case 'S':
-      return "####..###..####";
-    case 'T':
-      return "###.#..#..#..#.";
-    case 'U':
-      return "#.##.##.##.####";
-    case 'V':
-      return "#.##.##.##.#.#.";
-    case 'W':
-      return "#.##.##.#####.#";
-    case 'X':
-      return "#.##.#.#.#.##.#";
-    case 'Y':
-      return "#.##.#.#..#..#.";
-    case 'Z':
-      return "###..#.#.#..###";
-    case '.':
-      return "............#..";
-    case ',':
-      return "..........#.#..";
-    case '-':
-      return "......###......";
-    case '+':
-      return "....#.###.#....";
-    case '=':
-      return "...###...###...";
-    case '/':
-      return "..#..#.#.#..#..";
-    case ':':
-      return "....#.....#....";
-    case '_':
-      return "............###";
-    case '(':
-      return ".#.#..#..#...#.";
-    case ')':
-      return ".#...#..#..#.#.";
-    default:
-      return "...............";
-  }
-}
-
-struct Raster {
-  gs::Image img;
-  void put(int x, int y, uint32_t rgb) {
-    if (x < 0 || y < 0 || x >= img.width || y >= img.height) return;
-    img.at(y, x, 0) = float((rgb >> 16) & 255) / 255.f;
-    img.at(y, x, 1) = float((rgb >> 8) & 255) / 255.f;
-    img.at(y, x, 2) = float(rgb & 255) / 255.f;
-  }
-  void fill_rect(double x, double y, double w, double h, uint32_t rgb) {
-    const int x0 = int(std::lround(x)), y0 = int(std::lround(y));
-    const int x1 = int(std::lround(x + w)), y1 = int(std::lround(y + h));
-    for (int j = std::max(y0, 0); j < std::min(y1, img.height); ++j)
-      for (int i = std::max(x0, 0); i < std::min(x1, img.width); ++i) put(i, j, rgb);
-  }
-  void disc(double cx, double cy, double r, uint32_t rgb) {
-    for (int j = int(std::floor(cy - r)); j <= int(std::ceil(cy + r)); ++j)
-      for (int i = int(std::floor(cx - r)); i <= int(std::ceil(cx + r)); ++i) {
-        const double dx = i + 0.5 - cx, dy = j + 0.5 - cy;
-        if (dx * dx + dy * dy <= r * r) put(i, j, rgb);
-      }
-  }
-  void line(double x0, double y0, double x1, double y1, double width, uint32_t rgb) {
-    const double len = std::hypot(x1 - x0, y1 - y0);
-    const int steps = std::max(1, int(std::ceil(len * 2)));
-    const double r = std::max(0.5, width / 2);
-    for (int s = 0; s <= steps; ++s) {
-      const double t = double(s) / steps;
-      const double x = x0 + t * (x1 - x0), y = y0 + t * (y1 - y0);
-      if (r <= 0.75) {
-        put(int(std::floor(x)), int(std::floor(y)), rgb);
-      } else {
-        disc(x, y, r, rgb);
-      }
-    }
-  }
-  void text(double x, double y, const std::string& s, int anchor, uint32_t rgb) {
-    constexpr int kScale = 2, kAdvance = 4 * kScale;
-    const double w = double(s.size()) * kAdvance;
-    double left = anchor < 0 ? x : anchor > 0 ? x - w : x - w / 2;
-    const int top = int(std::lround(y)) - 5 * kScale;  // y is the baseline
-    for (char ch : s) {
-      const char* g = glyph(ch);
-      for (int r = 0; r < 5; ++r)
-        for (int col = 0; col < 3; ++col)
-          if (g[r * 3 + col] == '#')
-            fill_rect(left + col * kScale, top + r * kScale, kScale, kScale, rgb);
-      left += kAdvance;
-    }
-  }
-};
-
-}  // namespace
-
-gs::Image rasterize_chart(const Chart& c) {
-  Raster r;
-  r.img = gs::Image(c.width, c.height, 3);
-  std::fill(r.img.data.begin(), r.img.data.end(), 1.f);
-  for (const auto& x : c.rects) r.fill_rect(x.x, x.y, x.w, x.h, x.rgb);
-  for (const auto& l : c.lines) r.line(l.x0, l.y0, l.x1, l.y1, l.width, l.rgb);
-  for (const auto& p : c.circles) r.disc(p.x, p.y, p.r, p.rgb);
-  for (const auto& t : c.texts) r.text(t.x, t.y, t.text, t.anchor, t.rgb);
-  return r.img;
 }
 
 Status write_report(const std::vector<BenchRecord>& records, const std::string& dir,

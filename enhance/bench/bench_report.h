@@ -15,8 +15,9 @@
 //   zoom_<metric>.svg/.png       the metric vs the pair's zoom factor (depth_ratio), per-pair
 //                                points and a line per configuration through zoom-bin means
 //   scenes_<metric>.svg/.png     per-scene bars (scene means), one bar per configuration
-// SVG is written by hand; PNG is the same drawing rasterised here (lines, circles, rectangles and
-// text in a built-in 3x5 bitmap font drawn at 2x, upper case) and written with gs/image_io.h.
+// SVG is written by hand; PNG is the same drawing rasterised (lines, circles, rectangles and text
+// in a built-in 3x5 bitmap font drawn at 2x, upper case; enhance/bench/chart.h) and written with
+// gs/image_io.h.
 #pragma once
 
 #include <map>
@@ -26,6 +27,7 @@
 
 #include "attention/runtime/status.h"
 #include "enhance/bench/bench_harness.h"
+#include "enhance/bench/chart.h"
 #include "gs/image_io.h"
 
 namespace macro::enhance {
@@ -64,39 +66,7 @@ std::string format_metric(const std::string& name, std::optional<double> value);
 std::string table_markdown(const std::vector<ConfigResult>& configs);
 std::string table_csv(const std::vector<ConfigResult>& configs);
 
-// ---- Charts ------------------------------------------------------------------------------------
-// A drawing as a list of primitives in pixel coordinates (origin top left), rendered to SVG text
-// or rasterised to an RGB image.
-struct Chart {
-  struct Line {
-    double x0, y0, x1, y1;
-    uint32_t rgb;
-    double width;
-  };
-  struct Circle {
-    double x, y, r;
-    uint32_t rgb;
-  };
-  struct Rect {
-    double x, y, w, h;
-    uint32_t rgb;
-  };
-  struct Text {
-    double x, y;
-    std::string text;
-    uint32_t rgb;
-    int anchor;
-  };  // -1 left 0 mid 1 right
-  int width = 640, height = 420;
-  std::vector<Line> lines;
-  std::vector<Circle> circles;
-  std::vector<Rect> rects;
-  std::vector<Text> texts;
-};
-
-std::string chart_to_svg(const Chart& chart);
-gs::Image rasterize_chart(const Chart& chart);
-
+// ---- Charts (drawn by enhance/bench/chart.h) ---------------------------------------------------
 Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const MetricColumn& metric);
 Chart chart_metric_vs_zoom(const std::vector<ConfigResult>& configs, const MetricColumn& metric);
 Chart chart_scene_bars(const std::vector<ConfigResult>& configs, const MetricColumn& metric);

@@ -237,13 +237,7 @@ gs::GaussianCloud merge_clusters(const gs::GaussianCloud& in, const std::vector<
   return out;
 }
 
-Result<SynthCloseScene> make_synthclose_scene(const SynthCloseParams& p) {
-  if (p.supersample < 1 || p.supersample > 8)
-    return Status::error("synthclose: supersample: expected 1..8, found " +
-                         std::to_string(p.supersample));
-  if (!(p.min_spacing > 0) || !(p.tile >= 4 * p.min_spacing) || !(p.recon_cell_px > 0) ||
-      !(p.train_spacing_px > 0) || !(p.closeup_spacing_px > 0))
-    return Status::error("synthclose: spacing parameters must be positive (tile >= 4 min_spacing)");
+gs::SynthParams synthclose_layout_params(const SynthCloseParams& p) {
   gs::SynthParams sp;
   sp.seed = p.seed;
   sp.kind = p.kind;
@@ -254,20 +248,23 @@ Result<SynthCloseScene> make_synthclose_scene(const SynthCloseParams& p) {
   sp.training_views = p.training_views;
   sp.closeup_views = p.closeup_views;
   sp.closeup_cycle_start = p.closeup_cycle_start;
-  MACRO_ASSIGN_OR_RETURN(gs::SynthScene base, gs::generate_synthetic_scene(sp));
+  return sp;
+}
 
+Result<SynthCloseGroundTruth> sample_synthclose_gt(const SynthCloseParams& p,
+                                                   const gs::SynthScene& base) {
   std::vector<const gs::Camera*> train, close;
   for (const gs::Camera& c : base.cameras.cameras)
     (is_closeup(base, c.name) ? close : train).push_back(&c);
 
-  SynthCloseScene out;
-  gs::GaussianCloud& gt = out.gt;
+  SynthCloseGroundTruth out;
+  gs::GaussianCloud& gt = out.cloud;
   gt.sh_degree = 0;
   CloudWriter writer{gt};
   // Per GT Gaussian: its cluster key in the reconstruction.
-  std::vector<uint64_t> keys;
+  std::vector<uint64_t>& keys = out.cluster_keys;
   Rng rng{p.seed * 0x2545F4914F6CDD1Dull + 0x632BE59BD9B4E019ull};
-  gs::SynthGeometry& g = base.geometry;
+  const gs::SynthGeometry& g = base.geometry;
   uint64_t surface = 0;
 
   // Cluster size of a surface: recon_cell_px training pixels at its nearest training view
@@ -279,9 +276,11 @@ Result<SynthCloseScene> make_synthclose_scene(const SynthCloseParams& p) {
   };
 
   // Planes: tiles; spacing from the finest view of each tile; fine texture band-limited to it.
-  std::vector<size_t> first(g.planes.size() + g.spheres.size() + g.rods.size()),
-      count(first.size());
-  for (gs::SynthPlane& pl : g.planes) {
+  std::vector<size_t>& first = out.first;
+  std::vector<size_t>& count = out.count;
+  first.resize(g.planes.size() + g.spheres.size() + g.rods.size());
+  count.resize(first.size());
+  for (const gs::SynthPlane& pl : g.planes) {
     // Tiles hold a few Gaussians at least where only training views see them.
     double train_fp = INFINITY;
     for (const gs::Camera* c : train) train_fp = std::min(train_fp, footprint(*c, pl.center, 1e9));
@@ -361,8 +360,13 @@ Result<SynthCloseScene> make_synthclose_scene(const SynthCloseParams& p) {
     ++surface;
   }
   if (surface > 255) return Status::error("synthclose: more than 255 surfaces");
+  return out;
+}
 
-  // Reconstruction: clusters in key order (surface first), so each surface's range is contiguous.
+SynthCloseReconstruction merge_synthclose_gt(const SynthCloseGroundTruth& gt, double recon_cover) {
+  const std::vector<uint64_t>& keys = gt.cluster_keys;
+  const size_t surfaces = gt.recon_cell.size();
+  // Clusters in key order (surface first), so each surface's range is contiguous.
   std::vector<uint32_t> order(keys.size());
   std::iota(order.begin(), order.end(), 0u);
   std::stable_sort(order.begin(), order.end(),
@@ -371,47 +375,116 @@ Result<SynthCloseScene> make_synthclose_scene(const SynthCloseParams& p) {
   std::vector<float> cover(keys.size());
   for (size_t k = 0; k < keys.size(); ++k) {
     sorted[k] = keys[order[k]];
-    cover[k] = float(p.recon_cover * out.recon_cell[size_t(sorted[k] >> 54)]);
+    cover[k] = float(recon_cover * gt.recon_cell[size_t(sorted[k] >> 54)]);
   }
-  gs::GaussianCloud recon = merge_clusters(gt, sorted, order, cover);
+  SynthCloseReconstruction out;
+  out.cloud = merge_clusters(gt.cloud, sorted, order, cover);
   // Surface ranges in the reconstruction (geometry.json refers to scene.ply).
-  std::vector<size_t> rfirst(surface, 0), rcount(surface, 0);
-  {
-    size_t n = 0;
-    for (size_t a = 0; a < sorted.size();) {
-      size_t b = a;
-      while (b < sorted.size() && sorted[b] == sorted[a]) ++b;
-      const size_t sidx = size_t(sorted[a] >> 54);
-      if (rcount[sidx] == 0) rfirst[sidx] = n;
-      ++rcount[sidx];
-      ++n;
-      a = b;
-    }
+  out.first.assign(surfaces, 0);
+  out.count.assign(surfaces, 0);
+  size_t n = 0;
+  for (size_t a = 0; a < sorted.size();) {
+    size_t b = a;
+    while (b < sorted.size() && sorted[b] == sorted[a]) ++b;
+    const size_t sidx = size_t(sorted[a] >> 54);
+    if (out.count[sidx] == 0) out.first[sidx] = n;
+    ++out.count[sidx];
+    ++n;
+    a = b;
   }
+  return out;
+}
+
+Result<SynthCloseScene> make_synthclose_scene(const SynthCloseParams& p) {
+  if (p.supersample < 1 || p.supersample > 8)
+    return Status::error("synthclose: supersample: expected 1..8, found " +
+                         std::to_string(p.supersample));
+  if (!(p.min_spacing > 0) || !(p.tile >= 4 * p.min_spacing) || !(p.recon_cell_px > 0) ||
+      !(p.train_spacing_px > 0) || !(p.closeup_spacing_px > 0))
+    return Status::error("synthclose: spacing parameters must be positive (tile >= 4 min_spacing)");
+  MACRO_ASSIGN_OR_RETURN(gs::SynthScene base,
+                         gs::generate_synthetic_scene(synthclose_layout_params(p)));
+  MACRO_ASSIGN_OR_RETURN(SynthCloseGroundTruth gt, sample_synthclose_gt(p, base));
+  SynthCloseReconstruction recon = merge_synthclose_gt(gt, p.recon_cover);
+
+  SynthCloseScene out;
+  gs::SynthGeometry& g = base.geometry;
   for (const gs::SynthPlane& pl : g.planes) out.surface_names.push_back(pl.name);
   for (const gs::SynthSphere& sp : g.spheres) out.surface_names.push_back(sp.name);
   for (const gs::SynthRod& r : g.rods) out.surface_names.push_back(r.name);
-  out.gt_count = count;
-  out.recon_count = rcount;
+  out.recon_cell = gt.recon_cell;
+  out.gt_count = gt.count;
+  out.recon_count = recon.count;
+  // The layout's surfaces now refer to the reconstruction (scene.ply).
   size_t sidx = 0;
   for (gs::SynthPlane& pl : g.planes) {
-    pl.first = rfirst[sidx];
-    pl.count = rcount[sidx];
+    pl.first = recon.first[sidx];
+    pl.count = recon.count[sidx];
     pl.spacing = out.recon_cell[sidx];
     ++sidx;
   }
   for (gs::SynthSphere& s : g.spheres) {
-    s.first = rfirst[sidx];
-    s.count = rcount[sidx++];
+    s.first = recon.first[sidx];
+    s.count = recon.count[sidx++];
   }
   for (gs::SynthRod& r : g.rods) {
-    r.first = rfirst[sidx];
-    r.count = rcount[sidx++];
+    r.first = recon.first[sidx];
+    r.count = recon.count[sidx++];
   }
-  base.cloud = std::move(recon);
+  out.gt = std::move(gt.cloud);
+  base.cloud = std::move(recon.cloud);
   out.layout = std::move(base);
   return out;
 }
+
+namespace {
+
+// make_synthclose_scene, retried with the next seeds (params.seed += 1000003, at most 8 tries)
+// when gs/synth finds no visible close-up target; params.seed is the seed that was used.
+Result<SynthCloseScene> make_scene_retrying(SynthCloseParams& sp) {
+  Result<SynthCloseScene> scene = Status::error("");
+  for (int attempt = 0; attempt < 8; ++attempt, sp.seed += 1'000'003u) {
+    scene = make_synthclose_scene(sp);
+    if (scene || scene.status().message().find("no visible target") == std::string::npos) break;
+  }
+  return scene;
+}
+
+// synthclose.json: the generator's parameters and the scene's counts.
+std::string synthclose_json(const SynthCloseOptions& o, int k, const SynthCloseParams& sp,
+                            const SynthCloseScene& s, const std::string& gt_ply_name) {
+  nlohmann::ordered_json info;
+  info["generator"] = "macro bench synth";
+  info["size"] = synthclose_size_name(o.size);
+  info["seed"] = o.seed;
+  info["scene_index"] = k;
+  info["scene_seed"] = sp.seed;
+  info["kind"] = gs::synth_kind_name(sp.kind);
+  info["background"] = sp.background;
+  info["width"] = sp.width;
+  info["height"] = sp.height;
+  info["supersample"] = sp.supersample;
+  info["photo_filter"] = sp.tent_filter ? "tent" : "box";
+  info["train_spacing_px"] = sp.train_spacing_px;
+  info["closeup_spacing_px"] = sp.closeup_spacing_px;
+  info["background_spacing_px"] = sp.background_spacing_px;
+  info["min_spacing_m"] = sp.min_spacing;
+  info["recon_cell_px"] = sp.recon_cell_px;
+  info["recon_cover"] = sp.recon_cover;
+  info["gt_gaussians"] = s.gt.size();
+  info["recon_gaussians"] = s.layout.cloud.size();
+  info["surfaces"] = nlohmann::ordered_json::array();
+  for (size_t i = 0; i < s.surface_names.size(); ++i)
+    info["surfaces"].push_back({{"name", s.surface_names[i]},
+                                {"gt_gaussians", s.gt_count[i]},
+                                {"recon_gaussians", s.recon_count[i]},
+                                {"recon_cell_m", s.recon_cell[i]}});
+  info["gt_ply"] = gt_ply_name.empty() ? nlohmann::ordered_json() : "gt.ply";
+  info["recon_ply"] = "scene.ply";
+  return info.dump(1) + "\n";
+}
+
+}  // namespace
 
 Result<SynthCloseSummary> write_synthclose(const std::string& dir, const SynthCloseOptions& o) {
   namespace fs = std::filesystem;
@@ -436,13 +509,8 @@ Result<SynthCloseSummary> write_synthclose(const std::string& dir, const SynthCl
     char name[32];
     std::snprintf(name, sizeof name, "synthclose_%02d", k);
     const std::string scene_dir = demo ? dir : (fs::path(dir) / name).string();
-    // Retry with the next seeds when gs/synth finds no visible close-up target.
-    Result<SynthCloseScene> scene = Status::error("");
     SynthCloseParams sp = params[size_t(k)];
-    for (int attempt = 0; attempt < 8; ++attempt, sp.seed += 1'000'003u) {
-      scene = make_synthclose_scene(sp);
-      if (scene || scene.status().message().find("no visible target") == std::string::npos) break;
-    }
+    Result<SynthCloseScene> scene = make_scene_retrying(sp);
     if (!scene) return scene.status().with_context(scene_dir);
     tick();
     SynthFolderOptions fo;
@@ -453,36 +521,8 @@ Result<SynthCloseSummary> write_synthclose(const std::string& dir, const SynthCl
     fo.scene_name = demo ? "synthclose_demo" : name;
     fo.on_photo = tick;
     MACRO_TRY(write_closeup_scene_folder(scene->layout, scene_dir, fo));
-    nlohmann::ordered_json info;
-    info["generator"] = "macro bench synth";
-    info["size"] = synthclose_size_name(o.size);
-    info["seed"] = o.seed;
-    info["scene_index"] = k;
-    info["scene_seed"] = sp.seed;
-    info["kind"] = gs::synth_kind_name(sp.kind);
-    info["background"] = sp.background;
-    info["width"] = sp.width;
-    info["height"] = sp.height;
-    info["supersample"] = sp.supersample;
-    info["photo_filter"] = sp.tent_filter ? "tent" : "box";
-    info["train_spacing_px"] = sp.train_spacing_px;
-    info["closeup_spacing_px"] = sp.closeup_spacing_px;
-    info["background_spacing_px"] = sp.background_spacing_px;
-    info["min_spacing_m"] = sp.min_spacing;
-    info["recon_cell_px"] = sp.recon_cell_px;
-    info["recon_cover"] = sp.recon_cover;
-    info["gt_gaussians"] = scene->gt.size();
-    info["recon_gaussians"] = scene->layout.cloud.size();
-    info["surfaces"] = nlohmann::ordered_json::array();
-    for (size_t i = 0; i < scene->surface_names.size(); ++i)
-      info["surfaces"].push_back({{"name", scene->surface_names[i]},
-                                  {"gt_gaussians", scene->gt_count[i]},
-                                  {"recon_gaussians", scene->recon_count[i]},
-                                  {"recon_cell_m", scene->recon_cell[i]}});
-    info["gt_ply"] = fo.photo_ply_name.empty() ? nlohmann::ordered_json() : "gt.ply";
-    info["recon_ply"] = "scene.ply";
-    MACRO_TRY(
-        write_file_atomic((fs::path(scene_dir) / "synthclose.json").string(), info.dump(1) + "\n"));
+    MACRO_TRY(write_file_atomic((fs::path(scene_dir) / "synthclose.json").string(),
+                                synthclose_json(o, k, sp, *scene, fo.photo_ply_name)));
     tick();
     summary.scenes += 1;
     summary.pairs += int(scene->layout.geometry.closeups.size());

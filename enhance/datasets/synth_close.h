@@ -80,7 +80,46 @@ struct SynthCloseScene {
   std::vector<size_t> gt_count, recon_count;
 };
 
+// One scene: the steps below in their order (the layout from gs::generate_synthetic_scene). Errors:
+// bad params (named), gs/synth's (no visible close-up target for a seed), more than 255 surfaces.
 Result<SynthCloseScene> make_synthclose_scene(const SynthCloseParams& params);
+
+// ---- The scene's steps --------------------------------------------------------------------------
+// A trainer or benchmark can run them one at a time: e.g. the GT of a layout to train its own
+// reconstruction on the photos, or another merge of the same GT. No step draws from another's
+// stream: the GT has its own, seeded from params.seed.
+
+// 1. The gs/synth parameters of the scene's layout (geometry, training rig, close-ups, and the
+//    sphere and rod splats the GT reuses): seed, kind, background, base_gaussians, image size,
+//    view counts and close-up cycle from `params`.
+gs::SynthParams synthclose_layout_params(const SynthCloseParams& params);
+
+// 2. The ground truth of `layout` (gs::generate_synthetic_scene of step 1): per plane, tiles of
+//    `tile` metres (4x on the background; larger where the training views are far), each sampled
+//    at the spacing its finest view needs (train_spacing_px / closeup_spacing_px pixels,
+//    background_spacing_px training pixels on the backdrop, clamped to [min_spacing, tile / 2],
+//    at most 64 x 64 per tile), on a jittered grid with the band-limited fine texture; then the
+//    layout's sphere and rod splats as they are. Surfaces in geometry order: planes, spheres,
+//    rods. Error: more than 255 surfaces (the key's 8 bits).
+struct SynthCloseGroundTruth {
+  gs::GaussianCloud cloud;             // SH degree 0
+  std::vector<uint64_t> cluster_keys;  // [cloud.size()] reconstruction cluster of each Gaussian:
+                                       // surface << 54 | three 18-bit cell indices
+  std::vector<double> recon_cell;      // per surface: cluster size (m), recon_cell_px training
+                                       // pixels at its nearest training view
+  std::vector<size_t> first, count;    // per surface: its Gaussians in cloud
+};
+Result<SynthCloseGroundTruth> sample_synthclose_gt(const SynthCloseParams& params,
+                                                   const gs::SynthScene& layout);
+
+// 3. The "reconstruction": the GT merged per cluster (merge_clusters, in key order, so each
+//    surface's range is contiguous), each merged splat's in-surface sigma raised to at least
+//    recon_cover x its surface's cluster size.
+struct SynthCloseReconstruction {
+  gs::GaussianCloud cloud;
+  std::vector<size_t> first, count;  // per surface: its Gaussians in cloud
+};
+SynthCloseReconstruction merge_synthclose_gt(const SynthCloseGroundTruth& gt, double recon_cover);
 
 // Moment-matched merge: Gaussians with equal cluster id (ids sorted ascending, contiguous; order[k]
 // is the Gaussian with id ids[k]) become one, in id order. Weights w = opacity * (product of the

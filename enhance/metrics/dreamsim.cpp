@@ -10,7 +10,7 @@
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/io/safetensors.h"
 #include "enhance/metrics/feature_metrics.h"
-#include "enhance/metrics/metrics.h"
+#include "enhance/metrics/metric_value.h"
 #include "enhance/resample.h"
 
 namespace macro::enhance {

@@ -25,7 +25,8 @@
 #include <vector>
 
 #include "attention/nets/vit.h"
-#include "enhance/metrics/metrics.h"
+#include "attention/runtime/thread_pool.h"
+#include "enhance/metrics/metric_value.h"
 #include "gs/image_io.h"
 
 namespace macro::enhance {

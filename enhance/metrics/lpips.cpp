@@ -11,7 +11,7 @@
 #include "attention/nets/weights.h"
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/ops.h"
-#include "enhance/metrics/metrics.h"
+#include "enhance/metrics/metric_value.h"
 
 namespace macro::enhance {
 namespace {

@@ -1,4 +1,5 @@
-// PSNR, SSIM, the pair checks, the size match and the metric suite (contract in metrics.h).
+// PSNR, SSIM, the size match and the metric suite (contract in metrics.h; the pair checks are
+// metric_value.cpp).
 //
 // SSIM schedule: per channel, the planes are shifted by -R/2 (variances and covariance are
 // shift-invariant; the means are shifted back), which keeps E[x^2] - mu^2 small in float. Pass 1
@@ -18,11 +19,6 @@
 
 namespace macro::enhance {
 namespace {
-
-std::string size_string(const gs::Image& im) {
-  return std::to_string(im.width) + "x" + std::to_string(im.height) + "x" +
-         std::to_string(im.channels);
-}
 
 // Normalised Gaussian taps (torchmetrics _gaussian: exp(-(d / sigma)^2 / 2), d = -(n-1)/2 ...).
 std::vector<double> gaussian_taps(int n, double sigma) {
@@ -109,38 +105,6 @@ bool all_u8_levels(const gs::Image& im) {
 }
 
 }  // namespace
-
-// ---- checks ------------------------------------------------------------------------------------
-
-Status check_image(const gs::Image& im, const std::string& name) {
-  if (im.width <= 0 || im.height <= 0 || im.channels <= 0)
-    return Status::error(name + ": empty image (" + size_string(im) + ")");
-  if (im.data.size() != im.pixels() * size_t(im.channels))
-    return Status::error(name + ": pixel buffer holds " + std::to_string(im.data.size()) +
-                         " values, expected " + std::to_string(im.pixels() * im.channels) +
-                         " for " + size_string(im));
-  for (size_t i = 0; i < im.data.size(); ++i) {
-    if (!std::isfinite(im.data[i])) {
-      const size_t px = i / size_t(im.channels);
-      return Status::error(name + ": non-finite value " + std::to_string(im.data[i]) + " at row " +
-                           std::to_string(px / size_t(im.width)) + ", column " +
-                           std::to_string(px % size_t(im.width)) + ", channel " +
-                           std::to_string(i % size_t(im.channels)));
-    }
-  }
-  return Status::ok();
-}
-
-Status check_pair(const gs::Image& pred, const gs::Image& gt, const std::string& pred_name,
-                  const std::string& gt_name) {
-  MACRO_TRY(check_image(pred, pred_name));
-  MACRO_TRY(check_image(gt, gt_name));
-  if (pred.width != gt.width || pred.height != gt.height || pred.channels != gt.channels)
-    return Status::error(pred_name + " is " + size_string(pred) + " but " + gt_name + " is " +
-                         size_string(gt) + " (W x H x C): sizes must match (resize the " +
-                         "prediction to the ground-truth size first)");
-  return Status::ok();
-}
 
 // ---- PSNR --------------------------------------------------------------------------------------
 

@@ -1,6 +1,6 @@
-// Full-reference image metrics for the evaluation harness: PSNR and SSIM, the input checks every
-// metric shares, the Lanczos size match (prediction -> ground-truth size), and the metric suite
-// (PSNR, SSIM, LPIPS-Alex, DINOv2, DreamSim) as reported per image pair.
+// Full-reference image metrics for the evaluation harness: PSNR and SSIM, the Lanczos size match
+// (prediction -> ground-truth size), and the metric suite (PSNR, SSIM, LPIPS-Alex, DINOv2,
+// DreamSim) as reported per image pair (the value and the input checks: metric_value.h).
 //
 // Legend: H x W pixels, C channels; images row-major [H,W,C] (gs::Image), values in [0, 1].
 //
@@ -23,6 +23,7 @@
 
 #include "attention/runtime/status.h"
 #include "attention/runtime/thread_pool.h"
+#include "enhance/metrics/metric_value.h"
 #include "gs/image_io.h"
 
 namespace macro::enhance {
@@ -34,11 +35,7 @@ struct SsimParams {
   double data_range = 1.0;  // R
 };
 
-// Bad input checks shared by every metric: both images non-empty, data sized W*H*C, the same
-// W, H and C, every value finite. Messages name `pred_name` / `gt_name`, the field and the values.
-Status check_image(const gs::Image& image, const std::string& name);
-Status check_pair(const gs::Image& pred, const gs::Image& gt, const std::string& pred_name = "pred",
-                  const std::string& gt_name = "gt");
+// MetricValue, check_image and check_pair: enhance/metrics/metric_value.h.
 
 // PSNR in dB (double accumulation). +inf when the images are identical.
 Result<double> psnr(const gs::Image& pred, const gs::Image& gt, double data_range = 1.0);
@@ -65,15 +62,6 @@ double gradient_energy(const gs::Image& image);
 Result<double> gradient_energy_ratio(const gs::Image& pred, const gs::Image& gt);
 
 // ---- The suite ---------------------------------------------------------------------------------
-// One metric for one pair: a number, or "not computed" with the reason (never a made-up number).
-struct MetricValue {
-  std::string name;  // "psnr", "ssim", "lpips_alex", "dinov2", "dreamsim"
-  bool computed = false;
-  double value = 0.0;  // valid when computed (psnr may be +inf)
-  std::string unit;    // "dB" for psnr, else ""
-  std::string reason;  // why not computed
-};
-
 struct MetricOptions {
   bool resize_pred = true;       // Lanczos-resize pred to the GT size; false: sizes must match
   std::string lpips_backbone;    // AlexNet features safetensors; "" = default location

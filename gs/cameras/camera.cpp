@@ -5,18 +5,12 @@
 #include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <cmath>
-#include <cstdio>
 
 #include "attention/runtime/limits.h"
+#include "attention/runtime/text.h"
 
 namespace macro::gs {
 namespace {
-
-std::string num(double v) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.9g", v);
-  return buf;
-}
 
 std::string file_name_of(const std::string& path) {
   size_t slash = path.find_last_of("/\\");
@@ -119,29 +113,33 @@ Status Camera::validate() const {
                 " has more than the limit of " +
                 std::to_string(resource_limits().max_image_pixels) + " pixels (--max-image-pixels)");
   }
-  if (!std::isfinite(fx) || !(fx > 0)) return fail("fx = " + num(fx) + ": expected finite and > 0");
-  if (!std::isfinite(fy) || !(fy > 0)) return fail("fy = " + num(fy) + ": expected finite and > 0");
-  if (!std::isfinite(cx)) return fail("cx = " + num(cx) + ": expected a finite value");
-  if (!std::isfinite(cy)) return fail("cy = " + num(cy) + ": expected a finite value");
+  if (!std::isfinite(fx) || !(fx > 0))
+    return fail("fx = " + format_number(fx) + ": expected finite and > 0");
+  if (!std::isfinite(fy) || !(fy > 0))
+    return fail("fy = " + format_number(fy) + ": expected finite and > 0");
+  if (!std::isfinite(cx)) return fail("cx = " + format_number(cx) + ": expected a finite value");
+  if (!std::isfinite(cy)) return fail("cy = " + format_number(cy) + ": expected a finite value");
   for (int r = 0; r < 3; ++r) {
     for (int c = 0; c < 3; ++c) {
       if (!std::isfinite(R(r, c))) {
-        return fail("R(" + std::to_string(r) + "," + std::to_string(c) + ") = " + num(R(r, c)) +
-                    ": expected a finite value");
+        return fail("R(" + std::to_string(r) + "," + std::to_string(c) +
+                    ") = " + format_number(R(r, c)) + ": expected a finite value");
       }
     }
     if (!std::isfinite(t[r])) {
-      return fail("t[" + std::to_string(r) + "] = " + num(t[r]) + ": expected a finite value");
+      return fail("t[" + std::to_string(r) + "] = " + format_number(t[r]) +
+                  ": expected a finite value");
     }
   }
   const double ortho = (R.transpose() * R - Eigen::Matrix3d::Identity()).norm();
   if (!(ortho < 1e-4)) {
-    return fail("rotation is not orthonormal: ||R^T R - I|| = " + num(ortho) +
+    return fail("rotation is not orthonormal: ||R^T R - I|| = " + format_number(ortho) +
                 ", expected < 1e-4 (a rigid world-to-camera pose)");
   }
   const double det = R.determinant();
   if (!(std::abs(det - 1.0) < 1e-4)) {
-    return fail("rotation has determinant " + num(det) + ", expected +1 (not a reflection)");
+    return fail("rotation has determinant " + format_number(det) +
+                ", expected +1 (not a reflection)");
   }
   const int expected = camera_model_distortion_count(model);
   if (model != CameraModel::kPinhole && static_cast<int>(distortion.size()) < expected) {
@@ -150,7 +148,7 @@ Status Camera::validate() const {
   }
   for (size_t i = 0; i < distortion.size(); ++i) {
     if (!std::isfinite(distortion[i])) {
-      return fail("distortion[" + std::to_string(i) + "] = " + num(distortion[i]) +
+      return fail("distortion[" + std::to_string(i) + "] = " + format_number(distortion[i]) +
                   ": expected a finite value");
     }
   }

@@ -6,10 +6,10 @@
 #include <algorithm>
 #include <climits>
 #include <cmath>
-#include <cstdio>
 #include <unordered_map>
 
 #include "attention/runtime/file_io.h"
+#include "attention/runtime/text.h"
 
 namespace macro::gs::detail {
 namespace {
@@ -29,12 +29,6 @@ constexpr ColmapModelInfo kModels[] = {
     {10, "THIN_PRISM_FISHEYE", 12, false},
     {11, "RAD_TAN_THIN_PRISM_FISHEYE", 16, false},
 };
-
-std::string num(double v) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.9g", v);
-  return buf;
-}
 
 }  // namespace
 
@@ -98,9 +92,10 @@ Result<CameraSet> assemble_colmap(const std::vector<ColmapCameraRecord>& cameras
     const double qn =
         std::sqrt(im.q[0] * im.q[0] + im.q[1] * im.q[1] + im.q[2] * im.q[2] + im.q[3] * im.q[3]);
     if (!(std::abs(qn - 1.0) <= 1e-3)) {
-      return Status::error(where + ": quaternion (QW QX QY QZ) = (" + num(im.q[0]) + ", " +
-                           num(im.q[1]) + ", " + num(im.q[2]) + ", " + num(im.q[3]) +
-                           ") has norm " + num(qn) + ", expected a unit quaternion");
+      return Status::error(where + ": quaternion (QW QX QY QZ) = (" + format_number(im.q[0]) +
+                           ", " + format_number(im.q[1]) + ", " + format_number(im.q[2]) + ", " +
+                           format_number(im.q[3]) + ") has norm " + format_number(qn) +
+                           ", expected a unit quaternion");
     }
     const ColmapCameraRecord& rec = *it->second;
     const std::vector<double>& p = rec.params;

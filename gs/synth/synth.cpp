@@ -221,9 +221,9 @@ std::optional<SurfaceHit> cast_pixel(const SynthGeometry& g, const Camera& cam, 
   return cast_ray(g, cam.center(), cam.R.transpose() * d_cam);
 }
 
-// ---- the generator -------------------------------------------------------------------------------
+// ---- the generator, step by step (synth.h) -----------------------------------------------------
 
-Result<SynthScene> generate_synthetic_scene(const SynthParams& params) {
+Status check_synth_params(const SynthParams& params) {
   if (params.gaussians < 1000 || params.gaussians > 20'000'000) {
     return Status::error("synthetic scene: gaussians: expected 1000 to 20000000, found " +
                          std::to_string(params.gaussians));
@@ -236,10 +236,15 @@ Result<SynthScene> generate_synthetic_scene(const SynthParams& params) {
       params.closeup_views > 256) {
     return Status::error("synthetic scene: views: expected 1..256 training and 0..256 close-up");
   }
-  SynthScene scene;
-  scene.params = params;
-  SynthGeometry& g = scene.geometry;
-  Rng rng{params.seed * 0xD1B54A32D192ED03ull + 0x5851F42D4C957F2Dull};
+  return Status::ok();
+}
+
+synth_random::Rng synth_rng(uint64_t seed) {
+  return synth_random::Rng{seed * 0xD1B54A32D192ED03ull + 0x5851F42D4C957F2Dull};
+}
+
+SynthGeometry layout_synth_geometry(const SynthParams& params, Rng& rng) {
+  SynthGeometry g;
   auto jitter = [&](double a) { return rng.range(-a, a); };
   auto jv = [&](double a) { return Vector3d(jitter(a), jitter(a), jitter(a)); };
   const bool mixed = params.kind == SynthKind::kMixed;
@@ -262,22 +267,38 @@ Result<SynthScene> generate_synthetic_scene(const SynthParams& params) {
     g.rods.push_back({"wire_1", Vector3d(-2.0, -0.95, 4.1) + jv(0.05), Vector3d(2.0, -1.05, 4.4) + jv(0.05), 0.015});
     g.rods.push_back({"rod_2", Vector3d(1.55, -1.2, 3.2) + jv(0.05), Vector3d(1.7, 1.2, 3.25) + jv(0.05), 0.02});
   }
+  // Planes and spheres use 7 different palettes of the 8.
   std::vector<Texture> plane_tex, sphere_tex;
   const int palette0 = int(rng.next() % kPalettes);
   for (size_t k = 0; k < g.planes.size(); ++k) plane_tex.push_back(make_texture(rng, palette0 + int(k)));
   for (size_t k = 0; k < g.spheres.size(); ++k) sphere_tex.push_back(make_texture(rng, palette0 + 4 + int(k)));
   for (size_t k = 0; k < g.planes.size(); ++k) g.planes[k].texture = plane_tex[k];
   for (size_t k = 0; k < g.spheres.size(); ++k) g.spheres[k].texture = sphere_tex[k];
+  return g;
+}
 
-  // Planes and spheres use 7 different palettes of the 8.
-  // Budget: rods need ~1 Gaussian per 0.7 radius of length; spheres 12%; planes the rest, the
-  // background 25% of the planes' share and the others by area.
+namespace {
+
+// How many Gaussians each surface gets (no draws): rods ~1 per 0.7 radius of length; spheres 12%
+// of the target; planes the rest, the background 25% of the planes' share and the others by area.
+// Sets each plane's grid spacing.
+struct SynthBudget {
+  struct PlaneGrid {
+    int nu, nv;
+  };
+  std::vector<PlaneGrid> plane_grid;  // per plane
+  std::vector<size_t> sphere_n, rod_n;
+  size_t count = 0;  // all of them
+};
+
+SynthBudget plan_budget(const SynthParams& params, SynthGeometry& g) {
+  SynthBudget budget;
+  const bool mixed = params.kind == SynthKind::kMixed;
   const double total = double(params.gaussians);
   size_t rod_count = 0;
-  std::vector<size_t> rod_n;
   for (const SynthRod& r : g.rods) {
-    rod_n.push_back(size_t(std::ceil((r.b - r.a).norm() / (0.7 * r.radius))) + 1);
-    rod_count += rod_n.back();
+    budget.rod_n.push_back(size_t(std::ceil((r.b - r.a).norm() / (0.7 * r.radius))) + 1);
+    rod_count += budget.rod_n.back();
   }
   double sphere_area = 0;
   for (const SynthSphere& s : g.spheres) sphere_area += 4 * kPi * s.radius * s.radius;
@@ -289,35 +310,37 @@ Result<SynthScene> generate_synthetic_scene(const SynthParams& params) {
   }
   const double bg_share = params.background ? 0.25 : 0.0;
 
-  struct PlaneGrid {
-    int nu, nv;
-  };
-  std::vector<PlaneGrid> grids;
   size_t count = rod_count;
   for (SynthPlane& p : g.planes) {
     const double area = 4 * p.half_u * p.half_v;
     const double n = p.background ? bg_share * plane_budget
                                   : (1 - bg_share) * plane_budget * area / fg_area;
     const double s = std::sqrt(area / n);
-    PlaneGrid grid{std::max(2, int(std::lround(2 * p.half_u / s))),
-                   std::max(2, int(std::lround(2 * p.half_v / s)))};
+    SynthBudget::PlaneGrid grid{std::max(2, int(std::lround(2 * p.half_u / s))),
+                                std::max(2, int(std::lround(2 * p.half_v / s)))};
     p.spacing = s;
-    grids.push_back(grid);
+    budget.plane_grid.push_back(grid);
     count += size_t(grid.nu) * size_t(grid.nv);
   }
-  std::vector<size_t> sphere_n;
   for (const SynthSphere& s : g.spheres) {
-    sphere_n.push_back(std::max<size_t>(
-        64, size_t(sphere_budget * 4 * kPi * s.radius * s.radius / sphere_area)));
-    count += sphere_n.back();
+    budget.sphere_n.push_back(
+        std::max<size_t>(64, size_t(sphere_budget * 4 * kPi * s.radius * s.radius / sphere_area)));
+    count += budget.sphere_n.back();
   }
+  budget.count = count;
+  return budget;
+}
 
-  GaussianCloud& cloud = scene.cloud;
-  cloud.resize(count, 0);
+}  // namespace
+
+GaussianCloud splat_synth_geometry(const SynthParams& params, SynthGeometry& g, Rng& rng) {
+  const SynthBudget budget = plan_budget(params, g);
+  GaussianCloud cloud;
+  cloud.resize(budget.count, 0);
   size_t n = 0;
   for (size_t k = 0; k < g.planes.size(); ++k) {
     SynthPlane& p = g.planes[k];
-    const PlaneGrid grid = grids[k];
+    const SynthBudget::PlaneGrid grid = budget.plane_grid[k];
     const double su = 2 * p.half_u / grid.nu, sv = 2 * p.half_v / grid.nv;
     const Vector3d sigma(kInPlaneSigma * su, kInPlaneSigma * sv, kThinSigma * std::min(su, sv));
     p.first = n;
@@ -326,14 +349,14 @@ Result<SynthScene> generate_synthetic_scene(const SynthParams& params) {
         const double u = -p.half_u + (a + 0.5) * su + kJitter * su * (2 * rng.uniform() - 1);
         const double v = -p.half_v + (b + 0.5) * sv + kJitter * sv * (2 * rng.uniform() - 1);
         put_gaussian(cloud, n++, p.center + u * p.axis_u + v * p.axis_v, p.axis_u, p.axis_v,
-                     p.normal, sigma, kOpacity, texture(plane_tex[k], u, v));
+                     p.normal, sigma, kOpacity, texture(p.texture, u, v));
       }
     }
     p.count = n - p.first;
   }
   for (size_t k = 0; k < g.spheres.size(); ++k) {
     SynthSphere& s = g.spheres[k];
-    const size_t m = sphere_n[k];
+    const size_t m = budget.sphere_n[k];
     const double spacing = std::sqrt(4 * kPi * s.radius * s.radius / double(m));
     const Vector3d sigma(kInPlaneSigma * spacing, kInPlaneSigma * spacing, kThinSigma * spacing);
     const double golden = kPi * (3.0 - std::sqrt(5.0));
@@ -349,7 +372,7 @@ Result<SynthScene> generate_synthetic_scene(const SynthParams& params) {
       // Texture over longitude/latitude arc lengths.
       const double lon = std::atan2(dir.z(), dir.x()) * s.radius, lat = std::asin(y) * s.radius;
       put_gaussian(cloud, n++, s.center + s.radius * dir, t1, t2, dir, sigma, kOpacity,
-                   texture(sphere_tex[k], lon, lat));
+                   texture(s.texture, lon, lat));
     }
     s.count = n - s.first;
   }
@@ -361,7 +384,7 @@ Result<SynthScene> generate_synthetic_scene(const SynthParams& params) {
     const Vector3d helper = std::abs(d.x()) < 0.9 ? Vector3d(1, 0, 0) : Vector3d(0, 1, 0);
     const Vector3d p1 = helper.cross(d).normalized();
     const Vector3d p2 = d.cross(p1);
-    const size_t m = rod_n[k];
+    const size_t m = budget.rod_n[k];
     const double step = len / double(m - 1);
     const Vector3d sigma(kInPlaneSigma * step, 0.5 * r.radius, 0.5 * r.radius);
     const Vector3d metal = k == 1 ? Vector3d(0.75, 0.55, 0.25) : Vector3d(0.62, 0.64, 0.68);
@@ -373,23 +396,35 @@ Result<SynthScene> generate_synthetic_scene(const SynthParams& params) {
     }
     r.count = n - r.first;
   }
-  MACRO_CHECK(n == count);
+  MACRO_CHECK(n == budget.count);
+  return cloud;
+}
 
+SynthTrainingRig place_training_cameras(const SynthParams& params, Rng& rng) {
+  auto jitter = [&](double a) { return rng.range(-a, a); };
+  SynthTrainingRig rig;
   // Training cameras on a shallow arc 3-4 m in front of the nearest plane.
   const Vector3d look(jitter(0.1), jitter(0.05), 5.0);
-  std::vector<Vector3d> eyes;
   for (int k = 0; k < params.training_views; ++k) {
     const double a = params.training_views == 1 ? 0.5 : double(k) / (params.training_views - 1);
     const Vector3d eye(-1.2 + 2.4 * a + jitter(0.05), (k % 2 ? -0.3 : 0.1) + jitter(0.05),
                        -0.6 - 0.3 * std::sin(kPi * a) + jitter(0.05));
-    eyes.push_back(eye);
-    scene.cameras.cameras.push_back(look_at(indexed("train_", k), eye, look, params));
+    rig.eyes.push_back(eye);
+    rig.cameras.push_back(look_at(indexed("train_", k), eye, look, params));
   }
+  return rig;
+}
 
+Result<std::vector<Camera>> place_closeup_cameras(const SynthParams& params,
+                                                  const SynthTrainingRig& rig, SynthGeometry& g,
+                                                  Rng& rng) {
   // Close-ups: a visible point on a foreground plane, approached from the training camera that
   // sees it most frontally, by a zoom factor.
   static constexpr double kZooms[] = {3.0, 1.5, 4.5, 6.0, 2.0, 2.5, 3.5, 5.0};
   static constexpr int kPlaneOrder[] = {1, 0, 2, 1, 0, 2, 1, 2};
+  const std::vector<Vector3d>& eyes = rig.eyes;
+  const int training_views = int(eyes.size());
+  std::vector<Camera> cameras;
   for (int k = 0; k < params.closeup_views; ++k) {
     const int cycle = (params.closeup_cycle_start % 8 + 8 + k) % 8;
     const int plane = kPlaneOrder[cycle];
@@ -401,7 +436,7 @@ Result<SynthScene> generate_synthetic_scene(const SynthParams& params) {
                               rng.range(-0.5, 0.5) * p.half_v * p.axis_v;
       int best = -1;
       double best_score = -1;
-      for (int c = 0; c < params.training_views; ++c) {
+      for (int c = 0; c < training_views; ++c) {
         const Vector3d dir = target - eyes[size_t(c)];
         auto hit = cast_ray(g, eyes[size_t(c)], dir);
         if (!hit || hit->kind != SurfaceHit::kPlane || hit->index != plane ||
@@ -417,8 +452,8 @@ Result<SynthScene> generate_synthetic_scene(const SynthParams& params) {
       if (best < 0) continue;
       const Vector3d eye = target - (target - eyes[size_t(best)]) / zoom;
       const std::string name = k == 0 ? "closeup" : indexed("closeup_", k);
-      scene.cameras.cameras.push_back(look_at(name, eye, target, params));
-      g.closeups.push_back({name, indexed("train_", best), target, plane, zoom});
+      cameras.push_back(look_at(name, eye, target, params));
+      g.closeups.push_back({name, rig.cameras[size_t(best)].name, target, plane, zoom});
       placed = true;
     }
     if (!placed) {
@@ -426,6 +461,21 @@ Result<SynthScene> generate_synthetic_scene(const SynthParams& params) {
                            std::to_string(k) + " (seed " + std::to_string(params.seed) + ")");
     }
   }
+  return cameras;
+}
+
+Result<SynthScene> generate_synthetic_scene(const SynthParams& params) {
+  MACRO_TRY(check_synth_params(params));
+  SynthScene scene;
+  scene.params = params;
+  Rng rng = synth_rng(params.seed);
+  scene.geometry = layout_synth_geometry(params, rng);
+  scene.cloud = splat_synth_geometry(params, scene.geometry, rng);
+  SynthTrainingRig rig = place_training_cameras(params, rng);
+  MACRO_ASSIGN_OR_RETURN(std::vector<Camera> closeups,
+                         place_closeup_cameras(params, rig, scene.geometry, rng));
+  scene.cameras.cameras = std::move(rig.cameras);
+  for (Camera& c : closeups) scene.cameras.cameras.push_back(std::move(c));
   return scene;
 }
 

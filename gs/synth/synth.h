@@ -26,6 +26,7 @@
 #include "attention/runtime/status.h"
 #include "gs/cameras/camera.h"
 #include "gs/gaussians.h"
+#include "gs/synth/synth_random.h"
 
 namespace macro::gs {
 
@@ -100,7 +101,51 @@ struct SynthScene {
   SynthGeometry geometry;
 };
 
+// The whole scene: check_synth_params, then the steps below in their order on one stream
+// (synth_rng(params.seed)).
 Result<SynthScene> generate_synthetic_scene(const SynthParams& params);
+
+// ---- The generator's steps ----------------------------------------------------------------------
+// Each step draws from `rng` in a fixed order, so running them in this order on synth_rng(seed)
+// gives generate_synthetic_scene's bytes; a caller may stop after any of them (a layout without
+// Gaussians, a cloud without cameras) or put its own step in place of one (its own cloud on the
+// same layout and rig). A step changes the stream for every step after it.
+
+// Invalid counts and sizes, naming the field and the value found.
+Status check_synth_params(const SynthParams& params);
+
+// The stream every step draws from (SplitMix64, seeded from `seed`).
+synth_random::Rng synth_rng(uint64_t seed);
+
+// 1. The layout: planes near / mid / far at fixed base positions and tilts perturbed by the seed,
+//    the background plane (params.background), spheres and rods (kind mixed), and each plane's and
+//    sphere's texture. Gaussian ranges (first, count) and plane spacings are left 0; no close-ups.
+SynthGeometry layout_synth_geometry(const SynthParams& params, synth_random::Rng& rng);
+
+// 2. The cloud (SH degree 0) for `geometry`: about params.gaussians in all (rods ~1 per 0.7 radius
+//    of length, spheres 12% on a Fibonacci lattice, planes the rest on a jittered grid, the
+//    background a quarter of the planes' share), planes first, then spheres, then rods. Sets every
+//    surface's Gaussian range and each plane's grid spacing. Only the plane jitter draws.
+GaussianCloud splat_synth_geometry(const SynthParams& params, SynthGeometry& geometry,
+                                   synth_random::Rng& rng);
+
+// 3. The training cameras "train_00", ... on a shallow arc about 3.5-7 m in front of the planes,
+//    all looking at one jittered point; eyes[k] is cameras[k]'s centre exactly as placed (the
+//    close-ups start from it, not from the rounded Camera::center()).
+struct SynthTrainingRig {
+  std::vector<Camera> cameras;
+  std::vector<Eigen::Vector3d> eyes;
+};
+SynthTrainingRig place_training_cameras(const SynthParams& params, synth_random::Rng& rng);
+
+// 4. The close-ups ("closeup", "closeup_01", ...): close-up k takes zoom and plane from the fixed
+//    cycles (SynthParams::closeup_cycle_start), draws targets on that plane until one is seen
+//    unoccluded by some training camera (at most 200 tries), and moves the most frontal such
+//    camera towards it by the zoom. Appends one SynthCloseup per camera to geometry.closeups. An
+//    error (naming the close-up and the seed) when a close-up finds no visible target.
+Result<std::vector<Camera>> place_closeup_cameras(const SynthParams& params,
+                                                  const SynthTrainingRig& rig,
+                                                  SynthGeometry& geometry, synth_random::Rng& rng);
 
 // First surface hit by the ray origin + t * dir (t > 0) among planes (within their extents),
 // spheres and rods (as capsules). With dir = R^T ((u - cx)/fx, (v - cy)/fy, 1), t is the view depth.

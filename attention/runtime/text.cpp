@@ -1,0 +1,35 @@
+// Numbers as text (text.h).
+#include "attention/runtime/text.h"
+
+#include <cstdio>
+
+#include "attention/runtime/status.h"
+
+namespace macro {
+namespace {
+
+// snprintf into a buffer sized by a first, measuring call.
+std::string print(const char* format, int precision, double v) {
+  char small[64];
+  const int n = std::snprintf(small, sizeof small, format, precision, v);
+  MACRO_CHECK(n >= 0);
+  if (size_t(n) < sizeof small) return std::string(small, size_t(n));
+  std::string out(size_t(n) + 1, '\0');
+  std::snprintf(out.data(), out.size(), format, precision, v);
+  out.resize(size_t(n));
+  return out;
+}
+
+}  // namespace
+
+std::string format_number(double v, int significant) {
+  MACRO_CHECK(significant >= 1 && significant <= 17);
+  return print("%.*g", significant, v);
+}
+
+std::string format_fixed(double v, int decimals) {
+  MACRO_CHECK(decimals >= 0 && decimals <= 40);
+  return print("%.*f", decimals, v);
+}
+
+}  // namespace macro

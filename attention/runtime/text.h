@@ -1,0 +1,21 @@
+// Numbers as text for messages, reports and drawings: printf's formats, named once, so every
+// caller that prints a double the same way calls the same function (and one that prints it
+// differently says so by its arguments).
+//
+//   format_number(v)      "%.9g"  9 significant digits (round-trips a float): camera fields
+//   format_number(v, 6)   "%g"    printf's default 6 significant digits: pair-construction messages
+//   format_fixed(v, 2)    "%.2f"  fixed decimals: SVG coordinates of the benchmark charts
+// The result is never truncated (any double, any precision up to 17 / 40 digits).
+#pragma once
+
+#include <string>
+
+namespace macro {
+
+// printf "%.{significant}g" of v; significant in [1, 17].
+std::string format_number(double v, int significant = 9);
+
+// printf "%.{decimals}f" of v; decimals in [0, 40].
+std::string format_fixed(double v, int decimals);
+
+}  // namespace macro
