@@ -16,6 +16,7 @@
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/io/safetensors.h"
 #include "test_support.h"
+#include "tiny_checkpoint_fixture.h"
 
 using namespace macro;
 using namespace macro::nets;
@@ -275,11 +276,7 @@ TEST_CASE("difix pipeline: the text encoder's width must match the unet", "[nets
   // Tiny U-Net (cross dim 48) + tiny VAE + tiny text encoder (64 wide): refused by name.
   test::TempDir dir("clip-pipe");
   const std::string root = make_text_folder(dir);
-  fs::create_directory_symlink(test::golden_dir() + "/unet-tiny", root + "/unet");
-  fs::create_directory_symlink(test::golden_dir() + "/vae-tiny", root + "/vae");
-  REQUIRE(write_file_atomic(root + "/model_index.json",
-                            std::string(R"({"_class_name": "DifixPipeline"})"))
-              .is_ok());
+  test::write_tiny_pipeline(root);
   auto pipe = DifixPipeline::load(root, Precision::kF32);
   REQUIRE(pipe.is_ok());
   PromptCacheInfo info;
@@ -389,11 +386,7 @@ TEST_CASE("difix pipeline without input.ctx uses the folder's cached prompt embe
   const std::string root = dir.path + "/pipe";
   fs::create_directories(root);
   fs::create_directory_symlink(test::golden_dir() + "/clip/tokenizer", root + "/tokenizer");
-  fs::create_directory_symlink(test::golden_dir() + "/unet-tiny", root + "/unet");
-  fs::create_directory_symlink(test::golden_dir() + "/vae-tiny", root + "/vae");
-  REQUIRE(write_file_atomic(root + "/model_index.json",
-                            std::string(R"({"_class_name": "DifixPipeline"})"))
-              .is_ok());
+  test::write_tiny_pipeline(root);
   write_random_text_encoder(root, 48);
   auto pipe = DifixPipeline::load(root, Precision::kF32);
   REQUIRE(pipe.is_ok());

@@ -14,6 +14,7 @@
 #include "attention/runtime/io/safetensors.h"
 #include "golden_tensors.h"
 #include "test_support.h"
+#include "tiny_checkpoint_fixture.h"
 
 using namespace macro;
 using namespace macro::nets;
@@ -38,17 +39,11 @@ void check_close(const std::string& what, const TensorView& got, const Tensor& w
 // A pipeline folder over the tiny goldens: model_index.json, unet/ and vae/ (symlinks),
 // scheduler/scheduler_config.json.
 std::string make_pipeline(const test::TempDir& dir) {
-  namespace fs = std::filesystem;
   const std::string root = dir.path + "/difix-tiny";
-  fs::create_directories(root + "/scheduler");
-  fs::create_directory_symlink(test::golden_dir() + "/unet-tiny", root + "/unet");
-  fs::create_directory_symlink(test::golden_dir() + "/vae-tiny", root + "/vae");
-  REQUIRE(
-      write_file_atomic(
-          root + "/model_index.json",
-          std::string(
-              R"({"_class_name": "DifixPipeline", "unet": ["diffusers", "UNet2DConditionModel"], "vae": ["diffusers", "AutoencoderKL"]})"))
-          .is_ok());
+  test::write_tiny_pipeline(
+      root,
+      R"({"_class_name": "DifixPipeline", "unet": ["diffusers", "UNet2DConditionModel"], "vae": ["diffusers", "AutoencoderKL"]})");
+  std::filesystem::create_directories(root + "/scheduler");
   REQUIRE(
       write_file_atomic(
           root + "/scheduler/scheduler_config.json",
