@@ -300,13 +300,8 @@ TEST_CASE("nn-run on a CLIPTextModel folder reproduces the golden (I64 and I32 i
     TensorToWrite t{"input.ids", dt, e->shape,
                     dt == DType::kI64 ? static_cast<const void*>(e->data) : ids32.data()};
     REQUIRE(write_safetensors(in, {t}).is_ok());
-    const std::string cmd = test::macro_exe() + " nn-run --model " + te_dir() + " --inputs " + in +
-                            " --out " + out + " --threads 2 > " + dir.file("log.txt") + " 2>&1";
-    const int rc = test::run_command(cmd);
-    auto log = read_text_file(dir.file("log.txt"));
-    INFO((log.is_ok() ? *log : std::string("no log")));
-    REQUIRE(rc == 0);
-    auto o = SafeTensors::open(out);
+    const std::string cmd = test::nn_run_command(te_dir(), in, out, dir.file("log.txt"));
+    auto o = test::run_nn_run(cmd, dir.file("log.txt"), out);
     REQUIRE(o.is_ok());
     CHECK(o->metadata().at("model") == "clip_text");
     check_golden(std::string("nn-run ") + dtype_name(dt), read_f32(*o, "output.hidden").data(),
@@ -423,13 +418,8 @@ TEST_CASE("difix pipeline without input.ctx uses the folder's cached prompt embe
   // nn-run on the folder without input.ctx: same image as the explicit context.
   const std::string in = dir.file("in.safetensors"), out = dir.file("out.safetensors");
   REQUIRE(write_safetensors(in, {{"input.images", ie->dtype, ie->shape, ie->data}}).is_ok());
-  const std::string cmd = test::macro_exe() + " nn-run --model " + root + " --inputs " + in +
-                          " --out " + out + " --threads 2 > " + dir.file("log.txt") + " 2>&1";
-  const int rc = test::run_command(cmd);
-  auto log = read_text_file(dir.file("log.txt"));
-  INFO((log.is_ok() ? *log : std::string("no log")));
-  REQUIRE(rc == 0);
-  auto o = SafeTensors::open(out);
+  const std::string cmd = test::nn_run_command(root, in, out, dir.file("log.txt"));
+  auto o = test::run_nn_run(cmd, dir.file("log.txt"), out);
   REQUIRE(o.is_ok());
   const std::vector<float> img = read_f32(*o, "output.image");
   const test::Diff d = test::compare(img.data(), want->image.f32(), img.size());

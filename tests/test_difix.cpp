@@ -206,13 +206,8 @@ TEST_CASE("nn-run difix pipeline folder: the binary reproduces the golden",
   REQUIRE(ins.size() == 6);
   const std::string in = dir.file("in.safetensors"), out = dir.file("out.safetensors");
   REQUIRE(write_safetensors(in, ins).is_ok());
-  const std::string cmd = test::macro_exe() + " nn-run --model " + model + " --inputs " + in +
-                          " --out " + out + " --threads 2 > " + dir.file("log.txt") + " 2>&1";
-  const int rc = test::run_command(cmd);
-  auto log = read_text_file(dir.file("log.txt"));
-  INFO((log.is_ok() ? *log : std::string("no log")));
-  REQUIRE(rc == 0);
-  auto o = SafeTensors::open(out);
+  const std::string cmd = test::nn_run_command(model, in, out, dir.file("log.txt"));
+  auto o = test::run_nn_run(cmd, dir.file("log.txt"), out);
   REQUIRE(o.is_ok());
   CHECK(o->metadata().at("model") == "difix");
   for (const char* n : {"output.z", "output.eps", "output.z0", "output.image"})
