@@ -22,19 +22,11 @@ using namespace macro::nets;
 namespace {
 
 using test::Bound;
+using test::check_close;
 using test::kFp32;
 using test::read_tensor;
 // bf16 through encoder, U-Net and decoder of random-weight tiny nets; measured values printed.
 constexpr Bound kBf16{5e-2, 2e-1};
-
-void check_close(const std::string& what, const TensorView& got, const Tensor& want, Bound b) {
-  REQUIRE(got.shape_vec() == want.shape());
-  const test::Diff d = test::compare(got.f32(), want.f32(), size_t(want.numel()));
-  std::printf("  %-24s rel L2 %.3e  max abs %.3e\n", what.c_str(), d.rel_l2, d.max_abs);
-  INFO(what << ": rel L2 " << d.rel_l2 << ", max abs " << d.max_abs);
-  CHECK(d.rel_l2 <= b.rel_l2);
-  CHECK(d.max_abs <= b.max_abs);
-}
 
 // A pipeline folder over the tiny goldens: model_index.json, unet/ and vae/ (symlinks),
 // scheduler/scheduler_config.json.
