@@ -1,24 +1,25 @@
 // Shared by the end-to-end enhance tests (test_enhance, test_warp, test_tight_crops, test_transfer,
 // test_determinism, test_interrupts): a tiny Difix pipeline folder over the goldens (unet-tiny,
 // vae-tiny; cross-attention width 48, so the prompt context is a fixed [1, 77, 48] tensor) and a
-// small synthetic DL3DV-Closeup scene folder (gs/synth/synth.h generator, enhance/datasets/synth_scene_folder.h).
+// small synthetic DL3DV-Closeup scene folder (gs/synth/synth.h generator,
+// enhance/datasets/synth_scene_folder.h).
 #pragma once
 
 #include <catch2/catch.hpp>
 
 #include <cmath>
-#include <filesystem>
 #include <string>
 #include <vector>
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/thread_pool.h"
+#include "enhance/datasets/synth_scene_folder.h"
 #include "enhance/enhance.h"
 #include "enhance/scene_input.h"
-#include "enhance/datasets/synth_scene_folder.h"
 #include "gs/synth/synth.h"
 #include "test_support.h"
+#include "tiny_checkpoint_fixture.h"
 
 namespace macro::test {
 
@@ -50,14 +51,8 @@ inline std::string write_synth_scene(const TempDir& dir, const gs::SynthParams& 
 // DIR/pipe: model_index.json, unet/ and vae/ (symlinks to the goldens); DIR/ctx.safetensors.
 // Returns DIR/pipe.
 inline std::string make_tiny_pipeline(const TempDir& dir) {
-  namespace fs = std::filesystem;
   const std::string root = dir.file("pipe");
-  fs::create_directories(root);
-  fs::create_directory_symlink(golden_dir() + "/unet-tiny", root + "/unet");
-  fs::create_directory_symlink(golden_dir() + "/vae-tiny", root + "/vae");
-  REQUIRE(write_file_atomic(root + "/model_index.json",
-                            std::string(R"({"_class_name": "DifixPipeline"})"))
-              .is_ok());
+  write_tiny_pipeline(root);
   std::vector<float> ctx(77 * 48);
   for (size_t i = 0; i < ctx.size(); ++i) ctx[i] = 0.5f * std::sin(0.37f * float(i));
   REQUIRE(write_safetensors(dir.file("ctx.safetensors"),

@@ -2,10 +2,12 @@
 #pragma once
 
 #include <catch2/catch.hpp>
+#include <cstdio>
 #include <string>
 
 #include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/tensor.h"
+#include "test_support.h"
 
 namespace macro::test {
 
@@ -25,5 +27,17 @@ struct Bound {
 };
 // The goldens' fp32 tolerance (../shared/golden/README.md).
 constexpr Bound kFp32{1e-4, 1e-3};
+
+// got against the golden want within b, both measures printed on one line after `what`.
+inline Diff check_close(const std::string& what, const TensorView& got, const Tensor& want,
+                        Bound b) {
+  REQUIRE(got.shape_vec() == want.shape());
+  const Diff d = compare(got.f32(), want.f32(), size_t(want.numel()));
+  std::printf("  %-40s rel L2 %.3e  max abs %.3e\n", what.c_str(), d.rel_l2, d.max_abs);
+  INFO(what << ": rel L2 " << d.rel_l2 << ", max abs " << d.max_abs);
+  CHECK(d.rel_l2 <= b.rel_l2);
+  CHECK(d.max_abs <= b.max_abs);
+  return d;
+}
 
 }  // namespace macro::test

@@ -16,6 +16,7 @@
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/io/safetensors.h"
 #include "test_support.h"
+#include "tiny_checkpoint_fixture.h"
 
 using namespace macro;
 using namespace macro::nets;
@@ -275,11 +276,7 @@ TEST_CASE("difix pipeline: the text encoder's width must match the unet", "[nets
   // Tiny U-Net (cross dim 48) + tiny VAE + tiny text encoder (64 wide): refused by name.
   test::TempDir dir("clip-pipe");
   const std::string root = make_text_folder(dir);
-  fs::create_directory_symlink(test::golden_dir() + "/unet-tiny", root + "/unet");
-  fs::create_directory_symlink(test::golden_dir() + "/vae-tiny", root + "/vae");
-  REQUIRE(write_file_atomic(root + "/model_index.json",
-                            std::string(R"({"_class_name": "DifixPipeline"})"))
-              .is_ok());
+  test::write_tiny_pipeline(root);
   auto pipe = DifixPipeline::load(root, Precision::kF32);
   REQUIRE(pipe.is_ok());
   PromptCacheInfo info;
@@ -303,13 +300,8 @@ TEST_CASE("nn-run on a CLIPTextModel folder reproduces the golden (I64 and I32 i
     TensorToWrite t{"input.ids", dt, e->shape,
                     dt == DType::kI64 ? static_cast<const void*>(e->data) : ids32.data()};
     REQUIRE(write_safetensors(in, {t}).is_ok());
-    const std::string cmd = test::macro_exe() + " nn-run --model " + te_dir() + " --inputs " + in +
-                            " --out " + out + " --threads 2 > " + dir.file("log.txt") + " 2>&1";
-    const int rc = test::run_command(cmd);
-    auto log = read_text_file(dir.file("log.txt"));
-    INFO((log.is_ok() ? *log : std::string("no log")));
-    REQUIRE(rc == 0);
-    auto o = SafeTensors::open(out);
+    const std::string cmd = test::nn_run_command(te_dir(), in, out, dir.file("log.txt"));
+    auto o = test::run_nn_run(cmd, dir.file("log.txt"), out);
     REQUIRE(o.is_ok());
     CHECK(o->metadata().at("model") == "clip_text");
     check_golden(std::string("nn-run ") + dtype_name(dt), read_f32(*o, "output.hidden").data(),
@@ -389,11 +381,7 @@ TEST_CASE("difix pipeline without input.ctx uses the folder's cached prompt embe
   const std::string root = dir.path + "/pipe";
   fs::create_directories(root);
   fs::create_directory_symlink(test::golden_dir() + "/clip/tokenizer", root + "/tokenizer");
-  fs::create_directory_symlink(test::golden_dir() + "/unet-tiny", root + "/unet");
-  fs::create_directory_symlink(test::golden_dir() + "/vae-tiny", root + "/vae");
-  REQUIRE(write_file_atomic(root + "/model_index.json",
-                            std::string(R"({"_class_name": "DifixPipeline"})"))
-              .is_ok());
+  test::write_tiny_pipeline(root);
   write_random_text_encoder(root, 48);
   auto pipe = DifixPipeline::load(root, Precision::kF32);
   REQUIRE(pipe.is_ok());
@@ -430,13 +418,8 @@ TEST_CASE("difix pipeline without input.ctx uses the folder's cached prompt embe
   // nn-run on the folder without input.ctx: same image as the explicit context.
   const std::string in = dir.file("in.safetensors"), out = dir.file("out.safetensors");
   REQUIRE(write_safetensors(in, {{"input.images", ie->dtype, ie->shape, ie->data}}).is_ok());
-  const std::string cmd = test::macro_exe() + " nn-run --model " + root + " --inputs " + in +
-                          " --out " + out + " --threads 2 > " + dir.file("log.txt") + " 2>&1";
-  const int rc = test::run_command(cmd);
-  auto log = read_text_file(dir.file("log.txt"));
-  INFO((log.is_ok() ? *log : std::string("no log")));
-  REQUIRE(rc == 0);
-  auto o = SafeTensors::open(out);
+  const std::string cmd = test::nn_run_command(root, in, out, dir.file("log.txt"));
+  auto o = test::run_nn_run(cmd, dir.file("log.txt"), out);
   REQUIRE(o.is_ok());
   const std::vector<float> img = read_f32(*o, "output.image");
   const test::Diff d = test::compare(img.data(), want->image.f32(), img.size());

@@ -14,6 +14,7 @@
 #include "attention/runtime/io/safetensors.h"
 #include "golden_tensors.h"
 #include "test_support.h"
+#include "tiny_checkpoint_fixture.h"
 
 using namespace macro;
 using namespace macro::nets;
@@ -21,34 +22,20 @@ using namespace macro::nets;
 namespace {
 
 using test::Bound;
+using test::check_close;
 using test::kFp32;
 using test::read_tensor;
 // bf16 through encoder, U-Net and decoder of random-weight tiny nets; measured values printed.
 constexpr Bound kBf16{5e-2, 2e-1};
 
-void check_close(const std::string& what, const TensorView& got, const Tensor& want, Bound b) {
-  REQUIRE(got.shape_vec() == want.shape());
-  const test::Diff d = test::compare(got.f32(), want.f32(), size_t(want.numel()));
-  std::printf("  %-24s rel L2 %.3e  max abs %.3e\n", what.c_str(), d.rel_l2, d.max_abs);
-  INFO(what << ": rel L2 " << d.rel_l2 << ", max abs " << d.max_abs);
-  CHECK(d.rel_l2 <= b.rel_l2);
-  CHECK(d.max_abs <= b.max_abs);
-}
-
 // A pipeline folder over the tiny goldens: model_index.json, unet/ and vae/ (symlinks),
 // scheduler/scheduler_config.json.
 std::string make_pipeline(const test::TempDir& dir) {
-  namespace fs = std::filesystem;
   const std::string root = dir.path + "/difix-tiny";
-  fs::create_directories(root + "/scheduler");
-  fs::create_directory_symlink(test::golden_dir() + "/unet-tiny", root + "/unet");
-  fs::create_directory_symlink(test::golden_dir() + "/vae-tiny", root + "/vae");
-  REQUIRE(
-      write_file_atomic(
-          root + "/model_index.json",
-          std::string(
-              R"({"_class_name": "DifixPipeline", "unet": ["diffusers", "UNet2DConditionModel"], "vae": ["diffusers", "AutoencoderKL"]})"))
-          .is_ok());
+  test::write_tiny_pipeline(
+      root,
+      R"({"_class_name": "DifixPipeline", "unet": ["diffusers", "UNet2DConditionModel"], "vae": ["diffusers", "AutoencoderKL"]})");
+  std::filesystem::create_directories(root + "/scheduler");
   REQUIRE(
       write_file_atomic(
           root + "/scheduler/scheduler_config.json",
@@ -211,13 +198,8 @@ TEST_CASE("nn-run difix pipeline folder: the binary reproduces the golden",
   REQUIRE(ins.size() == 6);
   const std::string in = dir.file("in.safetensors"), out = dir.file("out.safetensors");
   REQUIRE(write_safetensors(in, ins).is_ok());
-  const std::string cmd = test::macro_exe() + " nn-run --model " + model + " --inputs " + in +
-                          " --out " + out + " --threads 2 > " + dir.file("log.txt") + " 2>&1";
-  const int rc = test::run_command(cmd);
-  auto log = read_text_file(dir.file("log.txt"));
-  INFO((log.is_ok() ? *log : std::string("no log")));
-  REQUIRE(rc == 0);
-  auto o = SafeTensors::open(out);
+  const std::string cmd = test::nn_run_command(model, in, out, dir.file("log.txt"));
+  auto o = test::run_nn_run(cmd, dir.file("log.txt"), out);
   REQUIRE(o.is_ok());
   CHECK(o->metadata().at("model") == "difix");
   for (const char* n : {"output.z", "output.eps", "output.z0", "output.image"})

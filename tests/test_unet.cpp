@@ -29,21 +29,12 @@ std::string unet_dir() {
 }
 
 using test::Bound;
+using test::check_close;
 using test::kFp32;
 using test::read_tensor;
 // bf16 weights and matmul inputs through ~20 random-weight layers: measured 1.1-1.2e-2 rel L2,
 // max abs <= 2.6e-2 on these cases (2026-11-22).
 constexpr Bound kBf16{3e-2, 1e-1};
-
-test::Diff check_close(const std::string& what, const Tensor& got, const Tensor& want, Bound b) {
-  REQUIRE(got.shape() == want.shape());
-  const test::Diff d = test::compare(got.f32(), want.f32(), size_t(want.numel()));
-  std::printf("  %-40s rel L2 %.3e  max abs %.3e\n", what.c_str(), d.rel_l2, d.max_abs);
-  INFO(what << ": rel L2 " << d.rel_l2 << ", max abs " << d.max_abs);
-  CHECK(d.rel_l2 <= b.rel_l2);
-  CHECK(d.max_abs <= b.max_abs);
-  return d;
-}
 
 // Dense golden masks -> block-sparse masks for each level present.
 void golden_masks(const SafeTensors& g, std::vector<BlockSparseMask>* store, UNetMasks* masks) {

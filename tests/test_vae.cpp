@@ -22,19 +22,11 @@ std::string vae_dir() {
 }
 
 using test::Bound;
+using test::check_close;
 using test::kFp32;
 using test::read_tensor;
 // bf16 weights and conv/matmul inputs; measured values are printed by the test.
 constexpr Bound kBf16{3e-2, 1e-1};
-
-void check_close(const std::string& what, const TensorView& got, const Tensor& want, Bound b) {
-  REQUIRE(got.shape_vec() == want.shape());
-  const test::Diff d = test::compare(got.f32(), want.f32(), size_t(want.numel()));
-  std::printf("  %-28s rel L2 %.3e  max abs %.3e\n", what.c_str(), d.rel_l2, d.max_abs);
-  INFO(what << ": rel L2 " << d.rel_l2 << ", max abs " << d.max_abs);
-  CHECK(d.rel_l2 <= b.rel_l2);
-  CHECK(d.max_abs <= b.max_abs);
-}
 
 void run_roundtrip(Precision p, Bound b) {
   auto vae = DifixVae::load(vae_dir(), p);

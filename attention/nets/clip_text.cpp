@@ -103,12 +103,7 @@ Result<std::unique_ptr<ClipTextModel>> ClipTextModel::load(const std::string& fo
   MACRO_ASSIGN_OR_RETURN(ClipTextConfig cfg, load_clip_text_config(folder + "/config.json"));
   MACRO_ASSIGN_OR_RETURN(std::string weights, clip_text_weights_path(folder));
   MACRO_ASSIGN_OR_RETURN(auto model, build(cfg));
-  WeightStoreOptions opt;
-  opt.lazy = true;  // each tensor read once, when its module packs
-  MACRO_ASSIGN_OR_RETURN(auto store, WeightStore::open(weights, opt));
-  model->visit(*store);
-  MACRO_TRY(store->finish());
-  model->pack(precision);
+  MACRO_TRY(load_weights(*model, weights, {}, precision));
   return model;
 }
 

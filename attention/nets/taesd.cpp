@@ -4,12 +4,11 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <climits>
 #include <cmath>
-#include <cstdlib>
 #include <cstring>
 #include <set>
 
+#include "attention/runtime/bundled_data.h"
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/ops.h"
 
@@ -59,11 +58,6 @@ uint64_t physical_memory_bytes() {
   const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
   if (pages <= 0 || page <= 0) return uint64_t(1) << 40;
   return uint64_t(pages) * uint64_t(page);
-}
-
-std::string dir_name(const std::string& p) {
-  const size_t s = p.find_last_of('/');
-  return s == std::string::npos ? std::string(".") : p.substr(0, s);
 }
 
 }  // namespace
@@ -261,20 +255,7 @@ bool Taesd::is_taesd_folder(const std::string& folder) {
 }
 
 std::string Taesd::default_folder() {
-  if (const char* env = std::getenv("MACRO_TAESD"); env && *env) return env;
-  // data/weights/taesd beside the executable or up to three folders above it (build trees).
-  char exe[PATH_MAX];
-  const ssize_t len = ::readlink("/proc/self/exe", exe, sizeof(exe) - 1);
-  if (len > 0) {
-    exe[len] = '\0';
-    std::string dir = dir_name(exe);
-    for (int up = 0; up < 4; ++up) {
-      const std::string cand = dir + "/data/weights/taesd";
-      if (is_taesd_folder(cand)) return cand;
-      dir = dir_name(dir);
-    }
-  }
-  return "data/weights/taesd";
+  return find_bundled_data("data/weights/taesd", "MACRO_TAESD", is_taesd_folder);
 }
 
 Result<Taesd> Taesd::load(const std::string& folder, Precision precision) {

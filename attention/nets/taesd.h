@@ -91,7 +91,7 @@ class Taesd {
   // A folder with taesd_encoder.safetensors and taesd_decoder.safetensors (either may be absent
   // if `need` says so), or diffusers' AutoencoderTiny diffusion_pytorch_model.safetensors.
   static Result<Taesd> load(const std::string& folder, Precision precision = Precision::kF32);
-  // data/weights/taesd of the installation ($MACRO_TAESD overrides); see taesd.cpp.
+  // data/weights/taesd of the installation ($MACRO_TAESD overrides); see runtime/bundled_data.h.
   static std::string default_folder();
   static bool is_taesd_folder(const std::string& folder);
 

@@ -322,14 +322,7 @@ Result<std::unique_ptr<UNet2DConditionModel>> UNet2DConditionModel::load(const s
   MACRO_ASSIGN_OR_RETURN(UNetConfig cfg, load_unet_config(folder + "/config.json"));
   MACRO_ASSIGN_OR_RETURN(std::string weights, component_weights_path(folder));
   MACRO_ASSIGN_OR_RETURN(auto model, build(cfg));
-  WeightStoreOptions opt;
-  opt.lazy = true;  // each tensor read once, when its module packs (see weights.h)
-  MACRO_ASSIGN_OR_RETURN(auto store, WeightStore::open(weights, opt));
-  model->visit(*store);
-  MACRO_TRY(store->finish());
-  model->pack(precision);
-  release_widen_spare();     // the loading buffers kept between tensors
-  conv2d_release_scratch();
+  MACRO_TRY(load_weights(*model, weights, {}, precision));
   return model;
 }
 

@@ -176,14 +176,8 @@ Result<std::unique_ptr<DifixVae>> DifixVae::load(const std::string& folder, Prec
   MACRO_ASSIGN_OR_RETURN(std::string weights, component_weights_path(folder));
   MACRO_ASSIGN_OR_RETURN(auto model, build(cfg));
   WeightStoreOptions opt;
-  opt.lora_scale = cfg.lora_rank > 0 ? cfg.lora_scale : 0.0;
-  opt.lazy = true;  // each tensor read once, when its module packs (LoRA merged then)
-  MACRO_ASSIGN_OR_RETURN(auto store, WeightStore::open(weights, opt));
-  model->visit(*store);
-  MACRO_TRY(store->finish());
-  model->pack(precision);
-  release_widen_spare();     // the loading buffers kept between tensors
-  conv2d_release_scratch();
+  opt.lora_scale = cfg.lora_rank > 0 ? cfg.lora_scale : 0.0;  // merged when its module packs
+  MACRO_TRY(load_weights(*model, weights, opt, precision));
   return model;
 }
 

@@ -14,35 +14,6 @@ VitConfig VitConfig::dinov2_small() {
   return VitConfig{};  // the defaults are timm vit_small_patch14_dinov2
 }
 
-// ---- overrides ---------------------------------------------------------------------------------
-
-void ParamOverrides::param(const std::string& name, Param& p, const std::vector<int64_t>& shape) {
-  auto it = overrides_.find(name);
-  if (it == overrides_.end()) return inner_.param(name, p, shape);
-  used_.insert(name);
-  const OverrideTensor& t = it->second;
-  int64_t n = 1;
-  for (int64_t s : t.shape) n *= s;
-  if (t.shape != shape || int64_t(t.values.size()) != n) {
-    misshaped_.push_back(name + ": expected " + shape_string(shape) + ", found " +
-                         shape_string(t.shape) + " with " + std::to_string(t.values.size()) +
-                         " values");
-    return;
-  }
-  p = Param();
-  p.data = t.values.data();
-  p.shape = shape;
-}
-
-Status ParamOverrides::finish() const {
-  std::vector<std::string> unused;
-  for (const auto& kv : overrides_)
-    if (!used_.count(kv.first)) unused.push_back(kv.first);
-  if (misshaped_.empty() && unused.empty()) return Status::ok();
-  std::string msg = "tensor overrides do not match the model:";
-  return Status::error(msg + name_list("mis-shaped", misshaped_) + name_list("unused", unused));
-}
-
 // ---- one block ---------------------------------------------------------------------------------
 
 void VitBlock::init(const VitConfig& cfg) {
@@ -273,7 +244,6 @@ Result<std::unique_ptr<VitModel>> VitModel::load(const std::string& path, const 
                                                  const VitLoadOptions& options) {
   MACRO_ASSIGN_OR_RETURN(auto model, build(cfg));
   WeightStoreOptions opt;
-  opt.lazy = true;  // each tensor read once, when its module packs
   opt.lora_scale = options.lora_scale;
   opt.ignored = options.ignored;
   if (!options.ignored_prefixes.empty() || options.overrides) {
@@ -286,17 +256,7 @@ Result<std::unique_ptr<VitModel>> VitModel::load(const std::string& path, const 
       if (options.overrides && options.overrides->count(name)) opt.ignored.insert(name);
     }
   }
-  MACRO_ASSIGN_OR_RETURN(auto store, WeightStore::open(path, opt));
-  if (options.overrides) {
-    ParamOverrides over(*store, *options.overrides);
-    model->visit(over);
-    MACRO_TRY(store->finish());
-    MACRO_TRY(over.finish().with_context(path));
-  } else {
-    model->visit(*store);
-    MACRO_TRY(store->finish());
-  }
-  model->pack(options.precision);
+  MACRO_TRY(load_weights(*model, path, opt, options.precision, options.overrides));
   return model;
 }
 

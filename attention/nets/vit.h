@@ -84,29 +84,6 @@ struct VitConfig {
   int64_t out_dim() const { return proj_dim > 0 ? proj_dim : width; }
 };
 
-// A caller-supplied fp32 tensor that replaces (or supplies) one named parameter.
-struct OverrideTensor {
-  std::vector<int64_t> shape;
-  std::vector<float> values;  // row-major, numel(shape) values
-};
-
-// A ParamVisitor in front of another: names in the map are bound to the caller's values (shape
-// checked) instead of being asked of the inner visitor; every other name goes to the inner one.
-// The map must outlive pack(). finish() reports overrides that were mis-shaped or never asked for.
-class ParamOverrides : public ParamVisitor {
- public:
-  ParamOverrides(ParamVisitor& inner, const std::map<std::string, OverrideTensor>& overrides)
-      : inner_(inner), overrides_(overrides) {}
-  void param(const std::string& name, Param& p, const std::vector<int64_t>& shape) override;
-  Status finish() const;
-
- private:
-  ParamVisitor& inner_;
-  const std::map<std::string, OverrideTensor>& overrides_;
-  std::set<std::string> used_;
-  std::vector<std::string> misshaped_;
-};
-
 struct VitBlock {
   int64_t d = 0, ff = 0;
   int heads = 1;

@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cstring>
 
+#include "attention/runtime/conv.h"
 #include "attention/runtime/half.h"
 
 namespace macro::nets {
@@ -337,6 +338,40 @@ std::vector<std::string> WeightStore::names() const {
   std::vector<std::string> out;
   for (const auto& kv : sources_) out.push_back(kv.first);
   return out;
+}
+
+// ---- overrides ---------------------------------------------------------------------------------
+
+void ParamOverrides::param(const std::string& name, Param& p, const std::vector<int64_t>& shape) {
+  auto it = overrides_.find(name);
+  if (it == overrides_.end()) return inner_.param(name, p, shape);
+  used_.insert(name);
+  const OverrideTensor& t = it->second;
+  int64_t n = 1;
+  for (int64_t s : t.shape) n *= s;
+  if (t.shape != shape || int64_t(t.values.size()) != n) {
+    misshaped_.push_back(name + ": expected " + shape_string(shape) + ", found " +
+                         shape_string(t.shape) + " with " + std::to_string(t.values.size()) +
+                         " values");
+    return;
+  }
+  p = Param();
+  p.data = t.values.data();
+  p.shape = shape;
+}
+
+Status ParamOverrides::finish() const {
+  std::vector<std::string> unused;
+  for (const auto& kv : overrides_)
+    if (!used_.count(kv.first)) unused.push_back(kv.first);
+  if (misshaped_.empty() && unused.empty()) return Status::ok();
+  std::string msg = "tensor overrides do not match the model:";
+  return Status::error(msg + name_list("mis-shaped", misshaped_) + name_list("unused", unused));
+}
+
+void release_load_buffers() {
+  release_widen_spare();
+  conv2d_release_scratch();
 }
 
 }  // namespace macro::nets

@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "attention/nets/precision.h"
 #include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/status.h"
 
@@ -172,4 +173,55 @@ class WeightStore : public ParamVisitor {
 
 std::string shape_string(const std::vector<int64_t>& shape);
 
+// A caller-supplied fp32 tensor that replaces (or supplies) one named parameter.
+struct OverrideTensor {
+  std::vector<int64_t> shape;
+  std::vector<float> values;  // row-major, numel(shape) values
+};
+
+// A ParamVisitor in front of another: names in the map are bound to the caller's values (shape
+// checked) instead of being asked of the inner visitor; every other name goes to the inner one.
+// The map must outlive pack(). finish() reports overrides that were mis-shaped or never asked for.
+class ParamOverrides : public ParamVisitor {
+ public:
+  ParamOverrides(ParamVisitor& inner, const std::map<std::string, OverrideTensor>& overrides)
+      : inner_(inner), overrides_(overrides) {}
+  void param(const std::string& name, Param& p, const std::vector<int64_t>& shape) override;
+  Status finish() const;
+
+ private:
+  ParamVisitor& inner_;
+  const std::map<std::string, OverrideTensor>& overrides_;
+  std::set<std::string> used_;
+  std::vector<std::string> misshaped_;
+};
+
+// Frees what loading keeps between tensors on the calling thread: the spare widening buffer
+// (release_widen_spare) and the conv scratch.
+void release_load_buffers();
+
+// The loading tail the networks share, for a module tree `Model` with visit(ParamVisitor&) and
+// pack(Precision): opens the checkpoint `path` lazily with `options` (each tensor read once, when
+// its module packs), walks the tree over it (through a ParamOverrides in front of the store when
+// `overrides` is given), reports every missing, mis-shaped or unused tensor by name (then the
+// overrides' problems, naming `path`), packs at `precision` and frees the loading buffers.
+template <class Model>
+Status load_weights(Model& model, const std::string& path, WeightStoreOptions options,
+                    Precision precision,
+                    const std::map<std::string, OverrideTensor>* overrides = nullptr) {
+  options.lazy = true;
+  MACRO_ASSIGN_OR_RETURN(std::unique_ptr<WeightStore> store, WeightStore::open(path, options));
+  if (overrides) {
+    ParamOverrides front(*store, *overrides);
+    model.visit(front);
+    MACRO_TRY(store->finish());
+    MACRO_TRY(front.finish().with_context(path));
+  } else {
+    model.visit(*store);
+    MACRO_TRY(store->finish());
+  }
+  model.pack(precision);
+  release_load_buffers();
+  return Status::ok();
+}
 }  // namespace macro::nets

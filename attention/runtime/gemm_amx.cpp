@@ -29,6 +29,7 @@
 
 #include <cstring>
 
+#include "attention/runtime/gemm_store_avx512.h"
 #include "attention/runtime/kernels.h"
 
 namespace macro {
@@ -78,44 +79,12 @@ void micro_amx(const MicroTile& t) {
   _tile_stored(1, acc + 16, kNr * 4);
   _tile_stored(2, acc + 16 * kNr, kNr * 4);
   _tile_stored(3, acc + 16 * kNr + 16, kNr * 4);
-
-  const __mmask16 k0 = t.n >= 16 ? __mmask16(0xffff) : __mmask16((1u << t.n) - 1);
-  const __mmask16 k1 = t.n >= 32   ? __mmask16(0xffff)
-                       : t.n <= 16 ? __mmask16(0)
-                                   : __mmask16((1u << (t.n - 16)) - 1);
-  const __m512 alpha = _mm512_set1_ps(t.alpha), beta = _mm512_set1_ps(t.beta);
-  __m512 bn0 = _mm512_setzero_ps(), bn1 = _mm512_setzero_ps();
-  if (t.bias_n) {
-    bn0 = _mm512_maskz_loadu_ps(k0, t.bias_n);
-    bn1 = _mm512_maskz_loadu_ps(k1, t.bias_n + 16);
+  __m512 c0[kMr], c1[kMr];  // the two 16-column halves of each row
+  for (int r = 0; r < kMr; ++r) {
+    c0[r] = _mm512_load_ps(acc + r * kNr);
+    c1[r] = _mm512_load_ps(acc + r * kNr + 16);
   }
-  for (int r = 0; r < t.m; ++r) {
-    float* c = t.c + r * t.ldc;
-    __m512 v0 = _mm512_mul_ps(_mm512_load_ps(acc + r * kNr), alpha);
-    __m512 v1 = _mm512_mul_ps(_mm512_load_ps(acc + r * kNr + 16), alpha);
-    if (t.load_c) {
-      v0 = _mm512_fmadd_ps(beta, _mm512_maskz_loadu_ps(k0, c), v0);
-      v1 = _mm512_fmadd_ps(beta, _mm512_maskz_loadu_ps(k1, c + 16), v1);
-    }
-    v0 = _mm512_add_ps(v0, bn0);
-    v1 = _mm512_add_ps(v1, bn1);
-    if (t.bias_m) {
-      const __m512 bm = _mm512_set1_ps(t.bias_m[r]);
-      v0 = _mm512_add_ps(v0, bm);
-      v1 = _mm512_add_ps(v1, bm);
-    }
-    if (t.res) {
-      const float* rr = t.res + r * t.ldr;
-      v0 = _mm512_add_ps(v0, _mm512_maskz_loadu_ps(k0, rr));
-      v1 = _mm512_add_ps(v1, _mm512_maskz_loadu_ps(k1, rr + 16));
-    }
-    if (t.relu) {
-      v0 = _mm512_max_ps(v0, _mm512_setzero_ps());
-      v1 = _mm512_max_ps(v1, _mm512_setzero_ps());
-    }
-    _mm512_mask_storeu_ps(c, k0, v0);
-    _mm512_mask_storeu_ps(c + 16, k1, v1);
-  }
+  store_tile<kMr>(t, c0, c1);
 }
 
 // Four independent TDPBF16PS chains over fixed tiles: 16 x 16 x 32 MACs each.

@@ -1,5 +1,6 @@
-// The AVX-512 micro-tile epilogue and A-panel transpose shared by the fp32 and bf16 micro-kernels
-// (gemm_avx512.cpp, gemm_avx512bf16.cpp). Include ONLY from files compiled with AVX-512 flags.
+// The AVX-512 micro-tile epilogue and A-panel transpose shared by the fp32, bf16 and AMX
+// micro-kernels (gemm_avx512.cpp, gemm_avx512bf16.cpp, gemm_amx.cpp; AMX stores its fp32 tiles
+// and applies the same epilogue). Include ONLY from files compiled with AVX-512 flags.
 // Internal linkage (anonymous namespace), so each ISA file keeps its own copy compiled with its own
 // flags.
 #pragma once

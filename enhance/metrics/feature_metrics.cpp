@@ -1,40 +1,17 @@
 // DINOv2 / DreamSim entries of the metric suite (contract in feature_metrics.h).
 #include "enhance/metrics/feature_metrics.h"
 
-#include <unistd.h>
-
-#include <climits>
 #include <cmath>
 #include <cstring>
 #include <map>
 #include <mutex>
 
+#include "attention/runtime/bundled_data.h"
 #include "attention/runtime/file_io.h"
 #include "enhance/metrics/dreamsim.h"
 
 namespace macro::enhance {
 namespace {
-
-std::string parent_dir(const std::string& p) {
-  const size_t s = p.find_last_of('/');
-  return s == std::string::npos ? "." : (s == 0 ? "/" : p.substr(0, s));
-}
-
-// data/weights/<sub>/<file> beside the executable or up to three folders above it.
-std::string find_weights(const std::string& sub, const std::string& file) {
-  const std::string rel = "data/weights/" + sub + "/" + file;
-  char exe[PATH_MAX];
-  const ssize_t len = ::readlink("/proc/self/exe", exe, sizeof(exe) - 1);
-  if (len > 0) {
-    exe[len] = '\0';
-    std::string dir = parent_dir(exe);
-    for (int up = 0; up < 4; ++up) {
-      if (file_exists(dir + "/" + rel)) return dir + "/" + rel;
-      dir = parent_dir(dir);
-    }
-  }
-  return rel;
-}
 
 // The entry for absent weights (callers check file_exists first).
 MetricValue not_computed(const char* name, const std::string& path) {
@@ -48,10 +25,10 @@ MetricValue not_computed(const char* name, const std::string& path) {
 }  // namespace
 
 std::string default_dinov2_path() {
-  return find_weights("dinov2", kDinov2File);
+  return find_bundled_data(std::string("data/weights/dinov2/") + kDinov2File);
 }
 std::string default_dreamsim_path() {
-  return find_weights("dreamsim", kDreamSimFile);
+  return find_bundled_data(std::string("data/weights/dreamsim/") + kDreamSimFile);
 }
 
 // ---- DINOv2 -------------------------------------------------------------------------------------

@@ -2,13 +2,10 @@
 // and the per-tap normalised, head-weighted distances.
 #include "enhance/metrics/lpips.h"
 
-#include <unistd.h>
-
-#include <climits>
 #include <cmath>
-#include <cstdlib>
 
 #include "attention/nets/weights.h"
+#include "attention/runtime/bundled_data.h"
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/ops.h"
 #include "enhance/metrics/metric_value.h"
@@ -27,11 +24,6 @@ constexpr std::array<AlexConvSpec, kLpipsTaps> kAlexConvs = {{
     {8, 384, 256, 3, 1, 1},
     {10, 256, 256, 3, 1, 1},
 }};
-
-std::string parent_dir(const std::string& p) {
-  const size_t s = p.find_last_of('/');
-  return s == std::string::npos ? "." : (s == 0 ? "/" : p.substr(0, s));
-}
 
 // Max pool 3x3 stride 2, no padding, floor mode: x [NC, H, W] -> y [NC, (H-3)/2+1, (W-3)/2+1].
 void max_pool_3s2(const float* x, int64_t nc, int64_t h, int64_t w, float* y, ThreadPool* pool) {
@@ -107,19 +99,9 @@ double tap_distance(const float* f, int64_t c, int64_t hw, const float* w, Threa
 }  // namespace
 
 std::string default_lpips_folder() {
-  if (const char* env = std::getenv("MACRO_LPIPS"); env && *env) return env;
-  char exe[PATH_MAX];
-  const ssize_t len = ::readlink("/proc/self/exe", exe, sizeof(exe) - 1);
-  if (len > 0) {
-    exe[len] = '\0';
-    std::string dir = parent_dir(exe);
-    for (int up = 0; up < 4; ++up) {
-      const std::string cand = dir + "/data/weights/lpips";
-      if (file_exists(cand + "/" + kLpipsHeadsFile)) return cand;
-      dir = parent_dir(dir);
-    }
-  }
-  return "data/weights/lpips";
+  return find_bundled_data("data/weights/lpips", "MACRO_LPIPS", [](const std::string& cand) {
+    return file_exists(cand + "/" + kLpipsHeadsFile);
+  });
 }
 
 Result<LpipsAlex> LpipsAlex::load(const std::string& backbone_path, const std::string& heads_path,
