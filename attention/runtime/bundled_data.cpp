@@ -30,8 +30,9 @@ std::string find_bundled_data(const std::string& rel, const char* override_env,
     exe[len] = '\0';
     std::string dir = parent_dir(exe);
     for (int up = 0; up < 4; ++up) {
-      const std::string cand = dir + "/" + rel;
+      const std::string cand = (dir == "/" ? "" : dir) + "/" + rel;
       if (found ? found(cand) : file_exists(cand)) return cand;
+      if (dir == "/") break;
       dir = parent_dir(dir);
     }
   }
