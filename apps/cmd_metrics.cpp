@@ -1,6 +1,6 @@
 // macro metrics: PSNR, SSIM, LPIPS-Alex, DINOv2, DreamSim of one prediction against its ground
-// truth (the evaluation protocol of docs/spec/macro-method.md §7). Metrics whose networks are not available
-// print "not computed: <reason>".
+// truth (the evaluation protocol of docs/spec/macro-method.md §7). Metrics whose networks are not
+// available print "not computed: <reason>".
 #include <cstdio>
 
 #include "apps/args.h"

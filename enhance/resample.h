@@ -34,7 +34,7 @@ namespace macro::enhance {
 inline constexpr double kLanczosSupport = 3.0;   // Pillow LANCZOS: a = 3
 inline constexpr double kBicubicSupport = 2.0;   // Pillow BICUBIC
 inline constexpr int kPillowPrecisionBits = 22;  // 32 - 8 - 2: fixed-point weight bits (8-bit mode)
-inline constexpr int kMaxModelSide = 960;        // MACRO _MAX_MODEL_SIDE (docs/spec/macro-method.md §5)
+inline constexpr int kMaxModelSide = 960;  // MACRO _MAX_MODEL_SIDE (docs/spec/macro-method.md §5)
 inline constexpr int kModelMultiple = 8;         // VAE downsampling factor
 
 // One output sample's taps: input indices [first, first + count), weights at k[offset ...].
@@ -68,9 +68,9 @@ inline int nearest_index(int i, int in, int out) {
   return static_cast<int>((int64_t(i) * in) / out);
 }
 
-// MACRO model size (docs/spec/macro-method.md §5): floor both sides to multiples of 8; if the longer side is
-// then above 960, scale so it is 960, round each side and floor it to a multiple of 8.
-// 960x540 -> 960x536, 1071x1428 -> 712x960. Sizes must be >= 8.
+// MACRO model size (docs/spec/macro-method.md §5): floor both sides to multiples of 8; if the
+// longer side is then above 960, scale so it is 960, round each side and floor it to a multiple
+// of 8. 960x540 -> 960x536, 1071x1428 -> 712x960. Sizes must be >= 8.
 struct Size2 {
   int w = 0, h = 0;
   bool operator==(const Size2& o) const { return w == o.w && h == o.h; }
@@ -95,7 +95,8 @@ class LanczosUpsampler final : public Upsampler {
   Result<gs::Image> resize(const gs::Image& src, int out_w, int out_h) const override;
 };
 
-// ---- PFT-SR upsampling (MACRO sr_worker.py superres_pft, docs/spec/macro-method.md §3, docs/pft.md) ------
+// ---- PFT-SR upsampling (MACRO sr_worker.py superres_pft, docs/spec/macro-method.md §3,
+// docs/pft.md) ------
 inline constexpr int kPftMaxSideForX4 = 512;  // x4 while both sides are <= 512, else x2
 inline constexpr int kPftMaxSrSide = 1500;    // no further pass once the longer side is above
 inline constexpr const char* kPftX4Stem = "103_PFT_light_SRx4_finetune";

@@ -1,12 +1,13 @@
-// The CLIP byte-pair-encoding tokenizer (OpenCLIP SimpleTokenizer behaviour), loaded from a diffusers
-// `tokenizer/` folder (vocab.json + merges.txt).
+// The CLIP byte-pair-encoding tokenizer (OpenCLIP SimpleTokenizer behaviour), loaded from a
+// diffusers `tokenizer/` folder (vocab.json + merges.txt).
 //
-// encode(text) -> 77 ids: <start> tokens... <end>, padded with 0 (the id of "!", as SD 2.x / SD-Turbo
-// pad), truncated to 77 keeping <end> last. Text cleaning: HTML entities unescaped (twice), whitespace
-// runs collapsed to one space and trimmed, lower-cased. Pre-tokenisation splits into the special
-// tokens, the contractions 's 't 're 've 'm 'll 'd, runs of letters, single digits, and runs of other
-// non-space characters. Letters/digits outside ASCII and Latin-1 are classified by code-point range
-// (an approximation of Unicode \p{L} / \p{N}; see docs/spec/difix-spec.md §1.3); ftfy's mojibake repair is not done.
+// encode(text) -> 77 ids: <start> tokens... <end>, padded with 0 (the id of "!", as SD 2.x /
+// SD-Turbo pad), truncated to 77 keeping <end> last. Text cleaning: HTML entities unescaped
+// (twice), whitespace runs collapsed to one space and trimmed, lower-cased. Pre-tokenisation splits
+// into the special tokens, the contractions 's 't 're 've 'm 'll 'd, runs of letters, single
+// digits, and runs of other non-space characters. Letters/digits outside ASCII and Latin-1 are
+// classified by code-point range (an approximation of Unicode \p{L} / \p{N}; see
+// docs/spec/difix-spec.md §1.3); ftfy's mojibake repair is not done.
 #pragma once
 
 #include <cstdint>

@@ -1,8 +1,8 @@
 // The text conditioning of a pipeline folder, computed once and cached on disk.
 //
-// Difix uses one fixed prompt ("remove degradation", docs/spec/difix-spec.md §1.3), so its CLIP embedding
-// [1, 77, D] is computed once per pipeline folder (tokenizer/ + text_encoder/, always fp32: a
-// one-off 45 GFLOP at SD-Turbo size) and stored as a small safetensors file:
+// Difix uses one fixed prompt ("remove degradation", docs/spec/difix-spec.md §1.3), so its CLIP
+// embedding [1, 77, D] is computed once per pipeline folder (tokenizer/ + text_encoder/, always
+// fp32: a one-off 45 GFLOP at SD-Turbo size) and stored as a small safetensors file:
 //
 //   <pipeline>/text_encoder/prompt_cache/<key>.safetensors        (preferred: beside the weights)
 //   $XDG_CACHE_HOME/macro/prompt_cache/<key>.safetensors          (if the folder is not writable;

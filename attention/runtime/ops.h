@@ -12,8 +12,8 @@
 // use the C library's exp/erf/tanh. Vector paths use polynomial exp/erfc with error bounds stated
 // in tests/test_ops.cpp (a few ulp relative for exp/SiLU/softmax, ~2e-7 relative for GELU).
 //
-// Numerics (docs/spec/difix-spec.md §5): GroupNorm/LayerNorm statistics are accumulated in double per
-// block (two passes: mean, then centred variance), biased variance, y = (x - mean) / sqrt(var +
+// Numerics (docs/spec/difix-spec.md §5): GroupNorm/LayerNorm statistics are accumulated in double
+// per block (two passes: mean, then centred variance), biased variance, y = (x - mean) / sqrt(var +
 // eps)
 // * gamma + beta. GELU is the exact erf form. GEGLU takes the FIRST half of the projection as the
 // value and the SECOND half as the gate. Softmax subtracts the row max.

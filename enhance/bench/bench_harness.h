@@ -1,6 +1,7 @@
-// The evaluation harness (docs/spec/macro-method.md §7): enumerate the close-up pairs of a benchmark root,
-// run each method and option set on each pair, score it against closeup_gt/<frame>, and append one
-// JSON record per (pair, method, options) to a results file that a later run resumes.
+// The evaluation harness (docs/spec/macro-method.md §7): enumerate the close-up pairs of a
+// benchmark root, run each method and option set on each pair, score it against closeup_gt/<frame>,
+// and append one JSON record per (pair, method, options) to a results file that a later run
+// resumes.
 //
 // Benchmark root: either one scene folder (it holds split.json) or a folder of scene folders
 // (every direct sub-folder holding split.json, sorted by name). Scene folder layout: see

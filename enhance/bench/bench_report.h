@@ -1,10 +1,10 @@
 // Benchmark tables and charts from harness records (enhance/bench/bench_harness.h).
 //
-// Protocol (docs/spec/macro-method.md §7, scripts/aggregate_results.py): for each configuration (method +
-// option set), each scene's mean over its "ok" pairs, then the mean of the scene means. A metric
-// that was never computed for a pair is not part of that pair's contribution; a scene with no
-// computed value of a metric has no scene mean for it, and a configuration whose scenes have none
-// prints "n/c" (never a number). Skipped pairs never enter a mean (they are counted).
+// Protocol (docs/spec/macro-method.md §7, scripts/aggregate_results.py): for each configuration
+// (method + option set), each scene's mean over its "ok" pairs, then the mean of the scene means. A
+// metric that was never computed for a pair is not part of that pair's contribution; a scene with
+// no computed value of a metric has no scene mean for it, and a configuration whose scenes have
+// none prints "n/c" (never a number). Skipped pairs never enter a mean (they are counted).
 //
 // Outputs of write_report(DIR):
 //   table.md, table.csv          methods as rows; PSNR (up), SSIM (up), LPIPS (down), DINOv2 and

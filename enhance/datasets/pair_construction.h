@@ -118,11 +118,11 @@ std::vector<int> farthest_point_sampling(const std::vector<Eigen::Vector3d>& pos
                                          std::optional<uint64_t> seed);
 double pair_score(double iou, double depth_ratio);  // iou * log2(depth_ratio)
 
-// The split JSON (docs/spec/macro-method.md §7 fields plus "closeup_frames" and "pair_construction"):
-// scene, data_factor 1, intrinsics (of the first close-up, see docs), training_frames (sampling
-// order), closeup_frames (every camera that is not a training view, so `bench run` draws references
-// from the training views only), closeup_eval_pairs, closeup_poses (OpenGL c2w), counts, and a
-// pair_construction record (parameters, counts, scene score).
+// The split JSON (docs/spec/macro-method.md §7 fields plus "closeup_frames" and
+// "pair_construction"): scene, data_factor 1, intrinsics (of the first close-up, see docs),
+// training_frames (sampling order), closeup_frames (every camera that is not a training view, so
+// `bench run` draws references from the training views only), closeup_eval_pairs, closeup_poses
+// (OpenGL c2w), counts, and a pair_construction record (parameters, counts, scene score).
 std::string split_json(const gs::CameraSet& cameras, const PairConstruction& pc,
                        const PairParams& params, const std::string& scene_name, int64_t num_points);
 

@@ -1,5 +1,5 @@
-// MACRO depth planes (docs/spec/macro-method.md §1): the close-up's depth split into P planes by 1-D k-means
-// on disparity 1/z, bin 0 = farthest.
+// MACRO depth planes (docs/spec/macro-method.md §1): the close-up's depth split into P planes by
+// 1-D k-means on disparity 1/z, bin 0 = farthest.
 //
 // Legend: H x W close-up pixels; depth [H,W] = the alpha-weighted z sum (not divided by alpha), 0 =
 // invalid (alpha < 0.5 or nothing hit); labels [H,W] int32 in [0, planes) or -1 (invalid).

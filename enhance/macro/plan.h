@@ -1,5 +1,5 @@
-// MACRO planning stage: everything before the network, for one close-up (docs/spec/macro-method.md §0):
-// render the close-up (colour + depth) and every candidate's depth -> greedy K references ->
+// MACRO planning stage: everything before the network, for one close-up (docs/spec/macro-method.md
+// §0): render the close-up (colour + depth) and every candidate's depth -> greedy K references ->
 // model size -> depth planes -> scale-matched crops (bin-major) -> latent plane map and the
 // attention masks of every U-Net token grid. Then, on request, the view images (close-up Lanczos-
 // resized to the model size, crops cut and upsampled), the plan JSON and debug images.

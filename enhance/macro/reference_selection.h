@@ -1,5 +1,5 @@
-// MACRO reference selection (docs/spec/macro-method.md §2): greedy set cover of a 256x256 grid over the
-// close-up by each candidate's reprojected depth pixels.
+// MACRO reference selection (docs/spec/macro-method.md §2): greedy set cover of a 256x256 grid over
+// the close-up by each candidate's reprojected depth pixels.
 //
 // Legend: a DepthView is a camera and its MACRO depth [H,W] at the camera's size (the
 // alpha-weighted z sum, NOT divided by alpha, 0 where alpha < 0.5); G x G coverage grid (G = 256).

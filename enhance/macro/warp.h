@@ -1,6 +1,6 @@
-// The paper's backward-warp ablation ("Warp" row of the ablation table; docs/spec/macro-method.md §6): each
-// selected reference is backward-warped into the close-up with the close-up's depth, and the
-// warped full frames take the place of the scale-matched crops in the one Difix step.
+// The paper's backward-warp ablation ("Warp" row of the ablation table; docs/spec/macro-method.md
+// §6): each selected reference is backward-warped into the close-up with the close-up's depth, and
+// the warped full frames take the place of the scale-matched crops in the one Difix step.
 //
 // Legend: close-up W x H (its render size), reference W_r x H_r, model size Wm x Hm, K selected
 // references, n views after the close-up (one per surviving (plane, reference) pair of the plan).
@@ -16,10 +16,10 @@
 //    size and clamped to [0, 1];
 //  - the plane (bin) mask is ignored when warping, so every plane's view of a reference holds the
 //    same warped image; the views keep the plan's bin-major order and eliminations.
-// Where docs/spec/macro-method.md is silent we follow the paper (Warp row: K = 3 with the depth-aware
-// mask): the attention masks are the plan's mask mode with each view's validity = the warp's
-// validity (nearest-resized to the model size), so the close-up never attends to zeroed pixels.
-// Option (the paper's occlusion handling, off by default): with the reference's own depth a
+// Where docs/spec/macro-method.md is silent we follow the paper (Warp row: K = 3 with the
+// depth-aware mask): the attention masks are the plan's mask mode with each view's validity = the
+// warp's validity (nearest-resized to the model size), so the close-up never attends to zeroed
+// pixels. Option (the paper's occlusion handling, off by default): with the reference's own depth a
 // pixel is also invalid when the reference sees something nearer there:
 // z_ref > (1 + tolerance) * depth_ref(floor u, floor v), or depth_ref there is 0 (the same test
 // as the reference-selection option, reference_selection.h).

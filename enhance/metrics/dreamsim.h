@@ -1,8 +1,9 @@
 // DreamSim (Fu et al. 2023), the default ensemble, as MACRO's evaluation calls it:
 // `dreamsim(pretrained=True)` (normalize_embeds=True), its own PIL preprocessing, score = the
-// DreamSim distance between prediction and ground truth (docs/spec/macro-method.md §7). Facts from the public
-// ssundaram21/dreamsim sources (dreamsim/model.py, config.py, feature_extraction/*), re-implemented;
-// docs/dreamsim.md has the citations, the weight file layout and the recipe that writes it.
+// DreamSim distance between prediction and ground truth (docs/spec/macro-method.md §7). Facts from
+// the public ssundaram21/dreamsim sources (dreamsim/model.py, config.py, feature_extraction/*),
+// re-implemented; docs/dreamsim.md has the citations, the weight file layout and the recipe that
+// writes it.
 //
 // Legend: H x W input pixels, S = 224 model side, p = 16 patch, T = 1 + (S/p)^2 = 197 tokens,
 // D = 768 width, E = 1792 ensemble embedding (768 + 512 + 512).

@@ -1,4 +1,5 @@
-// Feature-space distances of MACRO's evaluation (docs/spec/macro-method.md §7): DINOv2 and DreamSim.
+// Feature-space distances of MACRO's evaluation (docs/spec/macro-method.md §7): DINOv2 and
+// DreamSim.
 //
 //  - DINOv2 (computed when the weights are supplied): timm `vit_small_patch14_dinov2`
 //    (num_classes=0: pooled CLS, 384-d = the final LayerNorm's output at token 0) on the
@@ -11,7 +12,8 @@
 //    extra or mis-shaped makes the entry "not computed" with a reason naming the tensors. The
 //    loaded model is cached (by path, size and modification time) across calls, thread-safely,
 //    and so are the embeddings of the last few images (a GT scored against several methods).
-//  - DreamSim (computed when the weights are supplied; enhance/metrics/dreamsim.h, docs/dreamsim.md):
+//  - DreamSim (computed when the weights are supplied; enhance/metrics/dreamsim.h,
+//  docs/dreamsim.md):
 //    `dreamsim(pretrained=True)`, the default ensemble (DINO ViT-B/16 CLS, CLIP ViT-B/16 and
 //    OpenCLIP ViT-B/16 projected embeddings) with its own 224x224 Pillow-bicubic preprocessing;
 //    the concatenated embedding is centred and L2-normalised; score = 1 - cosine. Without the
@@ -57,7 +59,8 @@ inline constexpr float kDinov2Std[3] = {0.229f, 0.224f, 0.225f};
 // [3, oh, ow] planar: source x = (o + 0.5) * in / out - 0.5 clamped at 0, the two neighbours
 // (the right one clamped to the edge), float arithmetic like torch's CPU kernel. No antialiasing
 // when shrinking (F.interpolate's default). This is the evaluation's tensor-side resize
-// (docs/spec/macro-method.md §7), not timm's own eval transform for this model (PIL bicubic, crop_pct 1).
+// (docs/spec/macro-method.md §7), not timm's own eval transform for this model (PIL bicubic,
+// crop_pct 1).
 std::vector<float> resize_bilinear_chw(const gs::Image& image, int oh, int ow);
 // The DINOv2 input: 518x518 bilinear, then (x - mean) / std per channel -> [3, 518, 518].
 std::vector<float> dinov2_input(const gs::Image& image);

@@ -1,4 +1,5 @@
-// nerfstudio / instant-ngp / Blender transforms.json (docs/cameras.md, docs/spec/gs-rasterizer.md §2.5).
+// nerfstudio / instant-ngp / Blender transforms.json (docs/cameras.md, docs/spec/gs-rasterizer.md
+// §2.5).
 //
 //   frames[i].transform_matrix  camera-to-world, OpenGL camera axes (x right, y up, z back), 4x4 or
 //                               3x4, in the transforms.json world frame.

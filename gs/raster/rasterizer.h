@@ -1,4 +1,5 @@
-// Tile-based CPU rasterizer for 3D Gaussian splats (gsplat conventions, docs/spec/gs-rasterizer.md).
+// Tile-based CPU rasterizer for 3D Gaussian splats (gsplat conventions,
+// docs/spec/gs-rasterizer.md).
 //
 // Stages over structure-of-arrays buffers: project (EWA + SH) -> bin (16x16 tiles, 64-bit
 // tile|depth keys, radix sort, tile ranges) -> blend (front to back). Threads over tiles on the one

@@ -3,16 +3,17 @@
 // with the exact tensor names and shapes of the release, from shared/golden/manifests).
 //
 // Per stage: wall and process-CPU time (all threads; the machine is shared, so CPU time is what
-// the code cost), GFLOP/s counted with the formulas of docs/spec/difix-spec.md §4.5 for the actual shapes, and
-// the fraction of the machine's fp32 FMA peak measured in the same run (kernels().probe_fma, at the
-// same thread count, probed before the stages; the step row uses the mean of the probes before and
-// after; the bf16 dot-product peak, about twice the FMA peak, is printed beside it). Peak RSS is
-// getrusage's ru_maxrss: the process high-water mark so far (weights load + every run before); run
-// one precision per process (--precision f32 / bf16) for a per-precision figure. Beside it, per
-// phase, the kernel's VmHWM reset between phases (/proc/self/clear_refs 5): the peak while loading
-// and the peak while running the stages, and the bytes the networks hold (packed weights) and the
-// one scratch arena every stage shares (reserved once per input shape, as DifixPipeline::step
-// does, and touched whole before the stages: in repeated steps it stays resident). Medians of
+// the code cost), GFLOP/s counted with the formulas of docs/spec/difix-spec.md §4.5 for the actual
+// shapes, and the fraction of the machine's fp32 FMA peak measured in the same run
+// (kernels().probe_fma, at the same thread count, probed before the stages; the step row uses the
+// mean of the probes before and after; the bf16 dot-product peak, about twice the FMA peak, is
+// printed beside it). Peak RSS is getrusage's ru_maxrss: the process high-water mark so far
+// (weights load + every run before); run one precision per process (--precision f32 / bf16) for a
+// per-precision figure. Beside it, per phase, the kernel's VmHWM reset between phases
+// (/proc/self/clear_refs 5): the peak while loading and the peak while running the stages, and the
+// bytes the networks hold (packed weights) and the one scratch arena every stage shares (reserved
+// once per input shape, as DifixPipeline::step does, and touched whole before the stages: in
+// repeated steps it stays resident). Medians of
 // --reps runs (default 1, no warm-up: one full-size step is tens of seconds;
 // --warmup adds one unmeasured run per stage first, for the steady state of repeated steps).
 //

@@ -142,8 +142,8 @@ int run(int argc, char** argv) {
   }
 
   if (do_gemm) {
-    // U-Net Linear shapes [M tokens, K in, N out] (docs/spec/difix-spec.md §4.3, §4.4; 512x512 -> L0 4096 tokens,
-    // 536x960 -> 8040).
+    // U-Net Linear shapes [M tokens, K in, N out] (docs/spec/difix-spec.md §4.3, §4.4; 512x512 ->
+    // L0 4096 tokens, 536x960 -> 8040).
     struct G {
       int64_t m, k, n;
       const char* what;
