@@ -584,3 +584,46 @@ TEST_CASE("train: what is not implemented is refused by flag, bad inputs by name
   CHECK(err4.find("v9") != std::string::npos);
   CHECK_FALSE(std::filesystem::exists(tmp.file("g.safetensors")));
 }
+
+TEST_CASE("train: macro grad on any SH degree and image size matches the library", "[train]") {
+  test::TempDir tmp("train-grad");
+  for (int degree : {0, 1, 2, 3}) {
+    INFO("SH degree " << degree);
+    RandomCase rc = random_case(20 + uint32_t(degree), 60, degree, 37, 29);
+    REQUIRE(write_splat_params(rc.params, tmp.file("s.ply")).is_ok());
+    CameraSet set;
+    set.cameras.push_back(rc.view.camera);
+    REQUIRE(save_cameras_json(set, tmp.file("cameras.json")).is_ok());
+    Image target(37, 29, 3);
+    target.data = rc.view.target;
+    REQUIRE(write_png(tmp.file("t.png"), target).is_ok());
+    auto back = read_image(tmp.file("t.png"));
+    REQUIRE(back.is_ok());
+    rc.view.target = back->data;  // the 8-bit values the command reads
+    REQUIRE(test::run_command(test::macro_exe() + " grad --quiet --scene " + tmp.file("s.ply") +
+                              " --cameras " + tmp.file("cameras.json") + " --camera random" +
+                              " --target " + tmp.file("t.png") + " --out " +
+                              tmp.file("g.safetensors")) == 0);
+    auto got = SafeTensors::open(tmp.file("g.safetensors"));
+    REQUIRE(got.is_ok());
+    auto want = view_gradient(rc.params, rc.view, {});
+    REQUIRE(want.is_ok());
+    const int64_t N = 60, K1 = (degree + 1) * (degree + 1) - 1;
+    const std::vector<std::pair<std::string, std::vector<int64_t>>> shapes = {
+        {"color", {29, 37, 3}},  {"alpha", {29, 37}},     {"loss", {1}},
+        {"grad.means", {N, 3}},  {"grad.scales", {N, 3}}, {"grad.quats", {N, 4}},
+        {"grad.opacities", {N}}, {"grad.sh0", {N, 1, 3}}, {"grad.shN", {N, K1, 3}},
+        {"grad.means2d", {N, 2}}};
+    for (const auto& [name, shape] : shapes) {
+      INFO(name);
+      const TensorEntry* e = got->find(name);
+      REQUIRE(e != nullptr);
+      CHECK(e->shape == shape);
+    }
+    CHECK(golden(*got, "loss")[0] == float(want->loss.loss));
+    for (const auto& [name, data] : grad_tensors(want->grads)) {
+      INFO(name);
+      CHECK(golden(*got, "grad." + name) == *data);
+    }
+  }
+}
