@@ -18,6 +18,7 @@
 #include <cmath>
 #include <numeric>
 
+#include "attention/runtime/limits.h"
 #include "gs/constants.h"
 #include "gs/raster/raster_stages.h"
 #include "gs/train/diff_project.h"
@@ -127,16 +128,22 @@ Status DiffRenderer::forward(const SplatParams& params, const Camera& camera,
   });
   const int tiles = cam.tiles_x * cam.tiles_y;
   s.tile_start.assign(size_t(tiles) + 1, 0);
+  // The pair count first (box areas), checked before anything is allocated or walked for them.
   uint64_t pairs = 0;
+  for (uint32_t g : order) {
+    const TileBox box = tile_box(s.proj[g], cam);
+    pairs += uint64_t(box.tx1 - box.tx0 + 1) * uint64_t(box.ty1 - box.ty0 + 1);
+  }
+  const uint64_t limit = std::min<uint64_t>(resource_limits().max_tile_pairs, 0xffffffffull);
+  if (pairs > limit)
+    return Status::error("render: the scene needs " + std::to_string(pairs) +
+                         " (Gaussian, tile) pairs for camera '" + camera.name +
+                         "', more than the limit " + std::to_string(limit) + " (--max-tile-pairs)");
   for (uint32_t g : order) {
     const TileBox box = tile_box(s.proj[g], cam);
     for (int ty = box.ty0; ty <= box.ty1; ++ty)
       for (int tx = box.tx0; tx <= box.tx1; ++tx) ++s.tile_start[size_t(ty * cam.tiles_x + tx) + 1];
-    pairs += uint64_t(box.tx1 - box.tx0 + 1) * uint64_t(box.ty1 - box.ty0 + 1);
   }
-  if (pairs >= (uint64_t(1) << 32))
-    return Status::error("render: " + std::to_string(pairs) +
-                         " (Gaussian, tile) pairs, more than 2^32-1");
   for (int t = 0; t < tiles; ++t) s.tile_start[size_t(t) + 1] += s.tile_start[size_t(t)];
   s.pair_g.resize(pairs);
   {

@@ -78,7 +78,8 @@ class DiffRenderer {
   DiffRenderer(DiffRenderer&&) noexcept;
   DiffRenderer& operator=(DiffRenderer&&) noexcept;
 
-  // Errors: invalid camera, inconsistent parameter arrays, more than 2^32 pairs.
+  // Errors: invalid camera, inconsistent parameter arrays, more pairs than --max-tile-pairs
+  // (resource_limits(), at most 2^32-1).
   Status forward(const SplatParams& params, const Camera& camera, const DiffRenderOptions& options,
                  DiffImage* image, ThreadPool& pool = ThreadPool::global());
   // Gradients of a loss given dL/dcolor [H,W,3] and, optionally, dL/dalpha [H,W] (nullptr: 0),
