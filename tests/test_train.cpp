@@ -583,6 +583,23 @@ TEST_CASE("train: what is not implemented is refused by flag, bad inputs by name
   CHECK(rc4 == 1);
   CHECK(err4.find("v9") != std::string::npos);
   CHECK_FALSE(std::filesystem::exists(tmp.file("g.safetensors")));
+  // Distorted cameras: the photos would need undistorting first.
+  auto cams = load_cameras(g + "/cameras.json");
+  REQUIRE(cams.is_ok());
+  cams->cameras[0].model = CameraModel::kOpenCV;
+  cams->cameras[0].distortion = {0.1, 0, 0, 0};
+  REQUIRE(save_cameras_json(*cams, tmp.file("distorted.json")).is_ok());
+  auto [rc5, err5] = run(test::macro_exe() + " grad --scene " + g + "/init.ply --cameras " +
+                         tmp.file("distorted.json") + " --camera v0 --target " + g +
+                         "/images/v0.png --out " + tmp.file("g.safetensors"));
+  CHECK(rc5 == 1);
+  CHECK(err5.find("camera 'v0' has OPENCV distortion") != std::string::npos);
+  auto [rc6, err6] = run(test::macro_exe() + " train --images " + g + "/images --cameras " +
+                         tmp.file("distorted.json") + " --init " + g + "/init.ply --out " +
+                         tmp.file("o.ply") + " --strategy none" + ok_flags);
+  CHECK(rc6 == 1);
+  CHECK(err6.find("not implemented yet") != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(tmp.file("o.ply")));
 }
 
 TEST_CASE("train: macro grad on any SH degree and image size matches the library", "[train]") {

@@ -71,6 +71,17 @@ std::string format_seconds(double s) {
   return buf;
 }
 
+// Training fits pinhole renders to the photos, so a camera with distortion (whose photos are not
+// undistorted) cannot be used as it is.
+Status check_pinhole(const Camera& camera) {
+  for (double k : camera.distortion)
+    if (k != 0)
+      return Status::error("camera '" + camera.name + "' has " + camera_model_name(camera.model) +
+                           " distortion: training with distorted photos is not implemented yet "
+                           "(undistort them and give pinhole cameras)");
+  return Status::ok();
+}
+
 }  // namespace
 
 double camera_extent_scale(const CameraSet& cameras) {
@@ -149,6 +160,7 @@ Result<GradJobResult> run_grad_job(const GradJob& job, ThreadPool& pool) {
   if (!cameras) return cameras.status().with_context("--cameras");
   auto camera = cameras->find(job.camera_name);
   if (!camera) return camera.status().with_context("--camera " + job.camera_name);
+  MACRO_TRY(check_pinhole(*camera).with_context("--cameras"));
   TrainView view;
   view.camera = *camera;
   auto target = read_target(job.target_path, camera->width, camera->height);
@@ -226,6 +238,8 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
   if (cameras->cameras.empty())
     return Status::error("--cameras: " + job.cameras_path + " holds no cameras");
   std::vector<TrainView> views;
+  for (const Camera& cam : cameras->cameras)
+    MACRO_TRY(check_pinhole(cam).with_context("--cameras"));
   for (const Camera& cam : cameras->cameras) {
     MACRO_ASSIGN_OR_RETURN(std::string path, find_view_image(job.images_dir, cam.name));
     auto target = read_target(path, cam.width, cam.height);
