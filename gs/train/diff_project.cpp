@@ -217,6 +217,7 @@ bool project_forward(const SplatParams& prm, size_t g, const CameraD& cam, int s
   const double cutoff =
       2 * std::log(f.opacity / double(raster::kMinAlpha)) * (1 + double(raster::kCutoffRelMargin)) +
       double(raster::kCutoffAbsMargin);
+  out->sigma_skip = std::log(f.opacity / double(raster::kMinAlpha)) + 1e-9;
   out->ext_x = std::sqrt(cutoff * f.sxx);
   out->ext_y = std::sqrt(cutoff * f.syy);
   if (!std::isfinite(out->x) || !std::isfinite(out->y) || !std::isfinite(out->ext_x) ||

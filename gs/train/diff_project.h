@@ -30,6 +30,9 @@ struct ProjectedD {
   double rgb[3];        // max(0, SH + 0.5)
   double depth;         // camera z
   double ext_x, ext_y;  // half extents of the cutoff ellipse (alpha >= 1/255 inside), with margin
+  // sigma above which alpha = o exp(-sigma) < 1/255 for certain: ln(255 o) + 1e-9 (the margin is
+  // far above the rounding of exp and log), so the blend skips there without evaluating exp.
+  double sigma_skip;
 };
 
 // Forward of Gaussian g; false when culled (depth, invalid, det <= 0, faint, off the image).

@@ -81,7 +81,7 @@ struct Hit {
 };
 inline bool evaluate(const ProjectedD& s, double dx, double dy, Hit* h) {
   h->sigma = 0.5 * (s.a * dx * dx + s.c * dy * dy) + s.b * dx * dy;
-  if (!(h->sigma >= 0)) return false;
+  if (!(h->sigma >= 0) || h->sigma > s.sigma_skip) return false;  // sigma_skip: alpha < 1/255
   h->vis = std::exp(-h->sigma);
   const double raw = s.opacity * h->vis;
   h->clamped = raw > double(raster::kMaxAlpha);
