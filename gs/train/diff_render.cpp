@@ -9,14 +9,14 @@
 //                             number of its tile's pairs the pixel walked (1 + last blended)
 //   pair_grad[P][9]           backward: the tile's contribution to each pair's Gaussian
 //                             (rgb 3, conic 3, mean2d 2, opacity 1)
-//   gauss_pairs / pairs_of    the pairs of each Gaussian in pair (= tile) order, for the sums
+//   pairs_start[N+1],         the pairs of each Gaussian in pair (= tile) order, for the sums
+//   pairs_of[P]
 // Every stage writes only its own slots, and every sum runs in a fixed order, so the result does
 // not depend on the number of threads.
 #include "gs/train/diff_render.h"
 
 #include <algorithm>
 #include <cmath>
-#include <numeric>
 
 #include "attention/runtime/limits.h"
 #include "gs/constants.h"
