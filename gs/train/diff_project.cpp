@@ -223,6 +223,20 @@ bool project_forward(const SplatParams& prm, size_t g, const CameraD& cam, int s
   if (!std::isfinite(out->x) || !std::isfinite(out->y) || !std::isfinite(out->ext_x) ||
       !std::isfinite(out->ext_y))
     return false;
+  raster::TileSplat& t = out->cover;
+  t = raster::TileSplat{};
+  t.x = float(out->x);
+  t.y = float(out->y);
+  t.a = float(out->a);
+  t.b = float(out->b);
+  t.c = float(out->c);
+  t.ext_x = float(out->ext_x);
+  t.ext_y = float(out->ext_y);
+  // On the row at offset dy the ellipse spans dx in row_k dy +- sqrt(row_a0 - row_a1 dy^2)
+  // (raster_kernels.h): row_k = sxy/syy, row_a0 = cutoff det/syy, row_a1 = det/syy^2.
+  t.row_k = float(f.sxy / f.syy);
+  t.row_a0 = float(cutoff * f.det / f.syy);
+  t.row_a1 = float(f.det / (f.syy * f.syy));
   if (out->x + out->ext_x < 0.5 || out->x - out->ext_x > cam.width - 0.5 ||
       out->y + out->ext_y < 0.5 || out->y - out->ext_y > cam.height - 0.5)
     return false;

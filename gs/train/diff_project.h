@@ -6,6 +6,7 @@
 
 #include "gs/cameras/camera.h"
 #include "gs/formats/splat_params.h"
+#include "gs/raster/raster_kernels.h"
 
 namespace macro::gs::train {
 
@@ -33,6 +34,9 @@ struct ProjectedD {
   // sigma above which alpha = o exp(-sigma) < 1/255 for certain: ln(255 o) + 1e-9 (the margin is
   // far above the rounding of exp and log), so the blend skips there without evaluating exp.
   double sigma_skip;
+  // The same cutoff ellipse in the rasterizer's record (x, y, b, c, ext_*, row_*; float), for
+  // its exact ellipse-against-tile coverage (raster::for_each_tile).
+  raster::TileSplat cover;
 };
 
 // Forward of Gaussian g; false when culled (depth, invalid, det <= 0, faint, off the image).

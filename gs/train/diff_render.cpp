@@ -63,16 +63,6 @@ DiffRenderStats DiffRenderer::stats() const {
 
 namespace {
 
-// The tiles a projected Gaussian's cutoff box covers: [tx0, tx1] x [ty0, ty1].
-struct TileBox {
-  int tx0, tx1, ty0, ty1;
-};
-TileBox tile_box(const ProjectedD& s, const CameraD& cam) {
-  using raster::tile_of;
-  return {tile_of(float(s.x - s.ext_x), cam.tiles_x), tile_of(float(s.x + s.ext_x), cam.tiles_x),
-          tile_of(float(s.y - s.ext_y), cam.tiles_y), tile_of(float(s.y + s.ext_y), cam.tiles_y)};
-}
-
 // alpha of a Gaussian at pixel offset (dx, dy) = mean - pixel centre; false when skipped
 // (sigma < 0 or alpha < 1/255). vis = exp(-sigma); clamped: o vis > 0.99.
 struct Hit {
@@ -128,32 +118,41 @@ Status DiffRenderer::forward(const SplatParams& params, const Camera& camera,
   });
   const int tiles = cam.tiles_x * cam.tiles_y;
   s.tile_start.assign(size_t(tiles) + 1, 0);
-  // The pair count first (box areas), checked before anything is allocated or walked for them.
+  // Coverage: the cutoff ellipse against each tile, as gs/raster bins (raster::for_each_tile).
+  raster::CameraF camf{};
+  camf.width = cam.width;
+  camf.height = cam.height;
+  camf.tiles_x = cam.tiles_x;
+  camf.tiles_y = cam.tiles_y;
+  auto each_tile = [&](uint32_t g, auto&& fn) {
+    raster::for_each_tile(s.proj[g].cover, camf, raster::TileRule::kEllipse,
+                          [&](int tx, int ty) { fn(size_t(ty * cam.tiles_x + tx)); });
+  };
+  // The pair count first, checked before anything is allocated for the pairs.
+  std::vector<uint32_t> count(order.size());
+  pool.parallel_for(
+      order.size(),
+      [&](size_t b, size_t e, int) {
+        for (size_t k = b; k < e; ++k) {
+          uint32_t c = 0;
+          each_tile(order[k], [&](size_t) { ++c; });
+          count[k] = c;
+        }
+      },
+      256);
   uint64_t pairs = 0;
-  for (uint32_t g : order) {
-    const TileBox box = tile_box(s.proj[g], cam);
-    pairs += uint64_t(box.tx1 - box.tx0 + 1) * uint64_t(box.ty1 - box.ty0 + 1);
-  }
+  for (uint32_t c : count) pairs += c;
   const uint64_t limit = std::min<uint64_t>(resource_limits().max_tile_pairs, 0xffffffffull);
   if (pairs > limit)
     return Status::error("render: the scene needs " + std::to_string(pairs) +
                          " (Gaussian, tile) pairs for camera '" + camera.name +
                          "', more than the limit " + std::to_string(limit) + " (--max-tile-pairs)");
-  for (uint32_t g : order) {
-    const TileBox box = tile_box(s.proj[g], cam);
-    for (int ty = box.ty0; ty <= box.ty1; ++ty)
-      for (int tx = box.tx0; tx <= box.tx1; ++tx) ++s.tile_start[size_t(ty * cam.tiles_x + tx) + 1];
-  }
+  for (uint32_t g : order) each_tile(g, [&](size_t t) { ++s.tile_start[t + 1]; });
   for (int t = 0; t < tiles; ++t) s.tile_start[size_t(t) + 1] += s.tile_start[size_t(t)];
   s.pair_g.resize(pairs);
   {
     std::vector<uint32_t> fill(s.tile_start.begin(), s.tile_start.end() - 1);
-    for (uint32_t g : order) {
-      const TileBox box = tile_box(s.proj[g], cam);
-      for (int ty = box.ty0; ty <= box.ty1; ++ty)
-        for (int tx = box.tx0; tx <= box.tx1; ++tx)
-          s.pair_g[fill[size_t(ty * cam.tiles_x + tx)]++] = g;
-    }
+    for (uint32_t g : order) each_tile(g, [&](size_t t) { s.pair_g[fill[t]++] = g; });
   }
   s.stats.visible = order.size();
   s.stats.pairs = pairs;

@@ -10,8 +10,8 @@
 //             Jacobian; + eps2d 0.3; conic = inverse; o = sigmoid(logit);
 //             rgb = max(0, SH(normalise(p - camera centre)) + 0.5); culled as gs/raster culls
 //             (det <= 0, o < 1/255, cutoff ellipse off the image)
-//   bin       visible Gaussians stable-sorted by float depth (ties by index), a pair per tile of
-//             the cutoff ellipse's bounding box, pairs grouped by tile
+//   bin       visible Gaussians stable-sorted by float depth (ties by index), a pair per tile
+//             the cutoff ellipse reaches (gs/raster's exact ellipse-tile test), grouped by tile
 //   blend     per pixel front to back: sigma = 0.5(a dx^2 + c dy^2) + b dx dy, skip sigma < 0;
 //             alpha = min(0.99, o exp(-sigma)), skip alpha < 1/255; stop before a Gaussian that
 //             leaves T (1 - alpha) <= 1e-4; color = sum c alpha T + T bg, alpha_out = 1 - T
