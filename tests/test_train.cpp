@@ -246,6 +246,22 @@ TEST_CASE("train: macro grad and macro train match the goldens through the CLI",
       CHECK(line.find(key) != std::string::npos);
   }
   CHECK(lines == 10);
+
+  // Progress on stderr (step, loss, it/s, ETA) unless quiet.
+  const std::string err = tmp.file("err.txt");
+  REQUIRE(test::run_command("env -u MACRO_QUIET " + test::macro_exe() + " train --images " + g +
+                            "/images --cameras " + g + "/cameras.json --init " + g +
+                            "/init.ply --out " + ply +
+                            " --steps 2 --strategy none"
+                            " --lr-schedule constant --view-order sequential"
+                            " --sh-degree-interval 0 --scene-scale 1 >/dev/null 2>" +
+                            err) == 0);
+  std::ifstream ef(err);
+  std::stringstream es;
+  es << ef.rdbuf();
+  INFO(es.str());
+  for (const char* key : {"[train] step 2/2", "loss 0.3", "it/s", "eta"})
+    CHECK(es.str().find(key) != std::string::npos);
 }
 
 namespace {
