@@ -187,3 +187,7 @@ TEST_CASE("resource limits: --max-gaussians, --max-image-pixels, --max-tile-pair
           "[reliability][bad_inputs][limits]") {
   CHECK(run_group("limits") >= 10);
 }
+
+TEST_CASE("bad inputs: training inputs (macro grad, macro train)", "[reliability][bad_inputs]") {
+  CHECK(run_group("train") >= 10);
+}

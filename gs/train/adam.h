@@ -1,0 +1,50 @@
+// Adam over the splat parameters, one optimizer per parameter group, as torch.optim.Adam:
+//   m = b1 m + (1 - b1) g;  v = b2 v + (1 - b2) g^2
+//   p -= lr / (1 - b1^t) * m / (sqrt(v) / sqrt(1 - b2^t) + eps)
+// with gsplat's defaults: betas 0.9 / 0.999, eps 1e-15, learning rates means 1.6e-4 x scene
+// scale, scales 5e-3, quats 1e-3, opacities 5e-2, sh0 2.5e-3, shN 2.5e-3 / 20.
+// Legend: N Gaussians, K SH coefficients per channel; the moments have the parameters' shapes
+// (SplatParams, gs/formats/splat_params.h) and are kept in double.
+#pragma once
+
+#include <vector>
+
+#include "attention/runtime/thread_pool.h"
+#include "gs/formats/splat_params.h"
+#include "gs/train/diff_render.h"
+
+namespace macro::gs::train {
+
+struct AdamLearningRates {
+  double means = 1.6e-4;  // times the scene scale
+  double scales = 5e-3;
+  double quats = 1e-3;
+  double opacities = 5e-2;
+  double sh0 = 2.5e-3;
+  double shN = 2.5e-3 / 20;
+};
+
+struct AdamOptions {
+  double beta1 = 0.9, beta2 = 0.999, eps = 1e-15;
+  AdamLearningRates lr;
+  double scene_scale = 1.0;  // multiplies lr.means
+};
+
+class SplatAdam {
+ public:
+  SplatAdam(const SplatParams& params, const AdamOptions& options);
+  // One step of every group with the gradients of the current loss (shapes as the parameters).
+  void step(const SplatGrads& grads, SplatParams* params, ThreadPool& pool = ThreadPool::global());
+  int steps() const { return t_; }
+
+ private:
+  struct Group {
+    std::vector<double> m, v;
+    double lr;
+  };
+  AdamOptions options_;
+  Group means_, scales_, quats_, opacities_, sh0_, shN_;
+  int t_ = 0;
+};
+
+}  // namespace macro::gs::train

@@ -1,0 +1,294 @@
+// `macro grad` and `macro train` as library calls (train_job.h).
+#include "gs/train/train_job.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "attention/runtime/file_io.h"
+#include "attention/runtime/io/safetensors.h"
+#include "attention/runtime/progress.h"
+#include "gs/formats/splat_params.h"
+#include "gs/image_io.h"
+
+namespace macro::gs::train {
+namespace {
+
+// The output's folder exists and is writable, and the path is not a folder.
+Status check_output(const char* flag, const std::string& path) {
+  namespace fs = std::filesystem;
+  if (path.empty()) return Status::error(std::string(flag) + ": required");
+  const fs::path folder = fs::path(path).parent_path();
+  const std::string parent = folder.empty() ? std::string(".") : folder.string();
+  if (is_directory(path))
+    return Status::error(std::string(flag) + ": " + path + ": is a folder, expected a file path");
+  if (!is_directory(parent))
+    return Status::error(std::string(flag) + ": " + path + ": folder '" + parent +
+                         "' does not exist");
+  if (::access(parent.c_str(), W_OK) != 0)
+    return Status::error(std::string(flag) + ": " + path + ": folder '" + parent +
+                         "' is not writable");
+  return Status::ok();
+}
+
+Status not_implemented(const std::string& flag, const std::string& value,
+                       const std::string& implemented) {
+  return Status::error(flag + " " + value + ": not implemented yet (this version implements " +
+                       implemented + "; docs/training.md)");
+}
+
+std::string lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
+  return s;
+}
+
+bool has_extension(const std::string& name) {
+  const size_t slash = name.find_last_of('/');
+  const size_t dot = name.find_last_of('.');
+  return dot != std::string::npos && (slash == std::string::npos || dot > slash + 1);
+}
+
+std::string json_number(double v) {
+  if (!std::isfinite(v)) return "null";
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.9g", v);
+  return buf;
+}
+
+std::string format_seconds(double s) {
+  char buf[32];
+  if (!(s >= 0) || !std::isfinite(s)) return "?";
+  if (s < 60)
+    std::snprintf(buf, sizeof buf, "%.1fs", s);
+  else if (s < 3600)
+    std::snprintf(buf, sizeof buf, "%dm%02ds", int(s) / 60, int(s) % 60);
+  else
+    std::snprintf(buf, sizeof buf, "%dh%02dm", int(s) / 3600, (int(s) / 60) % 60);
+  return buf;
+}
+
+// Training fits pinhole renders to the photos, so a camera with distortion (whose photos are not
+// undistorted) cannot be used as it is.
+Status check_pinhole(const Camera& camera) {
+  for (double k : camera.distortion)
+    if (k != 0)
+      return Status::error("camera '" + camera.name + "' has " + camera_model_name(camera.model) +
+                           " distortion: training with distorted photos is not implemented yet "
+                           "(undistort them and give pinhole cameras)");
+  return Status::ok();
+}
+
+}  // namespace
+
+double camera_extent_scale(const CameraSet& cameras) {
+  if (cameras.cameras.empty()) return 0;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const Camera& c : cameras.cameras) mean += c.center();
+  mean /= double(cameras.cameras.size());
+  double extent = 0;
+  for (const Camera& c : cameras.cameras) extent = std::max(extent, (c.center() - mean).norm());
+  return 1.1 * extent;
+}
+
+Result<std::string> find_view_image(const std::string& dir, const std::string& name) {
+  if (!is_directory(dir)) return Status::error("--images: " + dir + ": not a folder");
+  if (has_extension(name)) {
+    const std::string path = dir + "/" + name;
+    if (!file_exists(path))
+      return Status::error("--images: no photo for camera '" + name + "': " + path +
+                           " does not exist");
+    return path;
+  }
+  std::vector<std::string> found;
+  for (const char* ext : {".png", ".jpg", ".jpeg", ".exr"})
+    if (file_exists(dir + "/" + name + ext)) found.push_back(dir + "/" + name + ext);
+  if (found.empty())
+    return Status::error("--images: no photo for camera '" + name + "': none of " + dir + "/" +
+                         name + ".png, .jpg, .jpeg, .exr exists");
+  if (found.size() > 1)
+    return Status::error("--images: camera '" + name + "' has two photos, " + found[0] + " and " +
+                         found[1] + "; expected one");
+  return found[0];
+}
+
+Result<std::vector<float>> read_target(const std::string& path, int width, int height) {
+  auto size_error = [&](int w, int h) {
+    return Status::error(path + ": image is " + std::to_string(w) + "x" + std::to_string(h) +
+                         ", expected the camera's " + std::to_string(width) + "x" +
+                         std::to_string(height));
+  };
+  const std::string name = lower(path);
+  if (name.size() > 4 && name.compare(name.size() - 4, 4, ".exr") == 0) {
+    MACRO_ASSIGN_OR_RETURN(ExrImage exr, read_exr(path));
+    if (exr.width != width || exr.height != height) return size_error(exr.width, exr.height);
+    const std::vector<float>* ch[3] = {exr.find("R"), exr.find("G"), exr.find("B")};
+    for (int c = 0; c < 3; ++c)
+      if (!ch[c])
+        return Status::error(path + ": EXR has no channel '" + std::string(1, "RGB"[c]) +
+                             "' (expected R, G, B)");
+    std::vector<float> out(size_t(width) * size_t(height) * 3);
+    for (size_t p = 0; p < size_t(width) * size_t(height); ++p)
+      for (int c = 0; c < 3; ++c) {
+        const float v = (*ch[c])[p];
+        if (!std::isfinite(v))
+          return Status::error(path + ": EXR channel '" + std::string(1, "RGB"[c]) +
+                               "' has a non-finite value at pixel " + std::to_string(p));
+        out[3 * p + c] = v;
+      }
+    return out;
+  }
+  MACRO_ASSIGN_OR_RETURN(Image img, read_image(path));
+  if (img.width != width || img.height != height) return size_error(img.width, img.height);
+  MACRO_CHECK(img.channels == 3);
+  return std::move(img.data);
+}
+
+Result<GradJobResult> run_grad_job(const GradJob& job, ThreadPool& pool) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (job.mode != "classic") return not_implemented("--mode", job.mode, "classic");
+  if (job.scene_path.empty()) return Status::error("--scene: required");
+  if (job.cameras_path.empty()) return Status::error("--cameras: required");
+  if (job.target_path.empty()) return Status::error("--target: required");
+  MACRO_TRY(check_output("--out", job.out_path));
+  auto params = read_splat_params(job.scene_path, job.limits);
+  if (!params) return params.status().with_context("--scene");
+  auto cameras = load_cameras(job.cameras_path);
+  if (!cameras) return cameras.status().with_context("--cameras");
+  auto camera = cameras->find(job.camera_name);
+  if (!camera) return camera.status().with_context("--camera " + job.camera_name);
+  MACRO_TRY(check_pinhole(*camera).with_context("--cameras"));
+  TrainView view;
+  view.camera = *camera;
+  auto target = read_target(job.target_path, camera->width, camera->height);
+  if (!target) return target.status().with_context("--target");
+  view.target = std::move(*target);
+  MACRO_ASSIGN_OR_RETURN(ViewGradient vg, view_gradient(*params, view, {}, pool));
+
+  const int64_t N = int64_t(params->size()), H = camera->height, W = camera->width;
+  const int64_t R = params->sh_rest();
+  const float loss = float(vg.loss.loss), l1 = float(vg.loss.l1), ssim = float(vg.loss.ssim);
+  const std::vector<float> color(vg.image.color.begin(), vg.image.color.end());
+  const std::vector<float> alpha(vg.image.alpha.begin(), vg.image.alpha.end());
+  const SplatGrads& g = vg.grads;
+  MACRO_TRY(write_safetensors(job.out_path,
+                              {{"loss", DType::kF32, {1}, &loss},
+                               {"l1", DType::kF32, {1}, &l1},
+                               {"ssim", DType::kF32, {1}, &ssim},
+                               {"color", DType::kF32, {H, W, 3}, color.data()},
+                               {"alpha", DType::kF32, {H, W}, alpha.data()},
+                               {"grad.means", DType::kF32, {N, 3}, g.means.data()},
+                               {"grad.scales", DType::kF32, {N, 3}, g.scales.data()},
+                               {"grad.quats", DType::kF32, {N, 4}, g.quats.data()},
+                               {"grad.opacities", DType::kF32, {N}, g.opacities.data()},
+                               {"grad.sh0", DType::kF32, {N, 1, 3}, g.sh0.data()},
+                               {"grad.shN", DType::kF32, {N, R, 3}, g.shN.data()},
+                               {"grad.means2d", DType::kF32, {N, 2}, g.means2d.data()}},
+                              {{"scene", job.scene_path},
+                               {"camera", camera->name},
+                               {"target", job.target_path},
+                               {"mode", job.mode},
+                               {"sh_degree", std::to_string(params->sh_degree)},
+                               {"loss", "0.8 L1 + 0.2 (1 - SSIM valid 11x11 sigma 1.5)"}})
+                .with_context("--out"));
+  GradJobResult out;
+  out.camera = *camera;
+  out.gaussians = params->size();
+  out.loss = vg.loss;
+  out.ms = ms_since(t0);
+  return out;
+}
+
+Status check_train_settings(const TrainJob& job) {
+  if (job.strategy != "none") return not_implemented("--strategy", job.strategy, "none");
+  if (job.lr_schedule != "constant")
+    return not_implemented("--lr-schedule", job.lr_schedule, "constant");
+  if (job.view_order != "sequential")
+    return not_implemented("--view-order", job.view_order, "sequential");
+  if (job.sh_degree_interval != 0)
+    return not_implemented("--sh-degree-interval", std::to_string(job.sh_degree_interval),
+                           "0: every SH band from the first step");
+  if (job.mode != "classic") return not_implemented("--mode", job.mode, "classic");
+  if (job.steps < 0)
+    return Status::error("--steps: expected >= 0, found " + std::to_string(job.steps));
+  if (job.scene_scale && !(*job.scene_scale > 0 && std::isfinite(*job.scene_scale)))
+    return Status::error("--scene-scale: expected a positive number, found " +
+                         std::to_string(*job.scene_scale));
+  return Status::ok();
+}
+
+Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
+  MACRO_TRY(check_train_settings(job));
+  if (job.images_dir.empty()) return Status::error("--images: required");
+  if (job.cameras_path.empty()) return Status::error("--cameras: required");
+  if (job.init_path.empty()) return Status::error("--init: required");
+  MACRO_TRY(check_output("--out", job.out_path));
+  if (!job.log_path.empty()) {
+    MACRO_TRY(check_output("--log", job.log_path));
+    if (job.log_path == job.out_path)
+      return Status::error("--log and --out are the same file " + job.out_path);
+  }
+  auto params = read_splat_params(job.init_path, job.limits);
+  if (!params) return params.status().with_context("--init");
+  auto cameras = load_cameras(job.cameras_path);
+  if (!cameras) return cameras.status().with_context("--cameras");
+  if (cameras->cameras.empty())
+    return Status::error("--cameras: " + job.cameras_path + " holds no cameras");
+  std::vector<TrainView> views;
+  for (const Camera& cam : cameras->cameras)
+    MACRO_TRY(check_pinhole(cam).with_context("--cameras"));
+  for (const Camera& cam : cameras->cameras) {
+    MACRO_ASSIGN_OR_RETURN(std::string path, find_view_image(job.images_dir, cam.name));
+    auto target = read_target(path, cam.width, cam.height);
+    if (!target) return target.status().with_context("--images");
+    views.push_back({cam, std::move(*target)});
+  }
+  TrainJobResult result;
+  result.gaussians = params->size();
+  result.views = views.size();
+  result.scene_scale = job.scene_scale ? *job.scene_scale : camera_extent_scale(*cameras);
+  if (!(result.scene_scale > 0))
+    return Status::error("--scene-scale: not given, and the cameras' extent is " +
+                         std::to_string(result.scene_scale) +
+                         " (a single camera, or all at one place); pass --scene-scale");
+
+  TrainOptions options;
+  options.steps = job.steps;
+  options.adam.scene_scale = result.scene_scale;
+  AtomicFile log;
+  if (!job.log_path.empty()) MACRO_TRY(log.open(job.log_path).with_context("--log"));
+  const bool show = job.progress && !quiet();
+  auto last_draw = std::chrono::steady_clock::now() - std::chrono::seconds(1);
+  auto on_step = [&](const StepRecord& r) -> Status {
+    result.records.push_back(r);
+    if (!job.log_path.empty()) {
+      const std::string line =
+          "{\"step\": " + std::to_string(r.step) + ", \"loss\": " + json_number(r.loss) +
+          ", \"l1\": " + json_number(r.l1) + ", \"ssim\": " + json_number(r.ssim) +
+          ", \"num_gaussians\": " + std::to_string(r.num_gaussians) +
+          ", \"seconds\": " + json_number(r.seconds) + "}\n";
+      MACRO_TRY(log.write(line).with_context("--log"));
+    }
+    const auto now = std::chrono::steady_clock::now();
+    const bool final_step = r.step + 1 == job.steps;
+    if (show && (final_step || now - last_draw >= std::chrono::milliseconds(250))) {
+      last_draw = now;
+      const double rate = r.seconds > 0 ? double(r.step + 1) / r.seconds : 0;
+      const double eta = rate > 0 ? double(job.steps - r.step - 1) / rate : -1;
+      std::fprintf(stderr, "\r[train] step %d/%d  loss %.5f  %.2f it/s  eta %s%s", r.step + 1,
+                   job.steps, r.loss, rate, format_seconds(eta).c_str(), final_step ? "\n" : "   ");
+      std::fflush(stderr);
+    }
+    return Status::ok();
+  };
+  MACRO_TRY(train(&*params, views, options, on_step, pool));
+  MACRO_TRY(write_splat_params(*params, job.out_path).with_context("--out"));
+  if (!job.log_path.empty()) MACRO_TRY(log.commit().with_context("--log"));
+  result.seconds = result.records.empty() ? 0 : result.records.back().seconds;
+  return result;
+}
+
+}  // namespace macro::gs::train

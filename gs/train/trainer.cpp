@@ -1,0 +1,71 @@
+// The training loop (trainer.h).
+#include "gs/train/trainer.h"
+
+#include <chrono>
+#include <string>
+
+namespace macro::gs::train {
+namespace {
+
+Status check_view(const TrainView& view) {
+  const size_t want = size_t(view.camera.width) * size_t(view.camera.height) * 3;
+  if (view.target.size() != want)
+    return Status::error("view '" + view.camera.name + "': target holds " +
+                         std::to_string(view.target.size()) + " values, expected " +
+                         std::to_string(want) + " (" + std::to_string(view.camera.width) + "x" +
+                         std::to_string(view.camera.height) + "x3)");
+  return Status::ok();
+}
+
+}  // namespace
+
+Result<ViewGradient> view_gradient(const SplatParams& params, const TrainView& view,
+                                   const DiffRenderOptions& options, ThreadPool& pool) {
+  MACRO_TRY(check_view(view));
+  ViewGradient out;
+  DiffRenderer renderer;
+  MACRO_TRY(renderer.forward(params, view.camera, options, &out.image, pool));
+  std::vector<double> v_color;
+  MACRO_ASSIGN_OR_RETURN(
+      out.loss, photometric_loss(out.image.color.data(), view.target.data(), out.image.width,
+                                 out.image.height, &v_color, pool));
+  renderer.backward(params, v_color.data(), nullptr, &out.grads, pool);
+  return out;
+}
+
+Status train(SplatParams* params, const std::vector<TrainView>& views, const TrainOptions& options,
+             const StepCallback& on_step, ThreadPool& pool) {
+  MACRO_CHECK(params != nullptr);
+  MACRO_TRY(params->check_shapes());
+  if (views.empty()) return Status::error("train: no views");
+  if (options.steps < 0)
+    return Status::error("train: steps " + std::to_string(options.steps) + ", expected >= 0");
+  for (const TrainView& v : views) MACRO_TRY(check_view(v));
+  SplatAdam adam(*params, options.adam);
+  DiffRenderer renderer;
+  DiffImage image;
+  SplatGrads grads;
+  std::vector<double> v_color;
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int step = 0; step < options.steps; ++step) {
+    const TrainView& view = views[size_t(step) % views.size()];
+    MACRO_TRY(renderer.forward(*params, view.camera, options.render, &image, pool)
+                  .with_context("step " + std::to_string(step)));
+    MACRO_ASSIGN_OR_RETURN(LossValue loss,
+                           photometric_loss(image.color.data(), view.target.data(), image.width,
+                                            image.height, &v_color, pool));
+    renderer.backward(*params, v_color.data(), nullptr, &grads, pool);
+    adam.step(grads, params, pool);
+    StepRecord rec;
+    rec.step = step;
+    rec.loss = loss.loss;
+    rec.l1 = loss.l1;
+    rec.ssim = loss.ssim;
+    rec.num_gaussians = params->size();
+    rec.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (on_step) MACRO_TRY(on_step(rec));
+  }
+  return Status::ok();
+}
+
+}  // namespace macro::gs::train
