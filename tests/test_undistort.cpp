@@ -15,6 +15,7 @@
 #include <fstream>
 
 #include "attention/runtime/file_io.h"
+#include "enhance/scene_input.h"
 #include "gs/cameras/camera.h"
 #include "gs/cameras/colmap_points.h"
 #include "gs/cameras/lens.h"
@@ -401,4 +402,28 @@ TEST_CASE("undistort_scene_folder: images, PINHOLE COLMAP model, points3D, split
   auto same = undistort_scene_folder(in, in);
   REQUIRE_FALSE(same);
   CHECK_THAT(same.status().message(), Catch::Contains("is the input folder"));
+}
+
+TEST_CASE("MACRO scene inputs refuse a distorted scene with the command to run", "[undistort]") {
+  test::TempDir tmp("undistort-scene-input");
+  const std::string dir = tmp.file("scene");
+  std::vector<Camera> cams = {reference_cameras()[3], reference_cameras()[3]};  // SIMPLE_RADIAL
+  cams[0].name = "a.png";
+  cams[1].name = "b.png";
+  CameraSet set;
+  set.cameras = cams;
+  REQUIRE(save_colmap_text(set, dir + "/sparse/0").is_ok());
+  Image img(320, 240, 3);
+  std::filesystem::create_directories(dir + "/images");
+  for (const char* n : {"a.png", "b.png"}) REQUIRE(write_png(dir + "/images/" + n, img).is_ok());
+  enhance::SceneInputOptions o;
+  o.scene_dir = dir;
+  o.closeup = "a.png";
+  o.scene = dir + "/none.ply";  // never reached: the cameras are refused first
+  auto in = enhance::load_scene_inputs(o);
+  REQUIRE_FALSE(in);
+  const std::string msg = in.status().message();
+  CHECK_THAT(msg, Catch::Contains("camera 'a.png' is SIMPLE_RADIAL k=-0.15"));
+  CHECK_THAT(msg, Catch::Contains("macro undistort --scene-dir " + dir + " --out " + dir +
+                                  "_undistorted"));
 }
