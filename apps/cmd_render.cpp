@@ -14,10 +14,15 @@ constexpr const char* kUsage =
     "usage: macro render --scene FILE|DIR [--cameras FILE] --camera NAME\n"
     "         [--out-png F.png] [--out-exr F.exr] [--out-tensors F.safetensors]\n"
     "         [--out-depth-png F.png] [--mode classic|antialiased|mip] [--background r,g,b]\n"
-    "         [--sh-degree D] [--max-gaussians N] [--threads N] [--quiet]\n"
+    "         [--sh-degree D] [--max-gaussians N] [--strict] [--ignore-distortion]\n"
+    "         [--threads N] [--quiet]\n"
     "  --scene      .ply (Inria/gsplat or SuperSplat compressed), .splat or .spz, or a folder\n"
     "               holding scene.ply (and cameras.json), e.g. data/scenes/default\n"
     "  --cameras    our cameras.json, a COLMAP sparse folder, transforms.json or a DL3DV split\n"
+    "  --camera     its name, path or name without extension (frame_00001 for frame_00001.png)\n"
+    "  --strict     any invalid entry in the camera file is an error (default: left out, warned)\n"
+    "  --ignore-distortion  render a camera with lens distortion as a pinhole (default: refused;\n"
+    "               macro undistort makes a pinhole scene)\n"
     "  --out-exr    float channels R,G,B (colour), A (alpha), depth (depth_sum/alpha, 0 if empty),\n"
     "               invdepth (sum w/z)\n"
     "  --out-tensors  color [H,W,3], alpha, depth_sum, inv_depth_sum [H,W], F32\n"
@@ -34,6 +39,8 @@ int run_render(std::vector<std::string> argv) {
   job.scene_path = args.required("--scene");
   job.cameras_path = args.value_or("--cameras", "");
   job.camera_name = args.required("--camera");
+  job.camera_options.strict = args.flag("--strict");
+  job.ignore_distortion = args.flag("--ignore-distortion");
   job.outputs.png = args.value_or("--out-png", "");
   job.outputs.exr = args.value_or("--out-exr", "");
   job.outputs.tensors = args.value_or("--out-tensors", "");
@@ -62,6 +69,8 @@ int run_render(std::vector<std::string> argv) {
   }
   auto result = gs::run_render_job(job);
   if (!result) return fail("render", result.status());
+  for (const std::string& w : result->warnings)
+    std::fprintf(stderr, "macro render: warning: %s\n", w.c_str());
   if (!quiet()) {
     std::printf("%s\n", gs::render_summary(*result).c_str());
     for (const auto& f : result->written) std::printf("  wrote %s\n", f.c_str());

@@ -170,6 +170,18 @@ Result<SceneInputs> load_scene_inputs(const SceneInputOptions& o) {
   if (in.candidates.empty())
     return Status::error(in.cameras_path + ": no reference candidate has an image in " +
                          in.images_dir);
+  // Distorted cameras are refused, not rendered as pinholes (docs/cameras.md §9).
+  std::string dir = o.scene_dir;
+  while (dir.size() > 1 && dir.back() == '/') dir.pop_back();
+  const std::string remedy =
+      dir.empty() ? "undistort the scene folder first (macro undistort --scene-dir DIR --out "
+                    "NEW_DIR) and pass NEW_DIR's cameras and images"
+                  : "undistort the scene folder first: macro undistort --scene-dir " + dir +
+                        " --out " + dir + "_undistorted, then use " + dir + "_undistorted";
+  MACRO_TRY(gs::refuse_distorted(in.closeup, "MACRO", remedy)
+                .with_context(in.closeup_source.empty() ? in.cameras_path : in.closeup_source));
+  for (const gs::Camera& c : in.candidates)
+    MACRO_TRY(gs::refuse_distorted(c, "MACRO", remedy).with_context(in.cameras_path));
   // Splat last (the expensive part).
   MACRO_ASSIGN_OR_RETURN(in.cloud, gs::load_scene(in.scene_path, o.limits));
   return in;

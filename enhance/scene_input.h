@@ -15,6 +15,9 @@
 // minus the close-up frame itself if it is registered (it would be its own ground truth; absent
 // from the released layout), minus cameras whose image is missing from images/ (released: "missing
 // depth file" elimination). Each candidate's intrinsics are scaled to its image's size.
+// Distortion: a close-up or candidate camera with lens distortion is an error that names the
+// camera and gives the `macro undistort` command to run (the pipeline renders pinhole images;
+// docs/cameras.md §9). Invalid camera entries are left out (gs::CameraLoadOptions::strict off).
 #pragma once
 
 #include <string>

@@ -300,3 +300,53 @@ TEST_CASE("macro render --out-tensors reproduces the raster goldens", "[render][
     }
   }
 }
+
+TEST_CASE("macro render refuses a distorted camera; --ignore-distortion warns; bad entries warn",
+          "[render][render_cli]") {
+  test::TempDir tmp("render-cli-distortion");
+  // The default scene's cameras with train_00 made OPENCV k1 = 0.5 and an invalid entry added.
+  auto set = gs::load_cameras(default_scene() + "/cameras.json");
+  REQUIRE(set.is_ok());
+  set->cameras[0].model = gs::CameraModel::kOpenCV;
+  set->cameras[0].distortion = {0.5, 0, 0, 0};
+  REQUIRE(gs::save_cameras_json(*set, tmp.file("cams.json")).is_ok());
+  std::string text = slurp(tmp.file("cams.json"));
+  const size_t end = text.rfind(']');
+  text = text.substr(0, end) + R"(, {"name": "broken.png", "width": 4})" + "]\n";
+  std::ofstream(tmp.file("cams.json")) << text;
+  const std::string base = "render --scene " + default_scene() + "/scene.ply --cameras " +
+                           tmp.file("cams.json") + " --out-png " + tmp.file("o.png");
+
+  Run refused = run_macro(base + " --camera train_00", tmp);
+  CHECK(refused.rc == 1);
+  CHECK(contains(refused.err, "camera 'train_00' is OPENCV k1=0.5"));
+  CHECK(contains(refused.err, "macro undistort --scene-dir"));
+  CHECK(contains(refused.err, "--ignore-distortion"));
+  CHECK_FALSE(std::filesystem::exists(tmp.file("o.png")));
+
+  Run ignored = run_macro(base + " --camera train_00 --ignore-distortion", tmp);
+  CHECK(ignored.rc == 0);
+  CHECK(contains(ignored.err, "warning: camera 'train_00' is OPENCV k1=0.5"));
+  CHECK(contains(ignored.err, "rendered as a pinhole"));
+  // The invalid entry is reported by index and name; another camera renders.
+  CHECK(contains(ignored.err, "warning: entry " + std::to_string(set->cameras.size()) +
+                                  " 'broken.png' left out"));
+  Run other = run_macro(base + " --camera train_01", tmp);
+  CHECK(other.rc == 0);
+  CHECK(contains(other.err, "'broken.png' left out"));
+  Run strict = run_macro(base + " --camera train_01 --strict", tmp);
+  CHECK(strict.rc == 1);
+  CHECK(contains(strict.err, "'broken.png': missing field 'height'"));
+
+  // macro cameras lists the file; a name without extension resolves.
+  Run list = run_macro("cameras " + tmp.file("cams.json"), tmp);
+  CHECK(list.rc == 0);
+  CHECK(contains(list.out, "train_00"));
+  CHECK(contains(list.out, "960x540"));
+  CHECK(contains(list.out, "OPENCV k1=0.5"));
+  CHECK(contains(list.out, "1 invalid entry left out"));
+  CHECK(contains(list.out, "'broken.png'"));
+  CHECK(run_macro("cameras " + tmp.file("cams.json") + " --strict", tmp).rc == 1);
+  CHECK(run_macro("cameras", tmp).rc == 2);
+  CHECK(run_macro("undistort --scene-dir " + tmp.path, tmp).rc == 2);
+}

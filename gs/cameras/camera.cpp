@@ -28,17 +28,26 @@ struct Lookup {
   std::vector<int> ambiguous;
 };
 
+// The file name without its last extension: "images/frame_00001.png" -> "frame_00001".
+std::string stem_of(const std::string& path) {
+  const std::string f = file_name_of(path);
+  const size_t dot = f.find_last_of('.');
+  return dot == std::string::npos || dot == 0 ? f : f.substr(0, dot);
+}
+
 Lookup lookup(const std::vector<Camera>& cams, const std::string& query) {
   const std::string q_path = strip_dot_slash(query);
   const std::string q_file = file_name_of(query);
-  // Three passes, strictest first; a pass with exactly one hit wins, several hits are ambiguous.
-  for (int pass = 0; pass < 3; ++pass) {
+  // Four passes, strictest first; a pass with exactly one hit wins, several hits are ambiguous.
+  // The last matches a query without extension against the names' stems.
+  for (int pass = 0; pass < 4; ++pass) {
     std::vector<int> hits;
     for (size_t i = 0; i < cams.size(); ++i) {
       const Camera& c = cams[i];
       bool hit = pass == 0   ? c.name == query
                  : pass == 1 ? !c.file_path.empty() && strip_dot_slash(c.file_path) == q_path
-                             : file_name_of(c.name) == q_file;
+                 : pass == 2 ? file_name_of(c.name) == q_file
+                             : stem_of(c.name) == q_file && stem_of(c.name) != file_name_of(c.name);
       if (hit) hits.push_back(static_cast<int>(i));
     }
     if (hits.size() == 1) return {hits[0], {}};
@@ -57,12 +66,43 @@ const char* camera_model_name(CameraModel model) {
       return "OPENCV";
     case CameraModel::kOpenCVFisheye:
       return "OPENCV_FISHEYE";
+    case CameraModel::kSimpleRadial:
+      return "SIMPLE_RADIAL";
+    case CameraModel::kRadial:
+      return "RADIAL";
+    case CameraModel::kFullOpenCV:
+      return "FULL_OPENCV";
   }
   return "?";
 }
 
+bool camera_model_from_name(const std::string& name, CameraModel* model) {
+  for (CameraModel m :
+       {CameraModel::kPinhole, CameraModel::kOpenCV, CameraModel::kOpenCVFisheye,
+        CameraModel::kSimpleRadial, CameraModel::kRadial, CameraModel::kFullOpenCV}) {
+    if (name == camera_model_name(m)) {
+      *model = m;
+      return true;
+    }
+  }
+  return false;
+}
+
 int camera_model_distortion_count(CameraModel model) {
-  return model == CameraModel::kPinhole ? 0 : 4;
+  switch (model) {
+    case CameraModel::kPinhole:
+      return 0;
+    case CameraModel::kSimpleRadial:
+      return 1;
+    case CameraModel::kRadial:
+      return 2;
+    case CameraModel::kOpenCV:
+    case CameraModel::kOpenCVFisheye:
+      return 4;
+    case CameraModel::kFullOpenCV:
+      return 8;
+  }
+  return 0;
 }
 
 const char* camera_format_name(CameraFormat format) {
@@ -142,9 +182,15 @@ Status Camera::validate() const {
                 ", expected +1 (not a reflection)");
   }
   const int expected = camera_model_distortion_count(model);
-  if (model != CameraModel::kPinhole && static_cast<int>(distortion.size()) < expected) {
+  const int found = static_cast<int>(distortion.size());
+  if (model != CameraModel::kPinhole && found < expected) {
     return fail(std::string(camera_model_name(model)) + " needs " + std::to_string(expected) +
-                " distortion parameters, found " + std::to_string(distortion.size()));
+                " distortion parameters, found " + std::to_string(found));
+  }
+  const int most = model == CameraModel::kOpenCV ? 5 : expected;
+  if (model != CameraModel::kPinhole && found > most) {
+    return fail(std::string(camera_model_name(model)) + " takes at most " + std::to_string(most) +
+                " distortion parameters, found " + std::to_string(found));
   }
   for (size_t i = 0; i < distortion.size(); ++i) {
     if (!std::isfinite(distortion[i])) {
@@ -153,6 +199,38 @@ Status Camera::validate() const {
     }
   }
   return Status::ok();
+}
+
+bool Camera::has_distortion() const {
+  if (model == CameraModel::kPinhole) return false;
+  for (double d : distortion)
+    if (d != 0) return true;
+  return false;
+}
+
+std::string Camera::model_text() const {
+  static const char* const kNames[][8] = {
+      {},
+      {"k1", "k2", "p1", "p2", "k3"},
+      {"k1", "k2", "k3", "k4"},
+      {"k"},
+      {"k1", "k2"},
+      {"k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"},
+  };
+  std::string text = camera_model_name(model);
+  const auto& names = kNames[static_cast<int>(model)];
+  for (size_t i = 0; i < distortion.size() && i < 8; ++i) {
+    char buf[48];
+    std::snprintf(buf, sizeof buf, " %s=%.9g", names[i] ? names[i] : "?", distortion[i]);
+    text += buf;
+  }
+  return text;
+}
+
+Status refuse_distorted(const Camera& camera, const std::string& what, const std::string& remedy) {
+  if (!camera.has_distortion()) return Status::ok();
+  return Status::error("camera '" + camera.name + "' is " + camera.model_text() + ": " + what +
+                       " draws pinhole images and would ignore this lens distortion; " + remedy);
 }
 
 Eigen::Matrix3d Camera::K() const {
@@ -192,11 +270,19 @@ Result<Camera> CameraSet::find(const std::string& name) const {
   const std::string where = source.empty() ? "camera set" : source;
   if (!l.ambiguous.empty()) {
     std::string msg = where + ": camera name '" + name + "' is ambiguous, it matches";
-    for (size_t i = 0; i < l.ambiguous.size() && i < 5; ++i) {
+    for (size_t i = 0; i < l.ambiguous.size() && i < 8; ++i) {
       const Camera& c = cameras[l.ambiguous[i]];
       msg += std::string(i ? ", '" : " '") + (c.file_path.empty() ? c.name : c.file_path) + "'";
     }
-    return Status::error(msg + "; give the full path");
+    if (l.ambiguous.size() > 8) msg += ", ...";
+    return Status::error(msg + "; give the full name");
+  }
+  for (const RejectedCamera& r : rejected) {
+    if (!r.name.empty() && (r.name == name || file_name_of(r.name) == file_name_of(name) ||
+                            stem_of(r.name) == file_name_of(name))) {
+      return Status::error(where + ": camera '" + name + "' (entry " + std::to_string(r.index) +
+                           ") was left out as invalid: " + r.message);
+    }
   }
   std::string msg = where + ": no camera named '" + name + "' among " +
                     std::to_string(cameras.size()) + " cameras";

@@ -75,7 +75,8 @@ Status check_count(const ByteReader& r, uint64_t count, uint64_t min_bytes,
                        " bytes left (truncated or not a COLMAP file)");
 }
 
-Result<std::vector<ColmapCameraRecord>> parse_cameras_bin(const std::string& path) {
+// An unsupported model (its parameter count is known) is kept with `error` set when non-strict.
+Result<std::vector<ColmapCameraRecord>> parse_cameras_bin(const std::string& path, bool strict) {
   MACRO_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, read_file(path));
   ByteReader r(bytes, path);
   MACRO_ASSIGN_OR_RETURN(uint64_t count, r.read<uint64_t>(path + ": camera count"));
@@ -100,10 +101,10 @@ Result<std::vector<ColmapCameraRecord>> parse_cameras_bin(const std::string& pat
                            " (supported: " + detail::colmap_supported_models() + ")");
     }
     if (!c.model->supported) {
-      return Status::error(c.where + ": camera " + std::to_string(id) + ": camera model " +
-                           c.model->name + " (id " + std::to_string(model_id) +
-                           ") is not supported (supported: " + detail::colmap_supported_models() +
-                           ")");
+      c.error = c.where + ": camera " + std::to_string(id) + ": camera model " + c.model->name +
+                " (id " + std::to_string(model_id) +
+                ") is not supported (supported: " + detail::colmap_supported_models() + ")";
+      if (strict) return Status::error(c.error);
     }
     c.params.resize(c.model->num_params);
     for (int k = 0; k < c.model->num_params; ++k) {
@@ -155,9 +156,9 @@ Result<std::vector<ColmapImageRecord>> parse_images_bin(const std::string& path)
 
 }  // namespace
 
-Result<CameraSet> load_colmap_binary(const std::string& cameras_bin,
-                                     const std::string& images_bin) {
-  MACRO_ASSIGN_OR_RETURN(auto cams, parse_cameras_bin(cameras_bin));
+Result<CameraSet> load_colmap_binary(const std::string& cameras_bin, const std::string& images_bin,
+                                     const CameraLoadOptions& options) {
+  MACRO_ASSIGN_OR_RETURN(auto cams, parse_cameras_bin(cameras_bin, options.strict));
   MACRO_ASSIGN_OR_RETURN(auto images, parse_images_bin(images_bin));
   // A model without images gives no cameras; every caller needs at least one, so an image count
   // of 0 is refused here, naming the file, instead of failing later as "no camera named ...".
@@ -167,7 +168,7 @@ Result<CameraSet> load_colmap_binary(const std::string& cameras_bin,
   const size_t slash = cameras_bin.find_last_of('/');
   const std::string folder =
       slash == std::string::npos ? cameras_bin : cameras_bin.substr(0, slash);
-  return detail::assemble_colmap(cams, images, cameras_bin, folder);
+  return detail::assemble_colmap(cams, images, cameras_bin, folder, options);
 }
 
 }  // namespace macro::gs

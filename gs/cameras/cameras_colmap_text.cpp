@@ -81,7 +81,41 @@ Status bad_token(const std::string& where, const char* field, std::string_view t
                        std::string(tok) + "'");
 }
 
-Result<std::vector<ColmapCameraRecord>> parse_cameras_txt(const std::string& path) {
+// One cameras.txt line after its CAMERA_ID: model, size and parameters into `c`.
+Status parse_camera_fields(const std::vector<std::string_view>& tok, const std::string& where,
+                           ColmapCameraRecord& c) {
+  const std::string model(tok[1]);
+  c.model = detail::colmap_model_by_name(model);
+  if (!c.model) {
+    return Status::error(where + ": camera " + std::to_string(c.id) + ": unknown camera model '" +
+                         model + "' (supported: " + detail::colmap_supported_models() + ")");
+  }
+  if (!c.model->supported) {
+    return Status::error(where + ": camera " + std::to_string(c.id) + ": camera model " + model +
+                         " is not supported (supported: " + detail::colmap_supported_models() +
+                         ")");
+  }
+  if (!parse_int(tok[2], &c.width)) return bad_token(where, "WIDTH", tok[2], "an integer");
+  if (!parse_int(tok[3], &c.height)) return bad_token(where, "HEIGHT", tok[3], "an integer");
+  const size_t np = tok.size() - 4;
+  if (np != size_t(c.model->num_params)) {
+    return Status::error(where + ": camera " + std::to_string(c.id) + ": " + model + " expects " +
+                         std::to_string(c.model->num_params) + " parameters, found " +
+                         std::to_string(np));
+  }
+  c.params.resize(np);
+  for (size_t k = 0; k < np; ++k) {
+    if (!parse_double(tok[4 + k], &c.params[k])) {
+      return bad_token(where, ("PARAMS[" + std::to_string(k) + "]").c_str(), tok[4 + k],
+                       "a number");
+    }
+  }
+  return Status::ok();
+}
+
+// A line whose CAMERA_ID reads is one camera; when the rest is bad it is kept with `error` set
+// (non-strict), so only the images using it are rejected.
+Result<std::vector<ColmapCameraRecord>> parse_cameras_txt(const std::string& path, bool strict) {
   MACRO_ASSIGN_OR_RETURN(std::string text, read_text_file(path));
   std::vector<ColmapCameraRecord> cams;
   const auto lines = split_lines(text);
@@ -90,38 +124,19 @@ Result<std::vector<ColmapCameraRecord>> parse_cameras_txt(const std::string& pat
     if (line.empty() || line[0] == '#') continue;
     const std::string where = at_line(path, li);
     const auto tok = tokens(line);
-    if (tok.size() < 4) {
-      return Status::error(where + ": expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS..., found " +
-                           std::to_string(tok.size()) + " fields");
-    }
     ColmapCameraRecord c;
     c.where = where;
-    if (!parse_int(tok[0], &c.id)) return bad_token(where, "CAMERA_ID", tok[0], "an integer");
-    const std::string model(tok[1]);
-    c.model = detail::colmap_model_by_name(model);
-    if (!c.model) {
-      return Status::error(where + ": camera " + std::to_string(c.id) + ": unknown camera model '" +
-                           model + "' (supported: " + detail::colmap_supported_models() + ")");
-    }
-    if (!c.model->supported) {
-      return Status::error(where + ": camera " + std::to_string(c.id) + ": camera model " + model +
-                           " is not supported (supported: " + detail::colmap_supported_models() +
-                           ")");
-    }
-    if (!parse_int(tok[2], &c.width)) return bad_token(where, "WIDTH", tok[2], "an integer");
-    if (!parse_int(tok[3], &c.height)) return bad_token(where, "HEIGHT", tok[3], "an integer");
-    const size_t np = tok.size() - 4;
-    if (np != size_t(c.model->num_params)) {
-      return Status::error(where + ": camera " + std::to_string(c.id) + ": " + model + " expects " +
-                           std::to_string(c.model->num_params) + " parameters, found " +
-                           std::to_string(np));
-    }
-    c.params.resize(np);
-    for (size_t k = 0; k < np; ++k) {
-      if (!parse_double(tok[4 + k], &c.params[k])) {
-        return bad_token(where, ("PARAMS[" + std::to_string(k) + "]").c_str(), tok[4 + k],
-                         "a number");
-      }
+    if (tok.empty() || !parse_int(tok[0], &c.id))
+      return bad_token(where, "CAMERA_ID", tok.empty() ? "" : tok[0], "an integer");
+    Status s = tok.size() < 4
+                   ? Status::error(where + ": expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS..., " +
+                                   "found " + std::to_string(tok.size()) + " fields")
+                   : parse_camera_fields(tok, where, c);
+    if (!s) {
+      if (strict) return s;
+      c.model = nullptr;
+      c.params.clear();
+      c.error = s.message();
     }
     cams.push_back(std::move(c));
   }
@@ -139,37 +154,46 @@ bool is_points_line(std::string_view line) {
   return true;
 }
 
-Result<std::vector<ColmapImageRecord>> parse_images_txt(const std::string& path) {
+// One image line of images.txt into `im`.
+Status parse_image_line(std::string_view line, const std::string& where, ColmapImageRecord& im) {
+  static const char* kFields[] = {"IMAGE_ID", "QW", "QX", "QY",       "QZ",
+                                  "TX",       "TY", "TZ", "CAMERA_ID"};
+  std::string_view rest;
+  const auto tok = tokens(line, 9, &rest);
+  if (tok.size() == 9) im.name = std::string(rest);
+  if (tok.size() < 9 || rest.empty()) {
+    return Status::error(where +
+                         ": expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, found '" +
+                         std::string(line.substr(0, 80)) + "'");
+  }
+  if (!parse_int(tok[0], &im.id)) return bad_token(where, kFields[0], tok[0], "an integer");
+  for (int k = 0; k < 4; ++k) {
+    if (!parse_double(tok[1 + k], &im.q[k]))
+      return bad_token(where, kFields[1 + k], tok[1 + k], "a number");
+  }
+  for (int k = 0; k < 3; ++k) {
+    if (!parse_double(tok[5 + k], &im.t[k]))
+      return bad_token(where, kFields[5 + k], tok[5 + k], "a number");
+  }
+  if (!parse_int(tok[8], &im.camera_id)) return bad_token(where, kFields[8], tok[8], "an integer");
+  return Status::ok();
+}
+
+// Image lines that do not read are rejected (non-strict) with their position among the image
+// entries; their points line is skipped all the same. A bad points line breaks the file's
+// two-line structure and is always an error.
+Result<std::vector<ColmapImageRecord>> parse_images_txt(const std::string& path, bool strict,
+                                                        std::vector<RejectedCamera>* rejected) {
   MACRO_ASSIGN_OR_RETURN(std::string text, read_text_file(path));
   std::vector<ColmapImageRecord> images;
   const auto lines = split_lines(text);
-  static const char* kFields[] = {"IMAGE_ID", "QW", "QX", "QY",       "QZ",
-                                  "TX",       "TY", "TZ", "CAMERA_ID"};
+  int entry = 0;  // image entries seen, valid or not
   for (size_t li = 0; li < lines.size(); ++li) {
     const std::string_view line = trim(lines[li]);
     if (line.empty() || line[0] == '#') continue;
-    const std::string where = at_line(path, li);
-    std::string_view rest;
-    const auto tok = tokens(line, 9, &rest);
-    if (tok.size() < 9 || rest.empty()) {
-      return Status::error(where +
-                           ": expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, found '" +
-                           std::string(line.substr(0, 80)) + "'");
-    }
     ColmapImageRecord im;
-    im.where = where;
-    if (!parse_int(tok[0], &im.id)) return bad_token(where, kFields[0], tok[0], "an integer");
-    for (int k = 0; k < 4; ++k) {
-      if (!parse_double(tok[1 + k], &im.q[k]))
-        return bad_token(where, kFields[1 + k], tok[1 + k], "a number");
-    }
-    for (int k = 0; k < 3; ++k) {
-      if (!parse_double(tok[5 + k], &im.t[k]))
-        return bad_token(where, kFields[5 + k], tok[5 + k], "a number");
-    }
-    if (!parse_int(tok[8], &im.camera_id))
-      return bad_token(where, kFields[8], tok[8], "an integer");
-    im.name = std::string(rest);
+    im.where = at_line(path, li);
+    Status s = parse_image_line(line, im.where, im);
     // The next line, whatever it holds, is this image's 2D points line.
     if (li + 1 < lines.size()) {
       ++li;
@@ -180,6 +204,12 @@ Result<std::vector<ColmapImageRecord>> parse_images_txt(const std::string& path)
                              std::string(trim(lines[li]).substr(0, 80)) + "'");
       }
     }
+    const int index = entry++;
+    if (!s) {
+      if (strict) return s;
+      rejected->push_back({index, im.name, s.message()});
+      continue;
+    }
     images.push_back(std::move(im));
   }
   return images;
@@ -187,19 +217,21 @@ Result<std::vector<ColmapImageRecord>> parse_images_txt(const std::string& path)
 
 }  // namespace
 
-Result<CameraSet> load_colmap_text(const std::string& cameras_txt, const std::string& images_txt) {
-  MACRO_ASSIGN_OR_RETURN(auto cams, parse_cameras_txt(cameras_txt));
-  MACRO_ASSIGN_OR_RETURN(auto images, parse_images_txt(images_txt));
+Result<CameraSet> load_colmap_text(const std::string& cameras_txt, const std::string& images_txt,
+                                   const CameraLoadOptions& options) {
+  MACRO_ASSIGN_OR_RETURN(auto cams, parse_cameras_txt(cameras_txt, options.strict));
+  std::vector<RejectedCamera> rejected;
+  MACRO_ASSIGN_OR_RETURN(auto images, parse_images_txt(images_txt, options.strict, &rejected));
   // A model without images gives no cameras; every caller needs at least one, so an empty file
   // (or one holding only comments) is refused here, naming it, instead of failing later as "no
   // camera named ...".
-  if (images.empty())
+  if (images.empty() && rejected.empty())
     return Status::error(images_txt + ": no images: a COLMAP model needs at least one " +
                          "registered image (line 'IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME')");
   const size_t slash = cameras_txt.find_last_of('/');
   const std::string folder =
       slash == std::string::npos ? cameras_txt : cameras_txt.substr(0, slash);
-  return detail::assemble_colmap(cams, images, cameras_txt, folder);
+  return detail::assemble_colmap(cams, images, cameras_txt, folder, options, std::move(rejected));
 }
 
 }  // namespace macro::gs

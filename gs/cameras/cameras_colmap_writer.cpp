@@ -18,24 +18,40 @@ std::string g17(double v) {
   return buf;
 }
 
-// The COLMAP model name and parameter list of a camera.
+// The COLMAP model name and parameter list of a camera. SIMPLE_RADIAL / RADIAL need fx = fy
+// (else they are written as the equivalent OPENCV); OPENCV with k3 is written as the equivalent
+// FULL_OPENCV (k4 = k5 = k6 = 0).
 Result<std::pair<std::string, std::vector<double>>> colmap_params(const Camera& c,
                                                                   const std::string& where) {
   std::vector<double> p = {c.fx, c.fy, c.cx, c.cy};
+  const std::vector<double>& d = c.distortion;
+  auto with = [&](const char* model, std::vector<double> params, std::vector<double> coefs) {
+    params.insert(params.end(), coefs.begin(), coefs.end());
+    return std::make_pair(std::string(model), params);
+  };
+  const size_t need = size_t(camera_model_distortion_count(c.model));
+  if (d.size() < need || d.size() > (c.model == CameraModel::kOpenCV ? 5 : need)) {
+    return Status::error(where + ": camera '" + c.name + "': " + camera_model_name(c.model) +
+                         " takes " + std::to_string(need) + " distortion parameters, found " +
+                         std::to_string(d.size()));
+  }
   switch (c.model) {
     case CameraModel::kPinhole:
       return std::make_pair(std::string("PINHOLE"), p);
+    case CameraModel::kSimpleRadial:
+      if (c.fx == c.fy) return with("SIMPLE_RADIAL", {c.fx, c.cx, c.cy}, d);
+      return with("OPENCV", p, {d[0], 0, 0, 0});
+    case CameraModel::kRadial:
+      if (c.fx == c.fy) return with("RADIAL", {c.fx, c.cx, c.cy}, d);
+      return with("OPENCV", p, {d[0], d[1], 0, 0});
     case CameraModel::kOpenCV:
-    case CameraModel::kOpenCVFisheye: {
-      const bool fisheye = c.model == CameraModel::kOpenCVFisheye;
-      if (c.distortion.size() != 4) {
-        return Status::error(
-            where + ": camera '" + c.name + "': COLMAP " + (fisheye ? "OPENCV_FISHEYE" : "OPENCV") +
-            " takes 4 distortion parameters, found " + std::to_string(c.distortion.size()));
-      }
-      p.insert(p.end(), c.distortion.begin(), c.distortion.end());
-      return std::make_pair(std::string(fisheye ? "OPENCV_FISHEYE" : "OPENCV"), p);
-    }
+      if (d.size() == 5 && d[4] != 0)
+        return with("FULL_OPENCV", p, {d[0], d[1], d[2], d[3], d[4], 0, 0, 0});
+      return with("OPENCV", p, {d[0], d[1], d[2], d[3]});
+    case CameraModel::kFullOpenCV:
+      return with("FULL_OPENCV", p, d);
+    case CameraModel::kOpenCVFisheye:
+      return with("OPENCV_FISHEYE", p, d);
   }
   return Status::error(where + ": camera '" + c.name + "': unknown model");
 }

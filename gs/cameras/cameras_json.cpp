@@ -1,12 +1,14 @@
 // Our camera JSON (the golden cameras.json layout): a list of
 //   {name, width, height, fx, fy, cx, cy, world_to_camera: 4x4 row-major OpenCV w2c}
-// plus optional "model" ("PINHOLE", "OPENCV", "OPENCV_FISHEYE"), "distortion" (list) and
-// "file_path". Already in the internal convention, so loading is a copy.
+// plus optional "model" (PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV, OPENCV_FISHEYE),
+// "distortion" (list, the model's coefficients in COLMAP's order) and "file_path". Already in the
+// internal convention, so loading is a copy. Non-strict loading leaves invalid entries out.
 #include <cmath>
 
 #include "attention/runtime/file_io.h"
 #include "gs/cameras/camera.h"
 #include "gs/cameras/cameras_json_fields.h"
+#include "gs/cameras/cameras_lenient.h"
 
 namespace macro::gs {
 namespace {
@@ -14,18 +16,20 @@ namespace {
 using detail::Json;
 
 Result<CameraModel> model_from_name(const std::string& name, const std::string& where) {
-  if (name == "PINHOLE") return CameraModel::kPinhole;
-  if (name == "OPENCV") return CameraModel::kOpenCV;
-  if (name == "OPENCV_FISHEYE") return CameraModel::kOpenCVFisheye;
+  CameraModel m;
+  if (camera_model_from_name(name, &m)) return m;
   return Status::error(where + ": field 'model': unknown camera model '" + name +
-                       "' (expected PINHOLE, OPENCV or OPENCV_FISHEYE)");
+                       "' (expected PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV or "
+                       "OPENCV_FISHEYE)");
 }
 
-Result<Camera> camera_from_json(const Json& e, const std::string& where0) {
+// `name` receives the entry's name as soon as it is read (for the rejection list).
+Result<Camera> camera_from_json(const Json& e, const std::string& where0, std::string* name) {
   if (!e.is_object())
     return Status::error(where0 + ": expected an object, found " + detail::describe_json(e));
   Camera c;
   MACRO_ASSIGN_OR_RETURN(c.name, detail::string_field(e, "name", where0));
+  *name = c.name;
   const std::string where = where0 + " '" + c.name + "'";
   MACRO_ASSIGN_OR_RETURN(c.width, detail::int_field(e, "width", where));
   MACRO_ASSIGN_OR_RETURN(c.height, detail::int_field(e, "height", where));
@@ -66,7 +70,7 @@ Result<Camera> camera_from_json(const Json& e, const std::string& where0) {
 
 }  // namespace
 
-Result<CameraSet> load_cameras_json(const std::string& path) {
+Result<CameraSet> load_cameras_json(const std::string& path, const CameraLoadOptions& options) {
   MACRO_ASSIGN_OR_RETURN(Json root, detail::parse_json_file(path));
   if (!root.is_array()) {
     return Status::error(path + ": expected a list of cameras, found " +
@@ -76,12 +80,17 @@ Result<CameraSet> load_cameras_json(const std::string& path) {
   set.source = path;
   set.cameras.reserve(root.size());
   for (size_t i = 0; i < root.size(); ++i) {
-    MACRO_ASSIGN_OR_RETURN(Camera c,
-                           camera_from_json(root[i], path + ": [" + std::to_string(i) + "]"));
-    MACRO_TRY(c.validate().with_context(path));
-    set.cameras.push_back(std::move(c));
+    std::string name;
+    Result<Camera> c = camera_from_json(root[i], path + ": [" + std::to_string(i) + "]", &name);
+    Status s = c ? c->validate().with_context(path + ": [" + std::to_string(i) + "]") : c.status();
+    if (!s) {
+      if (options.strict) return s;
+      set.rejected.push_back({int(i), name, s.message()});
+      continue;
+    }
+    set.cameras.push_back(std::move(*c));
   }
-  return set;
+  return detail::finish_lenient_load(std::move(set), path);
 }
 
 Status save_cameras_json(const CameraSet& set, const std::string& path) {

@@ -147,4 +147,32 @@ Result<Eigen::Matrix4d> matrix_value(const Json& value, const std::string& what,
   return m;
 }
 
+Result<CameraModel> intrinsics_model(const std::string& name, const std::string& where) {
+  if (name == "PINHOLE" || name == "SIMPLE_PINHOLE" || name == "PERSPECTIVE")
+    return CameraModel::kPinhole;
+  CameraModel m;
+  if (camera_model_from_name(name, &m)) return m;
+  return Status::error(where + ": field 'camera_model': camera model '" + name +
+                       "' is not supported (supported: PINHOLE, SIMPLE_PINHOLE, SIMPLE_RADIAL, "
+                       "RADIAL, OPENCV, FULL_OPENCV, OPENCV_FISHEYE)");
+}
+
+std::vector<const char*> distortion_keys(CameraModel model) {
+  switch (model) {
+    case CameraModel::kPinhole:
+      return {};
+    case CameraModel::kSimpleRadial:
+      return {"k1"};
+    case CameraModel::kRadial:
+      return {"k1", "k2"};
+    case CameraModel::kOpenCV:
+      return {"k1", "k2", "p1", "p2"};
+    case CameraModel::kFullOpenCV:
+      return {"k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"};
+    case CameraModel::kOpenCVFisheye:
+      return {"k1", "k2", "k3", "k4"};
+  }
+  return {};
+}
+
 }  // namespace macro::gs::detail

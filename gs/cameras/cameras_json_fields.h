@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "attention/runtime/status.h"
+#include "gs/cameras/camera.h"
 
 namespace macro::gs::detail {
 
@@ -31,5 +32,13 @@ Result<std::vector<std::string>> string_list_field(const Json& obj, const char* 
                                                    const std::string& where);
 // A 4x4 (or, if allow_3x4, 3x4 completed with 0 0 0 1) list of rows of numbers.
 Result<Eigen::Matrix4d> matrix_value(const Json& value, const std::string& what, bool allow_3x4);
+
+// A `camera_model` string of nerfstudio / split intrinsics: PINHOLE, SIMPLE_PINHOLE, PERSPECTIVE
+// (pinhole) or a model camera.h names. The error names `where` and the field.
+Result<CameraModel> intrinsics_model(const std::string& name, const std::string& where);
+// The intrinsics keys that hold a model's coefficients, in Camera::distortion order:
+// SIMPLE_RADIAL k1; RADIAL k1 k2; OPENCV k1 k2 p1 p2 (k3 is added by the loaders when non-zero);
+// FULL_OPENCV k1 k2 p1 p2 k3 k4 k5 k6; OPENCV_FISHEYE k1 k2 k3 k4.
+std::vector<const char*> distortion_keys(CameraModel model);
 
 }  // namespace macro::gs::detail

@@ -31,7 +31,7 @@ Result<CameraSet> load_folder(const std::string& folder, const CameraLoadOptions
   std::string dir = folder;
   while (dir.size() > 1 && dir.back() == '/') dir.pop_back();
   for (const char* sub : {"", "/sparse/0", "/sparse", "/colmap/sparse/0"}) {
-    if (has_colmap_files(dir + sub)) return load_colmap_sparse(dir + sub, format);
+    if (has_colmap_files(dir + sub)) return load_colmap_sparse(dir + sub, format, options);
   }
   if (file_exists(dir + "/transforms.json")) {
     if (format) *format = CameraFormat::kNerfstudio;
@@ -39,7 +39,7 @@ Result<CameraSet> load_folder(const std::string& folder, const CameraLoadOptions
   }
   if (file_exists(dir + "/cameras.json")) {
     if (format) *format = CameraFormat::kJson;
-    return load_cameras_json(dir + "/cameras.json");
+    return load_cameras_json(dir + "/cameras.json", options);
   }
   return Status::error(folder +
                        ": no cameras found (looked for a COLMAP model in ., sparse/0, "
@@ -60,17 +60,17 @@ Result<CameraSet> load_cameras(const std::string& path, const CameraLoadOptions&
   const std::string name = file_name_of(path);
   for (const char* colmap :
        {"cameras.txt", "images.txt", "points3D.txt", "cameras.bin", "images.bin", "points3D.bin"}) {
-    if (name == colmap) return load_colmap_sparse(parent_dir(path), format);
+    if (name == colmap) return load_colmap_sparse(parent_dir(path), format, options);
   }
 
   MACRO_ASSIGN_OR_RETURN(detail::Json root, detail::parse_json_file(path));
   if (root.is_array()) {
     if (format) *format = CameraFormat::kJson;
-    return load_cameras_json(path);
+    return load_cameras_json(path, options);
   }
   if (root.is_object() && root.contains("closeup_poses")) {
     if (format) *format = CameraFormat::kCloseupSplit;
-    MACRO_ASSIGN_OR_RETURN(CloseupSplit split, load_closeup_split(path));
+    MACRO_ASSIGN_OR_RETURN(CloseupSplit split, load_closeup_split(path, options));
     return std::move(split.closeups);
   }
   if (root.is_object() && root.contains("frames")) {

@@ -3,7 +3,7 @@
 //
 //   frames[i].transform_matrix  camera-to-world, OpenGL camera axes (x right, y up, z back), 4x4 or
 //                               3x4, in the transforms.json world frame.
-//   intrinsics                  fl_x fl_y cx cy w h camera_model k1 k2 [k3 k4] p1 p2, per frame or
+//   intrinsics                  fl_x fl_y cx cy w h camera_model k1..k6 p1 p2, per frame or
 //                               at the top level (a frame's own value wins). Blender files give
 //                               camera_angle_x (and maybe camera_angle_y) instead:
 //                               fx = 0.5 w / tan(camera_angle_x / 2).
@@ -23,6 +23,7 @@
 
 #include "gs/cameras/camera.h"
 #include "gs/cameras/cameras_json_fields.h"
+#include "gs/cameras/cameras_lenient.h"
 
 namespace macro::gs {
 namespace {
@@ -73,16 +74,6 @@ Result<double> number(const Json& frame, const Json& root, const char* key,
   return detail::number_field(root, key, where + " (top level)");
 }
 
-Result<CameraModel> parse_model(const std::string& name, const std::string& where) {
-  if (name == "PINHOLE" || name == "SIMPLE_PINHOLE" || name == "PERSPECTIVE")
-    return CameraModel::kPinhole;
-  if (name == "OPENCV") return CameraModel::kOpenCV;
-  if (name == "OPENCV_FISHEYE") return CameraModel::kOpenCVFisheye;
-  return Status::error(where + ": field 'camera_model': camera model '" + name +
-                       "' is not supported (supported: PINHOLE, SIMPLE_PINHOLE, OPENCV, "
-                       "OPENCV_FISHEYE)");
-}
-
 // The inverse world map of applied_transform as (M^-1, a, Q^T): x_colmap = M^-1 (x_ns - a).
 struct WorldUndo {
   Eigen::Matrix3d m_inv = Eigen::Matrix3d::Identity();
@@ -112,14 +103,16 @@ Result<WorldUndo> parse_applied_transform(const Json& value, const std::string& 
   return u;
 }
 
+// `name` receives the frame's name as soon as it is read (for the rejection list).
 Result<Camera> frame_camera(const Json& frame, const Json& root, const std::string& where0,
-                            const std::string& base_dir, const WorldUndo* undo) {
+                            const std::string& base_dir, const WorldUndo* undo, std::string* name) {
   if (!frame.is_object()) {
     return Status::error(where0 + ": expected an object, found " + detail::describe_json(frame));
   }
   Camera c;
   MACRO_ASSIGN_OR_RETURN(c.file_path, detail::string_field(frame, "file_path", where0));
   c.name = file_name_of(c.file_path);
+  *name = c.name;
   const std::string where = where0 + " '" + c.file_path + "'";
 
   // Size: w/h, else the PNG header (Blender files).
@@ -176,24 +169,19 @@ Result<Camera> frame_camera(const Json& frame, const Json& root, const std::stri
       return Status::error(where + ": field 'camera_model': expected a string, found " +
                            detail::describe_json(*m));
     }
-    MACRO_ASSIGN_OR_RETURN(c.model, parse_model(m->get<std::string>(), where));
+    MACRO_ASSIGN_OR_RETURN(c.model, detail::intrinsics_model(m->get<std::string>(), where));
   }
   auto coef = [&](const char* key) -> Result<double> {
     if (!lookup(frame, root, key)) return 0.0;
     return number(frame, root, key, where);
   };
+  for (const char* key : detail::distortion_keys(c.model)) {
+    MACRO_ASSIGN_OR_RETURN(double v, coef(key));
+    c.distortion.push_back(v);
+  }
   if (c.model == CameraModel::kOpenCV) {
-    for (const char* key : {"k1", "k2", "p1", "p2"}) {
-      MACRO_ASSIGN_OR_RETURN(double v, coef(key));
-      c.distortion.push_back(v);
-    }
     MACRO_ASSIGN_OR_RETURN(double k3, coef("k3"));
     if (k3 != 0) c.distortion.push_back(k3);
-  } else if (c.model == CameraModel::kOpenCVFisheye) {
-    for (const char* key : {"k1", "k2", "k3", "k4"}) {
-      MACRO_ASSIGN_OR_RETURN(double v, coef(key));
-      c.distortion.push_back(v);
-    }
   }
 
   // Pose.
@@ -238,12 +226,17 @@ Result<CameraSet> load_nerfstudio(const std::string& path, const CameraLoadOptio
   set.cameras.reserve(frames.size());
   const std::string base = parent_dir(path);
   for (size_t i = 0; i < frames.size(); ++i) {
-    MACRO_ASSIGN_OR_RETURN(
-        Camera c, frame_camera(frames[i], root, path + ": frames[" + std::to_string(i) + "]", base,
-                               has_undo ? &undo : nullptr));
-    set.cameras.push_back(std::move(c));
+    std::string name;
+    Result<Camera> c = frame_camera(frames[i], root, path + ": frames[" + std::to_string(i) + "]",
+                                    base, has_undo ? &undo : nullptr, &name);
+    if (!c) {
+      if (options.strict) return c.status();
+      set.rejected.push_back({int(i), name, c.status().message()});
+      continue;
+    }
+    set.cameras.push_back(std::move(*c));
   }
-  return set;
+  return detail::finish_lenient_load(std::move(set), path);
 }
 
 }  // namespace macro::gs

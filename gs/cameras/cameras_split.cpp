@@ -1,5 +1,6 @@
 // DL3DV-Closeup / MobileClose split JSON (docs/spec/macro-method.md §7):
-//   scene, data_factor, intrinsics {w, h, fl_x, fl_y, cx, cy, k1, k2, p1, p2, camera_model},
+//   scene, data_factor, intrinsics {w, h, fl_x, fl_y, cx, cy, k1, k2, p1, p2, camera_model} (and
+//   k3..k6 for the models that take them),
 //   training_frames (MobileClose: train_frames), optional closeup_frames,
 //   closeup_eval_pairs [{training_frame, closeup_frame, depth_ratio, iou, angle_deg, pair_score}],
 //   closeup_poses {frame: 4x4 camera-to-world, OpenGL axes, COLMAP world frame}.
@@ -7,6 +8,7 @@
 // converted OpenGL c2w -> OpenCV w2c (negate columns 1 and 2, invert). No world transform.
 #include "gs/cameras/camera.h"
 #include "gs/cameras/cameras_json_fields.h"
+#include "gs/cameras/cameras_lenient.h"
 
 namespace macro::gs {
 namespace {
@@ -33,21 +35,14 @@ Result<Camera> parse_intrinsics(const Json& root, const std::string& path) {
   if (in.contains("camera_model")) {
     MACRO_ASSIGN_OR_RETURN(model, detail::string_field(in, "camera_model", where));
   }
-  if (model == "PINHOLE" || model == "SIMPLE_PINHOLE") {
-    c.model = CameraModel::kPinhole;
-  } else if (model == "OPENCV" || model == "OPENCV_FISHEYE") {
-    const bool fisheye = model == "OPENCV_FISHEYE";
-    c.model = fisheye ? CameraModel::kOpenCVFisheye : CameraModel::kOpenCV;
-    static const char* const kOpenCV[] = {"k1", "k2", "p1", "p2"};
-    static const char* const kFisheye[] = {"k1", "k2", "k3", "k4"};
-    for (const char* key : fisheye ? kFisheye : kOpenCV) {
-      MACRO_ASSIGN_OR_RETURN(double v, detail::number_field_or(in, key, 0.0, where));
-      c.distortion.push_back(v);
-    }
-  } else {
-    return Status::error(where + ": field 'camera_model': camera model '" + model +
-                         "' is not supported (supported: PINHOLE, SIMPLE_PINHOLE, OPENCV, "
-                         "OPENCV_FISHEYE)");
+  MACRO_ASSIGN_OR_RETURN(c.model, detail::intrinsics_model(model, where));
+  for (const char* key : detail::distortion_keys(c.model)) {
+    MACRO_ASSIGN_OR_RETURN(double v, detail::number_field_or(in, key, 0.0, where));
+    c.distortion.push_back(v);
+  }
+  if (c.model == CameraModel::kOpenCV) {
+    MACRO_ASSIGN_OR_RETURN(double k3, detail::number_field_or(in, "k3", 0.0, where));
+    if (k3 != 0) c.distortion.push_back(k3);
   }
   return c;
 }
@@ -68,7 +63,7 @@ Result<CloseupEvalPair> parse_pair(const Json& p, const std::string& where) {
 
 }  // namespace
 
-Result<CloseupSplit> load_closeup_split(const std::string& path) {
+Result<CloseupSplit> load_closeup_split(const std::string& path, const CameraLoadOptions& options) {
   MACRO_ASSIGN_OR_RETURN(Json root, detail::parse_json_file(path));
   if (!root.is_object()) {
     return Status::error(path + ": expected a split object, found " + detail::describe_json(root));
@@ -117,16 +112,27 @@ Result<CloseupSplit> load_closeup_split(const std::string& path) {
                          detail::describe_json(poses));
   }
   split.closeups.source = path;
-  for (auto it = poses.begin(); it != poses.end(); ++it) {
+  int index = 0;
+  for (auto it = poses.begin(); it != poses.end(); ++it, ++index) {
     const std::string where = path + ": closeup_poses['" + it.key() + "']";
-    MACRO_ASSIGN_OR_RETURN(Eigen::Matrix4d c2w_gl, detail::matrix_value(it.value(), where, false));
+    Result<Eigen::Matrix4d> c2w_gl = detail::matrix_value(it.value(), where, false);
     Camera c = intr;
     c.name = it.key();
     c.file_path = it.key();
-    c.set_world_to_camera(opencv_w2c_from_opengl_c2w(c2w_gl));
-    MACRO_TRY(c.validate().with_context(path));
+    Status s = c2w_gl.status();
+    if (s) {
+      c.set_world_to_camera(opencv_w2c_from_opengl_c2w(*c2w_gl));
+      s = c.validate().with_context(path);
+    }
+    if (!s) {
+      if (options.strict) return s;
+      split.closeups.rejected.push_back({index, it.key(), s.message()});
+      continue;
+    }
     split.closeups.cameras.push_back(std::move(c));
   }
+  MACRO_ASSIGN_OR_RETURN(split.closeups,
+                         detail::finish_lenient_load(std::move(split.closeups), path));
   return split;
 }
 

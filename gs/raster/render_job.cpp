@@ -164,11 +164,27 @@ Result<RenderJobResult> run_render_job(const RenderJob& job) {
   RenderJobResult out;
   auto cloud = load_scene(scene_path, job.limits);
   if (!cloud) return cloud.status().with_context("--scene");
-  auto cameras = load_cameras(cameras_path);
+  auto cameras = load_cameras(cameras_path, job.camera_options);
   if (!cameras) return cameras.status().with_context("--cameras");
   auto camera = cameras->find(job.camera_name);
   if (!camera) return camera.status().with_context("--camera " + job.camera_name);
   if (Status s = camera->validate(); !s) return s.with_context(cameras_path);
+  for (const RejectedCamera& r : cameras->rejected) {
+    out.warnings.push_back("entry " + std::to_string(r.index) +
+                           (r.name.empty() ? std::string() : " '" + r.name + "'") +
+                           " left out (--strict makes this an error): " + r.message);
+  }
+  if (camera->has_distortion()) {
+    if (!job.ignore_distortion) {
+      return refuse_distorted(*camera, "macro render",
+                              "undistort the scene first (macro undistort --scene-dir DIR --out "
+                              "NEW_DIR) and render NEW_DIR's cameras, or pass "
+                              "--ignore-distortion to render it as a pinhole anyway")
+          .with_context(cameras_path);
+    }
+    out.warnings.push_back("camera '" + camera->name + "' is " + camera->model_text() +
+                           ": rendered as a pinhole, its distortion ignored (--ignore-distortion)");
+  }
   out.camera = *camera;
   out.gaussians = cloud->size();
   out.ms_load = ms_since(t0);

@@ -43,6 +43,11 @@ struct RenderJob {
   RenderOutputs outputs;
   RenderOptions options;
   LoadLimits limits;
+  // Strictness of the camera file (an invalid entry fails the load, or is left out and warned).
+  CameraLoadOptions camera_options;
+  // A camera with lens distortion is refused (the renderer draws pinhole images) unless this is
+  // set; then it is rendered as the pinhole with its fx fy cx cy, and a warning says so.
+  bool ignore_distortion = false;
 };
 
 struct RenderJobResult {
@@ -50,7 +55,8 @@ struct RenderJobResult {
   size_t gaussians = 0;
   RenderResult image;
   double ms_load = 0, ms_write = 0;
-  std::vector<std::string> written;  // the output files, in the order written
+  std::vector<std::string> written;   // the output files, in the order written
+  std::vector<std::string> warnings;  // rejected camera entries, distortion ignored
 };
 
 // Each output's folder exists and is writable and the paths are distinct. The message names the
