@@ -64,7 +64,7 @@ Status write_render_outputs(const RenderResult& image, const RenderOutputs& outp
                             RasterMode mode, std::vector<std::string>* written = nullptr);
 
 // A scene folder (as `macro synth` writes and data/scenes/default is) becomes its scene.ply, and
-// an empty cameras path its cameras.json. Errors name the folder and the missing file.
+// an empty cameras path its cameras.json. A SOG folder (holding meta.json) stays as it is. Errors name the folder and the missing file.
 Status resolve_scene_folder(std::string& scene_path, std::string& cameras_path);
 
 Result<RenderJobResult> run_render_job(const RenderJob& job);
