@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -398,4 +399,35 @@ TEST_CASE("gsplat: a checkpoint's splats load activated, and bad ones fail", "[f
   // A torch checkpoint that is not gsplat's.
   CHECK_THAT(load_error(dir + "basic_archive.pth"),
              Catch::Contains("basic_archive.pth") && Catch::Contains("splats.means"));
+}
+
+TEST_CASE("spz4: mutated version 4 and .sog files never crash the loaders",
+          "[formats][spz4][sog]") {
+  std::mt19937 rng(1234);
+  for (const char* name : {"tiny_v4.spz", "tiny.sog"}) {
+    auto good = read_file(fixture(name));
+    REQUIRE(good.is_ok());
+    size_t loaded = 0, refused = 0;
+    for (int trial = 0; trial < 400; ++trial) {
+      std::vector<uint8_t> b = *good;
+      if (trial % 4 == 0) {
+        b.resize(rng() % b.size());  // truncated
+      } else {
+        const int flips = 1 + static_cast<int>(rng() % 4);
+        for (int f = 0; f < flips; ++f) b[rng() % b.size()] = static_cast<uint8_t>(rng());
+      }
+      auto r = load_scene_from_memory(b.data(), b.size(), name);
+      if (!r.is_ok()) {
+        ++refused;
+        INFO(r.status().message());
+        CHECK(r.status().message().find(name) != std::string::npos);
+        continue;
+      }
+      ++loaded;
+      for (float o : r->opacity) CHECK((o >= 0.f && o <= 1.f));
+      for (float s : r->scale) CHECK(s > 0.f);
+    }
+    CHECK(refused > 0);
+    CHECK(loaded + refused == 400);
+  }
 }
