@@ -572,7 +572,7 @@ TEST_CASE("formats: .ply -> .splat and .spz round trips stay within quantisation
       CHECK(std::abs(0.5f + kShC0 * s.sh[i * 3 + c] - want) <= 0.5 / 255 + 1e-6);
     }
   CHECK(rotation_diff(s, a) <= 0.5 / 128 + 4e-3);
-  // .spz v3 with full 8-bit SH.
+  // .spz (version 4 by default) with full 8-bit SH.
   CHECK(z.sh_degree == 3);
   CHECK(max_abs_diff(z.position, a.position) <= 0.5 / 4096 + 1e-6);
   CHECK(max_log_diff(z.scale, a.scale) <= 1.0 / 32 + 1e-5);
