@@ -1,5 +1,6 @@
-// macro convert IN OUT: read any splat scene format (.ply, compressed .ply, .splat, .spz) and write
-// .ply, .splat or .spz (chosen by OUT's extension). Prints one summary line on stdout.
+// macro convert IN OUT: read any splat scene format (.ply, compressed .ply, .splat, .spz, SOG,
+// gsplat checkpoint) and write .ply, .splat or .spz (chosen by OUT's extension). Prints one summary
+// line on stdout.
 #include <climits>
 #include <cstdio>
 
@@ -13,15 +14,20 @@ int run_convert(std::vector<std::string> argv) {
   Args args(std::move(argv));
   if (args.flag("--help")) {
     std::printf(
-        "usage: macro convert IN OUT [--max-gaussians N] [--quiet]\n"
+        "usage: macro convert IN OUT [--spz-version 2|3|4] [--max-gaussians N] [--quiet]\n"
         "  IN   .ply (Inria/gsplat, binary or ascii), SuperSplat .compressed.ply, .splat, .spz\n"
-        "  OUT  .ply (Inria layout), .splat or .spz (v3), by extension\n");
+        "       (v2-v4), SOG (.sog zip, a folder with meta.json, or that meta.json), gsplat\n"
+        "       checkpoint (.pt)\n"
+        "  OUT  .ply (Inria layout), .splat (SH degree 0) or .spz, by extension\n"
+        "  --spz-version  .spz version to write (default 4, the reference library's current)\n");
     return 0;
   }
   if (Status s = apply_common_flags(args); !s) return fail("convert", s);
   gs::LoadLimits limits;
   limits.max_gaussians = static_cast<size_t>(
       args.int_or("--max-gaussians", static_cast<int>(limits.max_gaussians), 1, INT_MAX));
+  gs::SaveOptions save;
+  save.spz_version = args.int_or("--spz-version", save.spz_version, 2, 4);
   std::vector<std::string> files = args.positionals();
   if (Status s = args.finish(); !s) return fail("convert", s);
   if (files.size() != 2) {
@@ -32,10 +38,18 @@ int run_convert(std::vector<std::string> argv) {
   gs::LoadReport report;
   Result<gs::GaussianCloud> cloud = gs::load_scene(files[0], limits, &report);
   if (!cloud) return fail("convert", cloud.status());
-  if (Status s = gs::save_scene(*cloud, files[1]); !s) return fail("convert", s);
-  std::printf("%s (%s) -> %s: %zu Gaussians, SH degree %d, dropped %zu\n", files[0].c_str(),
-              gs::scene_format_name(report.format), files[1].c_str(), cloud->size(),
-              cloud->sh_degree, report.dropped_nonfinite);
+  if (Status s = gs::save_scene(*cloud, files[1], save); !s) return fail("convert", s);
+  // .splat has no SH bands above 0: say how much of the colour model was not written.
+  const std::string& out = files[1];
+  const bool to_splat = out.size() >= 6 && out.compare(out.size() - 6, 6, ".splat") == 0;
+  const int written_degree = to_splat ? 0 : cloud->sh_degree;
+  const int k_in = (cloud->sh_degree + 1) * (cloud->sh_degree + 1);
+  const int k_out = (written_degree + 1) * (written_degree + 1);
+  std::printf(
+      "%s (%s) -> %s: %zu Gaussians, SH degree %d -> %d (%d SH coefficients per channel "
+      "dropped), %zu Gaussians with NaN/Inf dropped\n",
+      files[0].c_str(), gs::scene_format_name(report.format), out.c_str(), cloud->size(),
+      cloud->sh_degree, written_degree, k_in - k_out, report.dropped_nonfinite);
   return 0;
 }
 

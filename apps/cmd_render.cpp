@@ -16,15 +16,16 @@ constexpr const char* kUsage =
     "         [--out-depth-png F.png] [--mode classic|antialiased|mip] [--background r,g,b]\n"
     "         [--sh-degree D] [--max-gaussians N] [--strict] [--ignore-distortion]\n"
     "         [--threads N] [--quiet]\n"
-    "  --scene      .ply (Inria/gsplat or SuperSplat compressed), .splat or .spz, or a folder\n"
+    "  --scene      .ply (Inria/gsplat or SuperSplat compressed), .splat, .spz, .sog, a SOG\n"
+    "               folder (meta.json), a gsplat checkpoint (.pt), or a folder\n"
     "               holding scene.ply (and cameras.json), e.g. data/scenes/default\n"
     "  --cameras    our cameras.json, a COLMAP sparse folder, transforms.json or a DL3DV split\n"
     "  --camera     its name, path or name without extension (frame_00001 for frame_00001.png)\n"
     "  --strict     any invalid entry in the camera file is an error (default: left out, warned)\n"
     "  --ignore-distortion  render a camera with lens distortion as a pinhole (default: refused;\n"
     "               macro undistort makes a pinhole scene)\n"
-    "  --out-exr    float channels R,G,B (colour), A (alpha), depth (depth_sum/alpha, 0 if empty),\n"
-    "               invdepth (sum w/z)\n"
+    "  --out-exr    float channels R,G,B (colour), A (alpha), depth (depth_sum/alpha, 0 if\n"
+    "               empty), invdepth (sum w/z)\n"
     "  --out-tensors  color [H,W,3], alpha, depth_sum, inv_depth_sum [H,W], F32\n"
     "  --out-depth-png  colour-mapped inverse depth (bright = near)\n";
 
@@ -48,8 +49,8 @@ int run_render(std::vector<std::string> argv) {
   const std::string mode = args.value_or("--mode", "classic");
   const std::vector<double> bg = args.doubles_or("--background", {0, 0, 0}, 3);
   job.options.sh_degree_cap = args.int_or("--sh-degree", 3, 0, 3);
-  job.limits.max_gaussians = size_t(
-      args.int_or("--max-gaussians", int(job.limits.max_gaussians), 1, 2147483647));
+  job.limits.max_gaussians =
+      size_t(args.int_or("--max-gaussians", int(job.limits.max_gaussians), 1, 2147483647));
   if (Status s = args.finish(); !s) {
     return fail("render", Status::error(s.message() + " (macro render --help for usage)"));
   }
@@ -78,8 +79,8 @@ int run_render(std::vector<std::string> argv) {
   return 0;
 }
 
-const bool registered =
-    register_command({"render", "render a camera of a splat scene to PNG/EXR/safetensors", run_render});
+const bool registered = register_command(
+    {"render", "render a camera of a splat scene to PNG/EXR/safetensors", run_render});
 
 }  // namespace
 }  // namespace macro::cli

@@ -491,7 +491,8 @@ TEST_CASE("formats: compressed .ply decodes the documented bit layout", "[format
     CHECK(r->rotation[i * 4 + 1] == Approx(b).margin(1e-5));
     CHECK(r->rotation[i * 4 + 2] == Approx(m).margin(1e-5));
     CHECK(r->rotation[i * 4 + 3] == Approx(a).margin(1e-5));
-    // f_rest channel-major: R = f_rest_0..2, G = 3..5, B = 6..8; value u*8/255 - 4.
+    // f_rest channel-major: R = f_rest_0..2, G = 3..5, B = 6..8; value u*8/255 - 4, as the
+    // PlayCanvas engine decodes it (gsplat-compressed-data.js and the compressedSH shader chunk).
     const double u[9] = {0, 255, 128, 64, 32, 16, 8, 4, 2};
     for (size_t k = 1; k < 4; ++k)
       for (size_t c = 0; c < 3; ++c)
@@ -571,7 +572,7 @@ TEST_CASE("formats: .ply -> .splat and .spz round trips stay within quantisation
       CHECK(std::abs(0.5f + kShC0 * s.sh[i * 3 + c] - want) <= 0.5 / 255 + 1e-6);
     }
   CHECK(rotation_diff(s, a) <= 0.5 / 128 + 4e-3);
-  // .spz v3 with full 8-bit SH.
+  // .spz (version 4 by default) with full 8-bit SH.
   CHECK(z.sh_degree == 3);
   CHECK(max_abs_diff(z.position, a.position) <= 0.5 / 4096 + 1e-6);
   CHECK(max_log_diff(z.scale, a.scale) <= 1.0 / 32 + 1e-5);
@@ -637,7 +638,7 @@ TEST_CASE("formats: .spz version 2 rotations and SH degree 4 payloads", "[format
 TEST_CASE("formats: writers refuse what they cannot store", "[formats]") {
   test::TempDir dir("formats");
   GaussianCloud c = must_load(metal("ply"));
-  c.position[4] = 5000.f;  // beyond the 24-bit, 12-fraction-bit .spz range
+  c.position[4] = 1e7f;  // beyond the 24-bit .spz range even with 0 fractional bits
   Status s = save_scene(c, dir.file("far.spz"));
   REQUIRE_FALSE(s.is_ok());
   CHECK_THAT(s.message(), Catch::Contains("far.spz") && Catch::Contains("position"));

@@ -13,7 +13,8 @@
 //   rotation         bits 30-31 index of the largest component in (w, x, y, z) order; the other
 //                    three in that order at bits 20-29, 10-19, 0-9, each (u/1023 - 0.5)*sqrt(2);
 //                    the largest is sqrt(1 - sum of squares)
-//   sh               f_rest = u*8/255 - 4
+//   sh               f_rest = u*8/255 - 4 (the PlayCanvas engine's decode, CPU and shader; see
+//                    docs/formats.md for splat-transform's midpoint variant)
 #include <algorithm>
 #include <cmath>
 

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <limits>
 
+#include "attention/runtime/progress.h"
 #include "gs/formats/scene_formats.h"
 
 namespace macro::gs::formats {
@@ -72,7 +73,13 @@ Result<std::vector<uint8_t>> encode_splat(const GaussianCloud& cloud, const std:
     for (int a = 0; a < 4; ++a)
       rec[28 + a] = to_u8(norm > 0 ? q[a] / norm * 128.f + 128.f : (a == 0 ? 255.f : 128.f));
   }
-  (void)file;
+  if (K > 1)
+    log_info("save", file + ": .splat stores SH degree 0 only: dropped SH band" +
+                         (cloud.sh_degree > 1 ? "s 1-" + std::to_string(cloud.sh_degree)
+                                              : std::string(" 1")) +
+                         ", " + std::to_string(K - 1) + " of " + std::to_string(K) +
+                         " SH coefficients per colour channel (" + std::to_string((K - 1) * 3) +
+                         " values per Gaussian); view-dependent colour is lost");
   return out;
 }
 

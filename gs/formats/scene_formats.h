@@ -9,13 +9,14 @@
 
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
 #include "attention/runtime/status.h"
-#include "gs/gaussians.h"
 #include "gs/formats/ply_reader.h"
 #include "gs/formats/scene_io.h"
+#include "gs/gaussians.h"
 
 namespace macro::gs::formats {
 
@@ -36,11 +37,29 @@ Result<GaussianCloud> decode_splat(const uint8_t* data, size_t size, const std::
                                    const LoadLimits& limits);
 Result<std::vector<uint8_t>> encode_splat(const GaussianCloud& cloud, const std::string& file);
 
-// Niantic .spz, versions 2 and 3 (gzip).
+// Niantic .spz: versions 2 and 3 (gzip), 4 (plain NGSP header, zstd streams).
 bool is_gzip(const uint8_t* data, size_t size);
+bool is_spz_v4(const uint8_t* data, size_t size);  // starts with the magic "NGSP"
 Result<GaussianCloud> decode_spz(const uint8_t* data, size_t size, const std::string& file,
                                  const LoadLimits& limits, LoadReport& report);
-Result<std::vector<uint8_t>> encode_spz(const GaussianCloud& cloud, const std::string& file);
+Result<std::vector<uint8_t>> encode_spz(const GaussianCloud& cloud, const std::string& file,
+                                        int version);
+
+// PlayCanvas SOG (meta.json + WebP images). `read_member(name)` returns a member's bytes (a file
+// of the folder, or a zip record); `file` names the folder or archive in messages.
+using SogMemberReader = std::function<Result<std::vector<uint8_t>>(const std::string& name)>;
+Result<GaussianCloud> decode_sog(const SogMemberReader& read_member, const std::string& file,
+                                 const LoadLimits& limits);
+// A .sog zip in memory.
+Result<GaussianCloud> decode_sog_zip(const uint8_t* data, size_t size, const std::string& file,
+                                     const LoadLimits& limits);
+// A SOG folder (holding meta.json).
+Result<GaussianCloud> decode_sog_folder(const std::string& folder, const LoadLimits& limits);
+
+// gsplat training checkpoint (torch zip with splats.means, .scales, .quats, .opacities, .sh0,
+// .shN).
+Result<GaussianCloud> decode_gsplat_checkpoint(const uint8_t* data, size_t size,
+                                               const std::string& file, const LoadLimits& limits);
 
 // Shared numeric helpers.
 inline float sigmoid(float x) {

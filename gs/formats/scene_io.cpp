@@ -1,5 +1,5 @@
-// Scene file detection, dispatch to the per-format decoders/encoders (gs/formats/scene_formats.h), and the
-// one sanitize pass every loaded cloud goes through (the bad-value policy in scene_io.h).
+// Scene file detection, dispatch to the per-format decoders/encoders (gs/formats/scene_formats.h),
+// and the one sanitize pass every loaded cloud goes through (the bad-value policy in scene_io.h).
 #include "gs/formats/scene_io.h"
 
 #include <fcntl.h>
@@ -12,6 +12,7 @@
 #include <cstring>
 
 #include "attention/runtime/file_io.h"
+#include "attention/runtime/io/zip_reader.h"
 #include "attention/runtime/progress.h"
 #include "gs/formats/ply_reader.h"
 #include "gs/formats/scene_formats.h"
@@ -118,6 +119,10 @@ const char* scene_format_name(SceneFormat format) {
       return "splat";
     case SceneFormat::kSpz:
       return "spz";
+    case SceneFormat::kSog:
+      return "sog";
+    case SceneFormat::kGsplatCheckpoint:
+      return "gsplat checkpoint";
   }
   return "?";
 }
@@ -130,11 +135,22 @@ Result<SceneFormat> detect_scene_format(const uint8_t* data, size_t size, const 
     MACRO_ASSIGN_OR_RETURN(ply::Header header, ply::parse_header(data, size, name));
     return formats::is_compressed_ply(header) ? SceneFormat::kCompressedPly : SceneFormat::kPly;
   }
-  if (formats::is_gzip(data, size) || ext == ".spz") return SceneFormat::kSpz;
+  if (formats::is_gzip(data, size) || formats::is_spz_v4(data, size) || ext == ".spz")
+    return SceneFormat::kSpz;
+  if (ext == ".sog") return SceneFormat::kSog;  // the zip reader names what is wrong
+  if (size >= 4 && le32(data) == kZipLocalHeaderSig) {
+    // A zip: SOG if it holds meta.json, else a torch checkpoint (the loader names what is missing).
+    Result<std::vector<ZipEntry>> entries = read_zip_directory(data, size, name);
+    if (!entries) return entries.status();
+    for (const ZipEntry& e : *entries)
+      if (e.name == "meta.json") return SceneFormat::kSog;
+    return SceneFormat::kGsplatCheckpoint;
+  }
   if (ext == ".ply") return SceneFormat::kPly;  // the PLY parser names what is wrong
+  if (ext == ".pt" || ext == ".pth" || ext == ".ckpt") return SceneFormat::kGsplatCheckpoint;
   return Status::error(name +
-                       ": unknown scene format: expected a PLY header, a gzip .spz or the "
-                       "extension .splat (found extension '" +
+                       ": unknown scene format: expected a PLY header, a .spz (gzip or 'NGSP'), "
+                       "a zip (.sog, gsplat .pt) or the extension .splat (found extension '" +
                        ext + "')");
 }
 
@@ -160,6 +176,12 @@ Result<GaussianCloud> load_scene_from_memory(const uint8_t* data, size_t size,
     case SceneFormat::kSpz:
       cloud = formats::decode_spz(data, size, name, limits, report);
       break;
+    case SceneFormat::kSog:
+      cloud = formats::decode_sog_zip(data, size, name, limits);
+      break;
+    case SceneFormat::kGsplatCheckpoint:
+      cloud = formats::decode_gsplat_checkpoint(data, size, name, limits);
+      break;
   }
   if (!cloud) return cloud.status();
   MACRO_TRY(sanitize(*cloud, report, name));
@@ -169,6 +191,19 @@ Result<GaussianCloud> load_scene_from_memory(const uint8_t* data, size_t size,
 
 Result<GaussianCloud> load_scene(const std::string& path, const LoadLimits& limits,
                                  LoadReport* report) {
+  // A SOG folder, or its meta.json: the images are separate files next to it.
+  struct stat dir_st {};
+  const bool is_dir = ::stat(path.c_str(), &dir_st) == 0 && S_ISDIR(dir_st.st_mode);
+  if (is_dir || ends_with(path, "/meta.json") || path == "meta.json") {
+    std::string folder = path;
+    if (!is_dir) folder = path.size() > 10 ? path.substr(0, path.size() - 10) : ".";
+    LoadReport r;
+    r.format = SceneFormat::kSog;
+    MACRO_ASSIGN_OR_RETURN(GaussianCloud cloud, formats::decode_sog_folder(folder, limits));
+    MACRO_TRY(sanitize(cloud, r, path));
+    if (report) *report = r;
+    return cloud;
+  }
   // Map the file read-only: no copy and no fresh pages for a 250 MB .ply. Anything that cannot be
   // mapped (a pipe, an empty file) goes through read_file, which names the problem.
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
@@ -199,7 +234,7 @@ Result<GaussianCloud> load_scene(const std::string& path, const LoadLimits& limi
 }
 
 Result<std::vector<uint8_t>> encode_scene(const GaussianCloud& cloud, SceneFormat format,
-                                          const std::string& name) {
+                                          const std::string& name, const SaveOptions& options) {
   const size_t N = cloud.size();
   const size_t K = static_cast<size_t>(cloud.sh_coeffs());
   if (cloud.sh_degree < 0 || cloud.sh_degree > 3 || cloud.position.size() != N * 3 ||
@@ -213,16 +248,17 @@ Result<std::vector<uint8_t>> encode_scene(const GaussianCloud& cloud, SceneForma
     case SceneFormat::kSplat:
       return formats::encode_splat(cloud, name);
     case SceneFormat::kSpz:
-      return formats::encode_spz(cloud, name);
+      return formats::encode_spz(cloud, name, options.spz_version);
     case SceneFormat::kCompressedPly:
+    case SceneFormat::kSog:
+    case SceneFormat::kGsplatCheckpoint:
       break;
   }
-  return Status::error(name +
-                       ": writing compressed .ply is not supported (use .ply, .splat or "
-                       ".spz)");
+  return Status::error(name + ": writing " + scene_format_name(format) +
+                       " is not supported (use .ply, .splat or .spz)");
 }
 
-Status save_scene(const GaussianCloud& cloud, const std::string& path) {
+Status save_scene(const GaussianCloud& cloud, const std::string& path, const SaveOptions& options) {
   const std::string ext = lower_extension(path);
   SceneFormat format;
   if (ends_with(path, ".compressed.ply"))
@@ -233,10 +269,12 @@ Status save_scene(const GaussianCloud& cloud, const std::string& path) {
     format = SceneFormat::kSplat;
   else if (ext == ".spz")
     format = SceneFormat::kSpz;
+  else if (ext == ".sog" || ext == ".pt" || ext == ".pth" || ext == ".ckpt")
+    format = ext == ".sog" ? SceneFormat::kSog : SceneFormat::kGsplatCheckpoint;
   else
     return Status::error(path + ": unknown output extension '" + ext +
                          "' (expected .ply, .splat or .spz)");
-  MACRO_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, encode_scene(cloud, format, path));
+  MACRO_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, encode_scene(cloud, format, path, options));
   return write_file_atomic(path, bytes.data(), bytes.size());
 }
 

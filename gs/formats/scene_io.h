@@ -1,7 +1,8 @@
 // Splat scene files: Inria/gsplat .ply (binary LE/BE, ascii), SuperSplat compressed .ply, .splat,
-// .spz (v2, v3). The format is detected from the content (PLY header, gzip magic) and the
-// extension. All loaders return an activated GaussianCloud (gs/gaussians.h) in the RDF frame of
-// .ply files.
+// .spz (v2, v3, v4), PlayCanvas SOG (a folder with meta.json, or a .sog zip) and gsplat training
+// checkpoints (a torch .pt zip with a `splats` dict). The format is detected from the content (PLY
+// header, gzip / NGSP / zip magic, the zip's members) and the extension. All loaders return an
+// activated GaussianCloud (gs/gaussians.h) in the RDF frame of .ply files.
 //
 // Bad input never crashes, hangs or allocates from a lying size: counts are checked against the
 // file size and LoadLimits before allocating, and messages name the file and the field. Values that
@@ -22,8 +23,9 @@
 
 namespace macro::gs {
 
-enum class SceneFormat { kPly, kCompressedPly, kSplat, kSpz };
-const char* scene_format_name(SceneFormat format);  // "ply", "compressed.ply", "splat", "spz"
+enum class SceneFormat { kPly, kCompressedPly, kSplat, kSpz, kSog, kGsplatCheckpoint };
+// "ply", "compressed.ply", "splat", "spz", "sog", "gsplat checkpoint"
+const char* scene_format_name(SceneFormat format);
 
 struct LoadLimits {
   // Checked before allocating; default from resource_limits() (50 M, --max-gaussians).
@@ -43,6 +45,7 @@ struct LoadReport {
 // Smallest linear scale a loader keeps (see LoadReport::clamped_scales).
 inline constexpr float kMinScale = 1e-7f;
 
+// path: a scene file, a SOG folder (holding meta.json) or a SOG meta.json itself.
 Result<GaussianCloud> load_scene(const std::string& path, const LoadLimits& limits = {},
                                  LoadReport* report = nullptr);
 // The same from bytes already in memory; `name` is used for format detection (its extension) and
@@ -50,14 +53,21 @@ Result<GaussianCloud> load_scene(const std::string& path, const LoadLimits& limi
 Result<GaussianCloud> load_scene_from_memory(const uint8_t* data, size_t size,
                                              const std::string& name, const LoadLimits& limits = {},
                                              LoadReport* report = nullptr);
-// Format from the content first (PLY header, gzip magic), then the extension (.splat).
+// Format from the content first (PLY header, gzip / NGSP magic, zip members), then the extension
+// (.splat, .spz).
 Result<SceneFormat> detect_scene_format(const uint8_t* data, size_t size, const std::string& name);
 
-// By extension: .ply (Inria binary little-endian layout), .splat, .spz (version 3). Atomic write.
-// Compressed .ply is read-only.
-Status save_scene(const GaussianCloud& cloud, const std::string& path);
+struct SaveOptions {
+  int spz_version = 4;  // .spz: 2, 3 or 4 (the reference library's current version)
+};
+
+// By extension: .ply (Inria binary little-endian layout), .splat (SH degree 0: higher bands are
+// dropped, with a note naming how many coefficients), .spz (options.spz_version). Atomic write.
+// Compressed .ply, SOG and checkpoints are read-only.
+Status save_scene(const GaussianCloud& cloud, const std::string& path,
+                  const SaveOptions& options = {});
 // The bytes save_scene would write.
 Result<std::vector<uint8_t>> encode_scene(const GaussianCloud& cloud, SceneFormat format,
-                                          const std::string& name);
+                                          const std::string& name, const SaveOptions& options = {});
 
 }  // namespace macro::gs

@@ -10,8 +10,8 @@
 #include <filesystem>
 
 #include "attention/runtime/file_io.h"
-#include "attention/runtime/progress.h"
 #include "attention/runtime/io/safetensors.h"
+#include "attention/runtime/progress.h"
 #include "gs/image_io.h"
 
 namespace macro::gs {
@@ -40,9 +40,12 @@ Status check_output(const char* kind, const std::string& path) {
 
 const char* raster_mode_name(RasterMode mode) {
   switch (mode) {
-    case RasterMode::kClassic: return "classic";
-    case RasterMode::kAntialiased: return "antialiased";
-    case RasterMode::kMip: return "mip";
+    case RasterMode::kClassic:
+      return "classic";
+    case RasterMode::kAntialiased:
+      return "antialiased";
+    case RasterMode::kMip:
+      return "mip";
   }
   return "?";
 }
@@ -77,8 +80,8 @@ Status write_render_outputs(const RenderResult& r, const RenderOutputs& o, const
   const size_t n = size_t(w) * size_t(h);
   if (w <= 0 || h <= 0 || r.color.size() != n * 3 || r.alpha.size() != n ||
       r.depth_sum.size() != n || r.inv_depth_sum.size() != n) {
-    return Status::error("render result: buffers do not match the image size " +
-                         std::to_string(w) + "x" + std::to_string(h));
+    return Status::error("render result: buffers do not match the image size " + std::to_string(w) +
+                         "x" + std::to_string(h));
   }
   std::vector<std::string> written;
   auto undo = [&](Status s) {
@@ -111,12 +114,13 @@ Status write_render_outputs(const RenderResult& r, const RenderOutputs& o, const
   }
   if (!o.tensors.empty()) {
     const int64_t H = h, W = w;
-    Status s = write_safetensors(o.tensors,
-                                 {{"color", DType::kF32, {H, W, 3}, r.color.data()},
-                                  {"alpha", DType::kF32, {H, W}, r.alpha.data()},
-                                  {"depth_sum", DType::kF32, {H, W}, r.depth_sum.data()},
-                                  {"inv_depth_sum", DType::kF32, {H, W}, r.inv_depth_sum.data()}},
-                                 {{"camera", camera}, {"scene", scene}, {"mode", raster_mode_name(mode)}});
+    Status s =
+        write_safetensors(o.tensors,
+                          {{"color", DType::kF32, {H, W, 3}, r.color.data()},
+                           {"alpha", DType::kF32, {H, W}, r.alpha.data()},
+                           {"depth_sum", DType::kF32, {H, W}, r.depth_sum.data()},
+                           {"inv_depth_sum", DType::kF32, {H, W}, r.inv_depth_sum.data()}},
+                          {{"camera", camera}, {"scene", scene}, {"mode", raster_mode_name(mode)}});
     if (!s) return undo(s);
     written.push_back(o.tensors);
   }
@@ -137,11 +141,12 @@ Status write_render_outputs(const RenderResult& r, const RenderOutputs& o, const
 }
 
 Status resolve_scene_folder(std::string& scene_path, std::string& cameras_path) {
-  if (is_directory(scene_path)) {
+  // A SOG folder (meta.json and its images) is a scene by itself; it needs --cameras.
+  if (is_directory(scene_path) && !file_exists(scene_path + "/meta.json")) {
     const std::string folder = scene_path;
     scene_path = folder + "/scene.ply";
     if (!file_exists(scene_path)) {
-      return Status::error("--scene: folder " + folder + " has no scene.ply");
+      return Status::error("--scene: folder " + folder + " has no scene.ply (nor a SOG meta.json)");
     }
     if (cameras_path.empty()) {
       cameras_path = folder + "/cameras.json";

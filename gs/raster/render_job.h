@@ -24,8 +24,8 @@
 
 #include "attention/runtime/status.h"
 #include "gs/cameras/camera.h"
-#include "gs/raster/rasterizer.h"
 #include "gs/formats/scene_io.h"
+#include "gs/raster/rasterizer.h"
 
 namespace macro::gs {
 
@@ -33,7 +33,9 @@ inline constexpr float kMinDepthAlpha = 1e-6f;  // below: no Gaussian blended, d
 
 struct RenderOutputs {
   std::string png, exr, tensors, depth_png;  // empty = not written
-  bool any() const { return !png.empty() || !exr.empty() || !tensors.empty() || !depth_png.empty(); }
+  bool any() const {
+    return !png.empty() || !exr.empty() || !tensors.empty() || !depth_png.empty();
+  }
 };
 
 struct RenderJob {
@@ -60,17 +62,19 @@ struct RenderJobResult {
 };
 
 // Each output's folder exists and is writable and the paths are distinct. The message names the
-// output by its `macro render` flag (--out-png, --out-exr, --out-tensors, --out-depth-png) and path.
+// output by its `macro render` flag (--out-png, --out-exr, --out-tensors, --out-depth-png) and
+// path.
 Status check_render_outputs(const RenderOutputs& outputs);
 
 // Writes the requested outputs of a render (see the table at the top). `scene` and `camera` go into
 // the safetensors metadata.
 Status write_render_outputs(const RenderResult& image, const RenderOutputs& outputs,
-                            const std::string& scene, const std::string& camera,
-                            RasterMode mode, std::vector<std::string>* written = nullptr);
+                            const std::string& scene, const std::string& camera, RasterMode mode,
+                            std::vector<std::string>* written = nullptr);
 
 // A scene folder (as `macro synth` writes and data/scenes/default is) becomes its scene.ply, and
-// an empty cameras path its cameras.json. Errors name the folder and the missing file.
+// an empty cameras path its cameras.json. A SOG folder (holding meta.json) stays as it is. Errors
+// name the folder and the missing file.
 Status resolve_scene_folder(std::string& scene_path, std::string& cameras_path);
 
 Result<RenderJobResult> run_render_job(const RenderJob& job);

@@ -104,6 +104,13 @@ inline Status scene_splat(const uint8_t* d, size_t n) {
 inline Status scene_spz(const uint8_t* d, size_t n) {
   return scene(d, n, "fuzz.spz");
 }
+// A .sog zip (meta.json and WebP members) and a gsplat checkpoint (torch zip).
+inline Status scene_sog(const uint8_t* d, size_t n) {
+  return scene(d, n, "fuzz.sog");
+}
+inline Status scene_gsplat(const uint8_t* d, size_t n) {
+  return scene(d, n, "fuzz.pt");
+}
 
 // One .safetensors file; every tensor is then read out as float32.
 inline Status safetensors(const uint8_t* data, size_t size) {
@@ -258,6 +265,8 @@ inline const std::vector<Entry>& entries() {
       {"scene_ply", scene_ply},
       {"scene_splat", scene_splat},
       {"scene_spz", scene_spz},
+      {"scene_sog", scene_sog},
+      {"scene_gsplat", scene_gsplat},
       {"safetensors", safetensors},
       {"safetensors_index", safetensors_index},
       {"torch_checkpoint", torch_checkpoint},

@@ -57,7 +57,11 @@ make_seeds() {
   done
   add scene_ply "$src/data/scenes/default/scene.ply" 4096
   for f in "$shared"/scenes/metalsplatter/*.splat; do add scene_splat "$f"; done
-  for f in "$shared"/scenes/metalsplatter/*.spz; do add scene_spz "$f"; done
+  for f in "$shared"/scenes/metalsplatter/*.spz "$src"/data/fixtures/splat_formats/*.spz; do
+    add scene_spz "$f"
+  done
+  add scene_sog "$src/data/fixtures/splat_formats/tiny.sog"
+  add scene_gsplat "$src/data/fixtures/torch/gsplat_ckpt.pt"
   # safetensors: the smallest goldens (header + data), each capped at 64 KiB.
   find "$shared/golden" -name '*.safetensors' -size -300k 2>/dev/null | head -n 6 |
     while read -r f; do add safetensors "$f"; done
