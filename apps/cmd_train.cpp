@@ -1,4 +1,4 @@
-// macro train: 3DGS training on the CPU (gsplat's definitions), a fixed set of Gaussians.
+// macro train: 3DGS training on the CPU (gsplat's definitions).
 // Thin main over gs::train::run_train_job (gs/train/train_job.h, docs/training.md).
 #include <cerrno>
 #include <cstdio>
@@ -13,22 +13,29 @@ namespace macro::cli {
 namespace {
 
 constexpr const char* kUsage =
-    "usage: macro train --images DIR --cameras C --init FILE.ply --out OUT.ply --steps N\n"
-    "         --strategy none --lr-schedule constant --view-order sequential\n"
-    "         --sh-degree-interval 0 [--scene-scale S] [--seed S] [--log LOG.jsonl]\n"
-    "         [--threads N] [--quiet]\n"
+    "usage: macro train --images DIR --cameras C --init FILE.ply --out OUT.ply [--steps N]\n"
+    "         [--strategy default|none] [--lr-schedule gsplat|constant]\n"
+    "         [--view-order shuffled|sequential] [--sh-degree-interval K] [--max-gaussians N]\n"
+    "         [--scene-scale S] [--seed S] [--log LOG.jsonl] [--threads N] [--quiet]\n"
     "  --images    folder of photos: camera NAME is DIR/NAME, or DIR/NAME.png|.jpg|.jpeg|.exr\n"
     "  --cameras   our cameras.json, a COLMAP sparse folder, transforms.json; every camera is a\n"
-    "              view, step s uses view s % views in file order\n"
+    "              view\n"
     "  --init      Inria-layout .ply to start from (raw parameters)\n"
     "  --out       the trained Gaussians, Inria-layout .ply\n"
     "  --steps     Adam steps (default 30000)\n"
     "  --scene-scale  multiplies the means' learning rate 1.6e-4 (default: 1.1 x the cameras'\n"
     "              extent, as gsplat)\n"
-    "  --log       JSONL, one line per step: step, loss, l1, ssim, num_gaussians, seconds\n"
-    "  Implemented so far: --strategy none, --lr-schedule constant, --view-order sequential,\n"
-    "  --sh-degree-interval 0, --mode classic; other values (gsplat's defaults included) are\n"
-    "  refused as not implemented yet (docs/training.md).\n";
+    "  --strategy  default (gsplat DefaultStrategy: duplicate, split, prune, opacity reset;\n"
+    "              the default) or none (a fixed set of Gaussians)\n"
+    "  --lr-schedule  gsplat (means' rate decays to 0.01x over the run; default) or constant\n"
+    "  --view-order   shuffled (a permutation per epoch from --seed; default) or sequential\n"
+    "              (step s uses view s % views in file order)\n"
+    "  --sh-degree-interval  one more SH band every K steps (default 1000; 0: all from the start)\n"
+    "  --max-gaussians  refuse densification past N Gaussians (default 0: no limit)\n"
+    "  --seed      view order and split samples (default 42; not torch's generator)\n"
+    "  --log       JSONL, one line per step: step, loss, l1, ssim, num_gaussians, view,\n"
+    "              sh_degree, means_lr, [duplicated, split, pruned, opacity_reset], seconds\n"
+    "  Not implemented yet: --strategy mcmc, --mode other than classic (docs/training.md).\n";
 
 int run_train(std::vector<std::string> argv) {
   Args args(std::move(argv));
@@ -50,6 +57,7 @@ int run_train(std::vector<std::string> argv) {
   job.sh_degree_interval =
       args.int_or("--sh-degree-interval", job.sh_degree_interval, 0, 1000000000);
   job.mode = args.value_or("--mode", job.mode);
+  job.max_gaussians = size_t(args.int_or("--max-gaussians", 0, 0, 2000000000));
   const std::optional<std::string> scene_scale = args.value("--scene-scale");
   const std::optional<std::string> scene_dir = args.value("--scene-dir");
   const std::optional<std::string> seed = args.value("--seed");
@@ -87,7 +95,8 @@ int run_train(std::vector<std::string> argv) {
 }
 
 const bool registered = register_command(
-    {"train", "3DGS training on the CPU (fixed Gaussians, gsplat's loss and Adam)", run_train});
+    {"train", "3DGS training on the CPU (gsplat's loss, Adam, schedules and default strategy)",
+     run_train});
 
 }  // namespace
 }  // namespace macro::cli

@@ -59,6 +59,24 @@ std::string json_number(double v) {
   return buf;
 }
 
+// A JSON string literal: quotes, backslashes and control characters escaped.
+std::string json_string(const std::string& v) {
+  std::string out = "\"";
+  for (unsigned char c : v) {
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += char(c);
+    } else if (c < 0x20) {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\u%04x", c);
+      out += buf;
+    } else {
+      out += char(c);
+    }
+  }
+  return out + "\"";
+}
+
 std::string format_seconds(double s) {
   char buf[32];
   if (!(s >= 0) || !std::isfinite(s)) return "?";
@@ -203,14 +221,21 @@ Result<GradJobResult> run_grad_job(const GradJob& job, ThreadPool& pool) {
 }
 
 Status check_train_settings(const TrainJob& job) {
-  if (job.strategy != "none") return not_implemented("--strategy", job.strategy, "none");
-  if (job.lr_schedule != "constant")
-    return not_implemented("--lr-schedule", job.lr_schedule, "constant");
-  if (job.view_order != "sequential")
-    return not_implemented("--view-order", job.view_order, "sequential");
-  if (job.sh_degree_interval != 0)
-    return not_implemented("--sh-degree-interval", std::to_string(job.sh_degree_interval),
-                           "0: every SH band from the first step");
+  if (job.strategy == "mcmc") return not_implemented("--strategy", job.strategy, "default, none");
+  if (job.strategy != "none" && job.strategy != "default")
+    return Status::error(
+        "--strategy: expected default, none (or mcmc, not implemented yet), "
+        "found '" +
+        job.strategy + "'");
+  if (job.lr_schedule != "constant" && job.lr_schedule != "gsplat")
+    return Status::error("--lr-schedule: expected gsplat or constant, found '" + job.lr_schedule +
+                         "'");
+  if (job.view_order != "sequential" && job.view_order != "shuffled")
+    return Status::error("--view-order: expected shuffled or sequential, found '" + job.view_order +
+                         "'");
+  if (job.sh_degree_interval < 0)
+    return Status::error("--sh-degree-interval: expected >= 0, found " +
+                         std::to_string(job.sh_degree_interval));
   if (job.mode != "classic") return not_implemented("--mode", job.mode, "classic");
   if (job.steps < 0)
     return Status::error("--steps: expected >= 0, found " + std::to_string(job.steps));
@@ -258,6 +283,12 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
   TrainOptions options;
   options.steps = job.steps;
   options.adam.scene_scale = result.scene_scale;
+  options.exponential_lr = job.lr_schedule == "gsplat";
+  options.shuffled_views = job.view_order == "shuffled";
+  options.sh_degree_interval = job.sh_degree_interval;
+  options.strategy = job.strategy == "default" ? Strategy::kDefault : Strategy::kNone;
+  options.default_strategy.max_gaussians = job.max_gaussians;
+  options.seed = job.seed;
   AtomicFile log;
   if (!job.log_path.empty()) MACRO_TRY(log.open(job.log_path).with_context("--log"));
   const bool show = job.progress && !quiet();
@@ -269,6 +300,14 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
           "{\"step\": " + std::to_string(r.step) + ", \"loss\": " + json_number(r.loss) +
           ", \"l1\": " + json_number(r.l1) + ", \"ssim\": " + json_number(r.ssim) +
           ", \"num_gaussians\": " + std::to_string(r.num_gaussians) +
+          ", \"view\": " + json_string(views[r.view].camera.name) +
+          ", \"sh_degree\": " + std::to_string(r.sh_degree) +
+          ", \"means_lr\": " + json_number(r.means_lr) +
+          (r.refine.refined ? ", \"duplicated\": " + std::to_string(r.refine.duplicated) +
+                                  ", \"split\": " + std::to_string(r.refine.split) +
+                                  ", \"pruned\": " + std::to_string(r.refine.pruned)
+                            : std::string()) +
+          (r.refine.reset ? ", \"opacity_reset\": true" : "") +
           ", \"seconds\": " + json_number(r.seconds) + "}\n";
       MACRO_TRY(log.write(line).with_context("--log"));
     }
@@ -285,6 +324,7 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
     return Status::ok();
   };
   MACRO_TRY(train(&*params, views, options, on_step, pool));
+  result.gaussians = params->size();
   MACRO_TRY(write_splat_params(*params, job.out_path).with_context("--out"));
   if (!job.log_path.empty()) MACRO_TRY(log.commit().with_context("--log"));
   result.seconds = result.records.empty() ? 0 : result.records.back().seconds;

@@ -52,19 +52,20 @@ struct TrainJob {
   std::string log_path;   // JSONL, optional
   int steps = 30000;
   // gsplat's defaults where a flag is absent; only the values named in docs/training.md run.
-  std::string strategy = "default";         // --strategy: none
-  std::string lr_schedule = "exponential";  // --lr-schedule: constant
-  std::string view_order = "random";        // --view-order: sequential
-  int sh_degree_interval = 1000;            // --sh-degree-interval: 0
-  std::string mode = "classic";             // --mode: classic
-  std::optional<double> scene_scale;        // --scene-scale; absent: gsplat's camera extent
-  uint64_t seed = 42;                       // --seed (nothing in this milestone is random)
-  bool progress = true;                     // stderr progress (also off when quiet())
+  std::string strategy = "default";     // --strategy: default | none
+  std::string lr_schedule = "gsplat";   // --lr-schedule: gsplat | constant
+  std::string view_order = "shuffled";  // --view-order: shuffled | sequential
+  int sh_degree_interval = 1000;        // --sh-degree-interval: 0 = every band from the start
+  std::string mode = "classic";         // --mode: classic
+  std::optional<double> scene_scale;    // --scene-scale; absent: gsplat's camera extent
+  uint64_t seed = 42;                   // --seed: view order and split samples
+  size_t max_gaussians = 0;             // --max-gaussians: 0 = no limit
+  bool progress = true;                 // stderr progress (also off when quiet())
   LoadLimits limits;
 };
 
 struct TrainJobResult {
-  size_t gaussians = 0, views = 0;
+  size_t gaussians = 0, views = 0;  // gaussians: after training
   double scene_scale = 1;
   std::vector<StepRecord> records;
   double seconds = 0;
