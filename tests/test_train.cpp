@@ -558,7 +558,7 @@ TEST_CASE("train: what is not implemented is refused by flag, bad inputs by name
        "--view-order: expected shuffled or sequential, found 'random'"},
       {" --strategy none --sh-degree-interval -1", "--sh-degree-interval"},
       {" --strategy none --max-gaussians -5", "--max-gaussians"},
-      {" --strategy none --scene-dir x" + ok_flags, "--scene-dir: not implemented yet"},
+      {" --strategy none --scene-dir x" + ok_flags, "--scene-dir replaces --images and --cameras"},
       {" --strategy none --scene-scale -1 --lr-schedule constant --view-order sequential"
        " --sh-degree-interval 0",
        "--scene-scale"},

@@ -4,16 +4,26 @@
 // kept rows, the learning-rate and SH-degree schedules and the per-epoch view order.
 #include <catch2/catch.hpp>
 
+#include <Eigen/Geometry>
+
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <set>
+#include <sstream>
 
 #include "gs/cameras/camera.h"
+#include "gs/cameras/colmap_points.h"
 #include "gs/formats/splat_params.h"
+#include "gs/image_io.h"
+#include "gs/synth/synth_random.h"
 #include "gs/train/adam.h"
+#include "gs/train/scene_inputs.h"
 #include "gs/train/schedule.h"
 #include "gs/train/strategy_default.h"
 #include "gs/train/trainer.h"
+#include "test_support.h"
 
 using namespace macro;
 using namespace macro::gs;
@@ -360,4 +370,157 @@ TEST_CASE("train schedule: inactive SH bands get zero gradients; train() applies
   CHECK(recs[5].sh_degree == 1);
   CHECK(recs[19].sh_degree == 3);
   CHECK(recs.back().loss < recs.front().loss);
+}
+
+// ---- --scene-dir inputs --------------------------------------------------------------------
+
+namespace {
+
+// A tiny COLMAP scene: 40 coloured Gaussians in a box, 9 cameras 48 x 36 on an arc looking at
+// it, the photos their renders, points3D the Gaussians' centres (jittered) and colours.
+void write_tiny_scene(const std::string& dir, SplatParams* truth) {
+  namespace fs = std::filesystem;
+  fs::create_directories(dir + "/images");
+  fs::create_directories(dir + "/sparse/0");
+  synth_random::Rng rng{11};
+  SplatParams& p = *truth;
+  p.resize(40, 0);
+  for (size_t i = 0; i < 40; ++i) {
+    for (int a = 0; a < 3; ++a) p.means[3 * i + a] = float(rng.range(-0.6, 0.6));
+    for (int a = 0; a < 3; ++a) p.scales[3 * i + a] = float(std::log(rng.range(0.08, 0.2)));
+    p.quats[4 * i] = 1.f;
+    p.opacities[i] = 1.5f;
+    for (int c = 0; c < 3; ++c) p.sh0[3 * i + c] = float(rng.range(-1.5, 1.5));
+  }
+  CameraSet set;
+  for (int k = 0; k < 9; ++k) {
+    Camera cam;
+    cam.name = "v" + std::to_string(k) + ".png";
+    cam.file_path = cam.name;
+    cam.width = 48;
+    cam.height = 36;
+    cam.fx = cam.fy = 45;
+    cam.cx = 24;
+    cam.cy = 18;
+    const double ang = -0.6 + 0.15 * k;
+    const Eigen::Vector3d c(3 * std::sin(ang), 0.2, -3 * std::cos(ang));
+    const Eigen::Vector3d fwd = (-c).normalized();
+    const Eigen::Vector3d right = Eigen::Vector3d(0, 1, 0).cross(fwd).normalized();
+    const Eigen::Vector3d down = fwd.cross(right);
+    cam.R.row(0) = right;
+    cam.R.row(1) = down;
+    cam.R.row(2) = fwd;
+    cam.t = -cam.R * c;
+    set.cameras.push_back(cam);
+    DiffRenderer r;
+    DiffImage img;
+    REQUIRE(r.forward(p, cam, {}, &img).is_ok());
+    Image png(48, 36, 3);
+    for (size_t j = 0; j < png.data.size(); ++j)
+      png.data[j] = float(std::clamp(img.color[j], 0.0, 1.0));
+    REQUIRE(write_png(dir + "/images/" + cam.name, png).is_ok());
+  }
+  REQUIRE(save_colmap_text(set, dir + "/sparse/0").is_ok());
+  ColmapPoints pts;
+  for (size_t i = 0; i < 40; ++i) {
+    pts.ids.push_back(int64_t(i + 1));
+    pts.xyz.emplace_back(p.means[3 * i] + rng.range(-0.05, 0.05),
+                         p.means[3 * i + 1] + rng.range(-0.05, 0.05),
+                         p.means[3 * i + 2] + rng.range(-0.05, 0.05));
+    for (int c = 0; c < 3; ++c)
+      pts.rgb.push_back(uint8_t(
+          std::clamp(std::lround(255 * (0.5 + 0.28209479177387814 * p.sh0[3 * i + c])), 0L, 255L)));
+    pts.error.push_back(0.5);
+    pts.track_offsets.push_back(0);
+  }
+  pts.track_offsets.push_back(0);
+  REQUIRE(save_colmap_points_text(pts, dir + "/sparse/0/points3D.txt").is_ok());
+}
+
+}  // namespace
+
+TEST_CASE("train inputs: test-every hold-out, SfM and random initialisation", "[train]") {
+  const std::vector<bool> h = test_every_holdout(17, 8);
+  for (size_t i = 0; i < 17; ++i) CHECK(h[i] == (i == 0 || i == 8 || i == 16));
+  CHECK(test_every_holdout(5, 0) == std::vector<bool>(5, false));
+  // Nearest neighbours: points on a line at 0, 1, 3, 7: for 0 the 3 nearest are 1, 3, 7.
+  const std::vector<Eigen::Vector3d> line = {{0, 0, 0}, {1, 0, 0}, {3, 0, 0}, {7, 0, 0}, {7, 5, 0}};
+  const std::vector<double> d = knn_mean_distance(line, 3);
+  CHECK(d[0] == Approx(std::sqrt((1 + 9 + 49) / 3.0)));
+  CHECK(d[2] == Approx(std::sqrt((4 + 9 + 16) / 3.0)));    // 1, 0, 7
+  CHECK(d[4] == Approx(std::sqrt((25 + 41 + 61) / 3.0)));  // (7,0), (3,0), (1,0)
+  ColmapPoints pts;
+  pts.xyz = line;
+  pts.rgb = {255, 0, 128, 0, 0, 0, 10, 20, 30, 1, 2, 3, 4, 5, 6};
+  SplatParams p = init_from_points(pts, 3, 5);
+  REQUIRE(p.size() == 5);
+  CHECK(p.sh_degree == 3);
+  CHECK(p.sh0[0] == Approx(0.5 / 0.28209479177387814));
+  CHECK(p.sh0[1] == Approx(-0.5 / 0.28209479177387814));
+  CHECK(p.scales[0] == Approx(std::log(d[0])));
+  CHECK(p.scales[2] == p.scales[0]);
+  CHECK(p.opacities[3] == Approx(std::log(0.1 / 0.9)));
+  for (float q : p.quats) CHECK((q >= 0.f && q < 1.f));
+  for (float v : p.shN) CHECK(v == 0.f);
+  SplatParams r = init_random(500, 2.5, 1, 9);
+  float lo = 1e9f, hi = -1e9f;
+  for (float m : r.means) lo = std::min(lo, m), hi = std::max(hi, m);
+  CHECK(lo >= -2.5f);
+  CHECK(hi <= 2.5f);
+  CHECK(lo < -2.3f);
+  CHECK(hi > 2.3f);
+}
+
+TEST_CASE("train inputs: macro train --scene-dir holds out test views and raises the PSNR",
+          "[train]") {
+  test::TempDir tmp("train-scene-dir");
+  const std::string dir = tmp.file("scene");
+  SplatParams truth;
+  write_tiny_scene(dir, &truth);
+  SceneDirOptions so;
+  auto in = load_scene_dir(dir, so);
+  REQUIRE(in.is_ok());
+  // 9 images sorted by name: v0 and v8 are test views.
+  REQUIRE(in->test.size() == 2);
+  CHECK(in->test[0].camera.name == "v0.png");
+  CHECK(in->test[1].camera.name == "v8.png");
+  REQUIRE(in->train.size() == 7);
+  CHECK(in->init.size() == 40);
+  // --data-factor 2 without images_2/: the photos are box-downscaled, the intrinsics halved.
+  so.data_factor = 2;
+  auto half = load_scene_dir(dir, so);
+  REQUIRE(half.is_ok());
+  CHECK(half->train[0].camera.width == 24);
+  CHECK(half->train[0].camera.fx == 22.5);
+  CHECK(half->train[0].target.size() == 24 * 18 * 3);
+
+  const std::string out = tmp.file("out.ply"), log = tmp.file("log.jsonl");
+  REQUIRE(test::run_command(test::macro_exe() + " train --quiet --scene-dir " + dir + " --out " +
+                            out + " --log " + log + " --steps 120 --sh-degree-interval 40") == 0);
+  auto trained = read_splat_params(out);
+  REQUIRE(trained.is_ok());
+  auto before = evaluate_views(in->init, in->train);
+  auto after = evaluate_views(*trained, in->train);
+  REQUIRE(before.is_ok());
+  REQUIRE(after.is_ok());
+  INFO("train PSNR " << before->psnr << " -> " << after->psnr);
+  CHECK(after->psnr > before->psnr + 1.0);
+  std::ifstream f(log);
+  std::vector<std::string> lines;
+  for (std::string l; std::getline(f, l);) lines.push_back(l);
+  REQUIRE(lines.size() == 1 + 120 + 1);
+  CHECK(lines[0].find("\"test_views\": [\"v0.png\", \"v8.png\"]") != std::string::npos);
+  CHECK(lines[0].find("\"train_views\": [\"v1.png\"") != std::string::npos);
+  CHECK(lines.back().find("\"eval\": \"test\"") != std::string::npos);
+  CHECK(lines.back().find("\"psnr\"") != std::string::npos);
+  // Bad inputs are refused by name.
+  const int rc =
+      test::run_command(test::macro_exe() + " train --quiet --scene-dir " + dir +
+                        " --init cube --out " + tmp.file("x.ply") + " 2>" + tmp.file("err.txt"));
+  CHECK(rc != 0);
+  std::ifstream ef(tmp.file("err.txt"));
+  std::stringstream es;
+  es << ef.rdbuf();
+  CHECK(es.str().find("cube") != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(tmp.file("x.ply")));
 }

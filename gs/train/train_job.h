@@ -21,6 +21,7 @@
 #include "attention/runtime/status.h"
 #include "gs/cameras/camera.h"
 #include "gs/formats/scene_io.h"
+#include "gs/train/scene_inputs.h"
 #include "gs/train/trainer.h"
 
 namespace macro::gs::train {
@@ -47,7 +48,11 @@ Result<GradJobResult> run_grad_job(const GradJob& job, ThreadPool& pool = Thread
 struct TrainJob {
   std::string images_dir;
   std::string cameras_path;
-  std::string init_path;  // Inria .ply
+  // Without scene_dir: an Inria .ply. With scene_dir: sfm (default), random, or an Inria .ply.
+  std::string init_path;
+  std::string scene_dir;  // --scene-dir (scene_inputs.h); replaces --images and --cameras
+  int data_factor = 1;    // --data-factor
+  int test_every = 8;     // --test-every (0: no hold-out)
   std::string out_path;   // .ply
   std::string log_path;   // JSONL, optional
   int steps = 30000;
@@ -65,7 +70,11 @@ struct TrainJob {
 };
 
 struct TrainJobResult {
-  size_t gaussians = 0, views = 0;  // gaussians: after training
+  size_t gaussians = 0, views = 0;  // gaussians: after training; views: training views
+  size_t initial_gaussians = 0;
+  std::vector<std::string> train_views, test_views;  // camera names
+  bool evaluated = false;  // test views existed: PSNR / SSIM on them after training
+  double test_psnr = 0, test_ssim = 0;
   double scene_scale = 1;
   std::vector<StepRecord> records;
   double seconds = 0;
