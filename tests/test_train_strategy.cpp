@@ -513,6 +513,22 @@ TEST_CASE("train inputs: macro train --scene-dir holds out test views and raises
   CHECK(lines[0].find("\"train_views\": [\"v1.png\"") != std::string::npos);
   CHECK(lines.back().find("\"eval\": \"test\"") != std::string::npos);
   CHECK(lines.back().find("\"psnr\"") != std::string::npos);
+  // A split.json: only its training frames train, its close-up frames never; no hold-out.
+  {
+    std::ofstream sj(dir + "/split.json");
+    sj << R"({"scene": "tiny", "data_factor": 1,
+      "intrinsics": {"w": 48, "h": 36, "fl_x": 45, "fl_y": 45, "cx": 24, "cy": 18},
+      "training_frames": ["v0.png", "v2.png", "v3.png", "v8.png"],
+      "closeup_frames": ["v8.png"], "closeup_poses": {}})";
+  }
+  auto with_split = load_scene_dir(dir, SceneDirOptions{});
+  REQUIRE(with_split.is_ok());
+  REQUIRE(with_split->train.size() == 3);
+  CHECK(with_split->train[0].camera.name == "v0.png");
+  CHECK(with_split->train[2].camera.name == "v3.png");
+  CHECK(with_split->test.empty());
+  CHECK(with_split->closeup_frames_skipped == 1);
+  CHECK(with_split->split_path == dir + "/split.json");
   // Bad inputs are refused by name.
   const int rc =
       test::run_command(test::macro_exe() + " train --quiet --scene-dir " + dir +
