@@ -38,7 +38,7 @@ constexpr const char* kUsage =
     "  --view-order   shuffled (a permutation per epoch from --seed; default) or sequential\n"
     "              (step s uses view s % views in file order)\n"
     "  --sh-degree-interval  one more SH band every K steps (default 1000; 0: all from the start)\n"
-    "  --max-gaussians  refuse densification past N Gaussians (default 0: no limit)\n"
+    "  --max-gaussians  the most Gaussians loaded or grown by densification (default 50M)\n"
     "  --seed      view order and split samples (default 42; not torch's generator)\n"
     "  --log       JSONL, one line per step: step, loss, l1, ssim, num_gaussians, view,\n"
     "              sh_degree, means_lr, [duplicated, split, pruned, opacity_reset], seconds\n"
@@ -68,7 +68,6 @@ int run_train(std::vector<std::string> argv) {
   job.sh_degree_interval =
       args.int_or("--sh-degree-interval", job.sh_degree_interval, 0, 1000000000);
   job.mode = args.value_or("--mode", job.mode);
-  job.max_gaussians = size_t(args.int_or("--max-gaussians", 0, 0, 2000000000));
   const std::optional<std::string> scene_scale = args.value("--scene-scale");
   const std::optional<std::string> seed = args.value("--seed");
   if (Status s = args.finish(); !s)

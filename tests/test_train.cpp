@@ -557,7 +557,7 @@ TEST_CASE("train: what is not implemented is refused by flag, bad inputs by name
       {" --strategy none --lr-schedule constant --view-order random --sh-degree-interval 0",
        "--view-order: expected shuffled or sequential, found 'random'"},
       {" --strategy none --sh-degree-interval -1", "--sh-degree-interval"},
-      {" --strategy none --max-gaussians -5", "--max-gaussians"},
+      {" --strategy none --max-gaussians -5", "--max-gaussians: expected an integer"},
       {" --strategy none --scene-dir x" + ok_flags, "--scene-dir replaces --images and --cameras"},
       {" --strategy none --scene-scale -1 --lr-schedule constant --view-order sequential"
        " --sh-degree-interval 0",

@@ -336,7 +336,7 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
   options.shuffled_views = job.view_order == "shuffled";
   options.sh_degree_interval = job.sh_degree_interval;
   options.strategy = job.strategy == "default" ? Strategy::kDefault : Strategy::kNone;
-  options.default_strategy.max_gaussians = job.max_gaussians;
+  options.default_strategy.max_gaussians = job.limits.max_gaussians;
   options.seed = job.seed;
   AtomicFile log;
   if (!job.log_path.empty()) MACRO_TRY(log.open(job.log_path).with_context("--log"));

@@ -64,9 +64,8 @@ struct TrainJob {
   std::string mode = "classic";         // --mode: classic
   std::optional<double> scene_scale;    // --scene-scale; absent: gsplat's camera extent
   uint64_t seed = 42;                   // --seed: view order and split samples
-  size_t max_gaussians = 0;             // --max-gaussians: 0 = no limit
   bool progress = true;                 // stderr progress (also off when quiet())
-  LoadLimits limits;
+  LoadLimits limits;  // limits.max_gaussians (--max-gaussians) also caps densification
 };
 
 struct TrainJobResult {
