@@ -1,4 +1,4 @@
-// macro train: 3DGS training on the CPU (gsplat's definitions), a fixed set of Gaussians.
+// macro train: 3DGS training on the CPU (gsplat's definitions).
 // Thin main over gs::train::run_train_job (gs/train/train_job.h, docs/training.md).
 #include <cerrno>
 #include <cstdio>
@@ -13,22 +13,36 @@ namespace macro::cli {
 namespace {
 
 constexpr const char* kUsage =
-    "usage: macro train --images DIR --cameras C --init FILE.ply --out OUT.ply --steps N\n"
-    "         --strategy none --lr-schedule constant --view-order sequential\n"
-    "         --sh-degree-interval 0 [--scene-scale S] [--seed S] [--log LOG.jsonl]\n"
-    "         [--threads N] [--quiet]\n"
+    "usage: macro train --images DIR --cameras C --init FILE.ply --out OUT.ply [--steps N]\n"
+    "       macro train --scene-dir DIR [--data-factor F] [--test-every 8]\n"
+    "         [--init sfm|random|FILE.ply] --out OUT.ply [--steps N]\n"
+    "         [--strategy default|none] [--lr-schedule gsplat|constant]\n"
+    "         [--view-order shuffled|sequential] [--sh-degree-interval K] [--max-gaussians N]\n"
+    "         [--scene-scale S] [--seed S] [--log LOG.jsonl] [--threads N] [--quiet]\n"
     "  --images    folder of photos: camera NAME is DIR/NAME, or DIR/NAME.png|.jpg|.jpeg|.exr\n"
     "  --cameras   our cameras.json, a COLMAP sparse folder, transforms.json; every camera is a\n"
-    "              view, step s uses view s % views in file order\n"
-    "  --init      Inria-layout .ply to start from (raw parameters)\n"
+    "              view\n"
+    "  --init      Inria-layout .ply to start from (raw parameters); with --scene-dir also sfm\n"
+    "              (the COLMAP points; default) or random (a cube of 3 x the scene scale)\n"
+    "  --scene-dir COLMAP scene: images/ (images_F/), sparse/0, optional split.json (only its\n"
+    "              training frames are used); every --test-every-th image by name is held out\n"
+    "              and PSNR/SSIM on those are reported after training (0: none)\n"
+    "  --data-factor  photos downscaled by F (images_F/ if present), intrinsics / F\n"
     "  --out       the trained Gaussians, Inria-layout .ply\n"
     "  --steps     Adam steps (default 30000)\n"
     "  --scene-scale  multiplies the means' learning rate 1.6e-4 (default: 1.1 x the cameras'\n"
     "              extent, as gsplat)\n"
-    "  --log       JSONL, one line per step: step, loss, l1, ssim, num_gaussians, seconds\n"
-    "  Implemented so far: --strategy none, --lr-schedule constant, --view-order sequential,\n"
-    "  --sh-degree-interval 0, --mode classic; other values (gsplat's defaults included) are\n"
-    "  refused as not implemented yet (docs/training.md).\n";
+    "  --strategy  default (gsplat DefaultStrategy: duplicate, split, prune, opacity reset;\n"
+    "              the default) or none (a fixed set of Gaussians)\n"
+    "  --lr-schedule  gsplat (means' rate decays to 0.01x over the run; default) or constant\n"
+    "  --view-order   shuffled (a permutation per epoch from --seed; default) or sequential\n"
+    "              (step s uses view s % views in file order)\n"
+    "  --sh-degree-interval  one more SH band every K steps (default 1000; 0: all from the start)\n"
+    "  --max-gaussians  the most Gaussians loaded or grown by densification (default 50M)\n"
+    "  --seed      view order and split samples (default 42; not torch's generator)\n"
+    "  --log       JSONL, one line per step: step, loss, l1, ssim, num_gaussians, view,\n"
+    "              sh_degree, means_lr, [duplicated, split, pruned, opacity_reset], seconds\n"
+    "  Not implemented yet: --strategy mcmc, --mode other than classic (docs/training.md).\n";
 
 int run_train(std::vector<std::string> argv) {
   Args args(std::move(argv));
@@ -38,9 +52,13 @@ int run_train(std::vector<std::string> argv) {
   }
   if (Status s = apply_common_flags(args); !s) return fail("train", s);
   gs::train::TrainJob job;
-  job.images_dir = args.required("--images");
-  job.cameras_path = args.required("--cameras");
-  job.init_path = args.required("--init");
+  const std::optional<std::string> scene_dir = args.value("--scene-dir");
+  job.scene_dir = scene_dir.value_or("");
+  job.images_dir = scene_dir ? args.value_or("--images", "") : args.required("--images");
+  job.cameras_path = scene_dir ? args.value_or("--cameras", "") : args.required("--cameras");
+  job.init_path = scene_dir ? args.value_or("--init", "sfm") : args.required("--init");
+  job.data_factor = args.int_or("--data-factor", 1, 1, 64);
+  job.test_every = args.int_or("--test-every", 8, 0, 1000000);
   job.out_path = args.required("--out");
   job.log_path = args.value_or("--log", "");
   job.steps = args.int_or("--steps", job.steps, 0, 1000000000);
@@ -51,13 +69,9 @@ int run_train(std::vector<std::string> argv) {
       args.int_or("--sh-degree-interval", job.sh_degree_interval, 0, 1000000000);
   job.mode = args.value_or("--mode", job.mode);
   const std::optional<std::string> scene_scale = args.value("--scene-scale");
-  const std::optional<std::string> scene_dir = args.value("--scene-dir");
   const std::optional<std::string> seed = args.value("--seed");
   if (Status s = args.finish(); !s)
     return fail("train", Status::error(s.message() + " (macro train --help for usage)"));
-  if (scene_dir)
-    return fail("train", Status::error("--scene-dir: not implemented yet (give --images, "
-                                       "--cameras and --init; docs/training.md)"));
   if (scene_scale) {
     char* end = nullptr;
     const double x = std::strtod(scene_scale->c_str(), &end);
@@ -79,15 +93,20 @@ int run_train(std::vector<std::string> argv) {
   if (!quiet()) {
     const double loss = result->records.empty() ? 0 : result->records.back().loss;
     std::printf(
-        "trained %zu Gaussians on %zu views for %d steps in %.1f s (last loss %.6f); "
+        "trained %zu Gaussians (from %zu) on %zu views for %d steps in %.1f s (last loss %.6f); "
         "wrote %s\n",
-        result->gaussians, result->views, job.steps, result->seconds, loss, job.out_path.c_str());
+        result->gaussians, result->initial_gaussians, result->views, job.steps, result->seconds,
+        loss, job.out_path.c_str());
+    if (result->evaluated)
+      std::printf("test views (%zu): PSNR %.3f dB, SSIM %.4f\n", result->test_views.size(),
+                  result->test_psnr, result->test_ssim);
   }
   return 0;
 }
 
 const bool registered = register_command(
-    {"train", "3DGS training on the CPU (fixed Gaussians, gsplat's loss and Adam)", run_train});
+    {"train", "3DGS training on the CPU (gsplat's loss, Adam, schedules and default strategy)",
+     run_train});
 
 }  // namespace
 }  // namespace macro::cli

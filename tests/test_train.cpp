@@ -550,16 +550,15 @@ TEST_CASE("train: what is not implemented is refused by flag, bad inputs by name
     std::string flags, expect;
   };
   const std::vector<Case> cases = {
-      {" --strategy default" + ok_flags, "--strategy default: not implemented yet"},
       {" --strategy mcmc" + ok_flags, "--strategy mcmc: not implemented yet"},
-      {ok_flags, "--strategy default: not implemented yet"},  // gsplat's default strategy
+      {" --strategy fancy" + ok_flags, "--strategy: expected default, none"},
       {" --strategy none --lr-schedule exponential --view-order sequential --sh-degree-interval 0",
-       "--lr-schedule exponential: not implemented yet"},
+       "--lr-schedule: expected gsplat or constant, found 'exponential'"},
       {" --strategy none --lr-schedule constant --view-order random --sh-degree-interval 0",
-       "--view-order random: not implemented yet"},
-      {" --strategy none --lr-schedule constant --view-order sequential --sh-degree-interval 1000",
-       "--sh-degree-interval 1000: not implemented yet"},
-      {" --strategy none --scene-dir x" + ok_flags, "--scene-dir: not implemented yet"},
+       "--view-order: expected shuffled or sequential, found 'random'"},
+      {" --strategy none --sh-degree-interval -1", "--sh-degree-interval"},
+      {" --strategy none --max-gaussians -5", "--max-gaussians: expected an integer"},
+      {" --strategy none --scene-dir x" + ok_flags, "--scene-dir replaces --images and --cameras"},
       {" --strategy none --scene-scale -1 --lr-schedule constant --view-order sequential"
        " --sh-degree-interval 0",
        "--scene-scale"},

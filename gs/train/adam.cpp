@@ -30,17 +30,19 @@ void adam_update(std::vector<double>& m, std::vector<double>& v, const std::vect
 }  // namespace
 
 SplatAdam::SplatAdam(const SplatParams& params, const AdamOptions& options) : options_(options) {
-  auto init = [](Group& grp, size_t n, double lr) {
-    grp.m.assign(n, 0.0);
-    grp.v.assign(n, 0.0);
+  const size_t N = params.size();
+  auto init = [N](Group& grp, size_t width, double lr) {
+    grp.width = width;
+    grp.m.assign(N * width, 0.0);
+    grp.v.assign(N * width, 0.0);
     grp.lr = lr;
   };
-  init(means_, params.means.size(), options.lr.means * options.scene_scale);
-  init(scales_, params.scales.size(), options.lr.scales);
-  init(quats_, params.quats.size(), options.lr.quats);
-  init(opacities_, params.opacities.size(), options.lr.opacities);
-  init(sh0_, params.sh0.size(), options.lr.sh0);
-  init(shN_, params.shN.size(), options.lr.shN);
+  init(means_, 3, options.lr.means * options.scene_scale);
+  init(scales_, 3, options.lr.scales);
+  init(quats_, 4, options.lr.quats);
+  init(opacities_, 1, options.lr.opacities);
+  init(sh0_, 3, options.lr.sh0);
+  init(shN_, size_t(params.sh_rest()) * 3, options.lr.shN);
 }
 
 void SplatAdam::step(const SplatGrads& g, SplatParams* p, ThreadPool& pool) {
@@ -52,6 +54,53 @@ void SplatAdam::step(const SplatGrads& g, SplatParams* p, ThreadPool& pool) {
               pool);
   adam_update(sh0_.m, sh0_.v, g.sh0, p->sh0, sh0_.lr, options_, t_, pool);
   adam_update(shN_.m, shN_.v, g.shN, p->shN, shN_.lr, options_, t_, pool);
+}
+
+namespace {
+
+void remap_group(std::vector<double>& m, std::vector<double>& v, const std::vector<int64_t>& src,
+                 size_t n_old, size_t width) {
+  std::vector<double> nm(src.size() * width, 0.0), nv(src.size() * width, 0.0);
+  for (size_t i = 0; i < src.size(); ++i) {
+    if (src[i] < 0) continue;
+    const size_t r = size_t(src[i]);
+    MACRO_CHECK(r < n_old);
+    std::copy(m.begin() + r * width, m.begin() + (r + 1) * width, nm.begin() + i * width);
+    std::copy(v.begin() + r * width, v.begin() + (r + 1) * width, nv.begin() + i * width);
+  }
+  m.swap(nm);
+  v.swap(nv);
+}
+
+}  // namespace
+
+void SplatAdam::remap_rows(const std::vector<int64_t>& src) {
+  const size_t n_old = opacities_.m.size();
+  for (Group* g : {&means_, &scales_, &quats_, &opacities_, &sh0_, &shN_})
+    remap_group(g->m, g->v, src, n_old, g->width);
+}
+
+void SplatAdam::zero_opacity_state() {
+  std::fill(opacities_.m.begin(), opacities_.m.end(), 0.0);
+  std::fill(opacities_.v.begin(), opacities_.v.end(), 0.0);
+}
+
+const SplatAdam::Group* SplatAdam::group(const std::string& name) const {
+  if (name == "means") return &means_;
+  if (name == "scales") return &scales_;
+  if (name == "quats") return &quats_;
+  if (name == "opacities") return &opacities_;
+  if (name == "sh0") return &sh0_;
+  if (name == "shN") return &shN_;
+  return nullptr;
+}
+const std::vector<double>* SplatAdam::exp_avg(const std::string& name) const {
+  const Group* g = group(name);
+  return g ? &g->m : nullptr;
+}
+const std::vector<double>* SplatAdam::exp_avg_sq(const std::string& name) const {
+  const Group* g = group(name);
+  return g ? &g->v : nullptr;
 }
 
 }  // namespace macro::gs::train

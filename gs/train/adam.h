@@ -7,6 +7,8 @@
 // (SplatParams, gs/formats/splat_params.h) and are kept in double.
 #pragma once
 
+#include <cstdint>
+#include <string>
 #include <vector>
 
 #include "attention/runtime/thread_pool.h"
@@ -36,12 +38,28 @@ class SplatAdam {
   // One step of every group with the gradients of the current loss (shapes as the parameters).
   void step(const SplatGrads& grads, SplatParams* params, ThreadPool& pool = ThreadPool::global());
   int steps() const { return t_; }
+  // The means' rate (gsplat's ExponentialLR changes only that group's rate).
+  void set_means_lr(double lr) { means_.lr = lr; }
+  double means_lr() const { return means_.lr; }
+
+  // Densification (gsplat strategy/ops.py `_update_param_with_optimizer`): the new row i of
+  // every group's moments is old row src[i], or zeros where src[i] < 0 (a new Gaussian).
+  // The step count t is shared and kept, as torch keeps each parameter's "step".
+  void remap_rows(const std::vector<int64_t>& src);
+  // Zeros both moments of the opacity group (gsplat reset_opa's optimizer_fn).
+  void zero_opacity_state();
+  // The moments of a group by gsplat's name ("means", "scales", "quats", "opacities", "sh0",
+  // "shN"), for tests and checks; nullptr for another name.
+  const std::vector<double>* exp_avg(const std::string& name) const;
+  const std::vector<double>* exp_avg_sq(const std::string& name) const;
 
  private:
   struct Group {
     std::vector<double> m, v;
     double lr;
+    size_t width = 0;  // values per Gaussian
   };
+  const Group* group(const std::string& name) const;
   AdamOptions options_;
   Group means_, scales_, quats_, opacities_, sh0_, shN_;
   int t_ = 0;

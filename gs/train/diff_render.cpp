@@ -60,6 +60,9 @@ DiffRenderer& DiffRenderer::operator=(DiffRenderer&&) noexcept = default;
 DiffRenderStats DiffRenderer::stats() const {
   return st_->stats;
 }
+const std::vector<uint8_t>& DiffRenderer::visible() const {
+  return st_->visible;
+}
 
 namespace {
 

@@ -87,6 +87,9 @@ class DiffRenderer {
   void backward(const SplatParams& params, const double* v_color, const double* v_alpha,
                 SplatGrads* grads, ThreadPool& pool = ThreadPool::global());
   DiffRenderStats stats() const;
+  // [N] of the last forward: 1 where the Gaussian survived projection and culling (gsplat's
+  // radii > 0), else 0.
+  const std::vector<uint8_t>& visible() const;
 
  private:
   struct State;

@@ -59,6 +59,24 @@ std::string json_number(double v) {
   return buf;
 }
 
+// A JSON string literal: quotes, backslashes and control characters escaped.
+std::string json_string(const std::string& v) {
+  std::string out = "\"";
+  for (unsigned char c : v) {
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += char(c);
+    } else if (c < 0x20) {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\u%04x", c);
+      out += buf;
+    } else {
+      out += char(c);
+    }
+  }
+  return out + "\"";
+}
+
 std::string format_seconds(double s) {
   char buf[32];
   if (!(s >= 0) || !std::isfinite(s)) return "?";
@@ -203,15 +221,26 @@ Result<GradJobResult> run_grad_job(const GradJob& job, ThreadPool& pool) {
 }
 
 Status check_train_settings(const TrainJob& job) {
-  if (job.strategy != "none") return not_implemented("--strategy", job.strategy, "none");
-  if (job.lr_schedule != "constant")
-    return not_implemented("--lr-schedule", job.lr_schedule, "constant");
-  if (job.view_order != "sequential")
-    return not_implemented("--view-order", job.view_order, "sequential");
-  if (job.sh_degree_interval != 0)
-    return not_implemented("--sh-degree-interval", std::to_string(job.sh_degree_interval),
-                           "0: every SH band from the first step");
+  if (job.strategy == "mcmc") return not_implemented("--strategy", job.strategy, "default, none");
+  if (job.strategy != "none" && job.strategy != "default")
+    return Status::error(
+        "--strategy: expected default, none (or mcmc, not implemented yet), "
+        "found '" +
+        job.strategy + "'");
+  if (job.lr_schedule != "constant" && job.lr_schedule != "gsplat")
+    return Status::error("--lr-schedule: expected gsplat or constant, found '" + job.lr_schedule +
+                         "'");
+  if (job.view_order != "sequential" && job.view_order != "shuffled")
+    return Status::error("--view-order: expected shuffled or sequential, found '" + job.view_order +
+                         "'");
+  if (job.sh_degree_interval < 0)
+    return Status::error("--sh-degree-interval: expected >= 0, found " +
+                         std::to_string(job.sh_degree_interval));
   if (job.mode != "classic") return not_implemented("--mode", job.mode, "classic");
+  if (job.data_factor < 1)
+    return Status::error("--data-factor: expected >= 1, found " + std::to_string(job.data_factor));
+  if (job.test_every < 0)
+    return Status::error("--test-every: expected >= 0, found " + std::to_string(job.test_every));
   if (job.steps < 0)
     return Status::error("--steps: expected >= 0, found " + std::to_string(job.steps));
   if (job.scene_scale && !(*job.scene_scale > 0 && std::isfinite(*job.scene_scale)))
@@ -222,34 +251,79 @@ Status check_train_settings(const TrainJob& job) {
 
 Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
   MACRO_TRY(check_train_settings(job));
-  if (job.images_dir.empty()) return Status::error("--images: required");
-  if (job.cameras_path.empty()) return Status::error("--cameras: required");
-  if (job.init_path.empty()) return Status::error("--init: required");
+  const bool from_scene = !job.scene_dir.empty();
+  if (!from_scene) {
+    if (job.images_dir.empty()) return Status::error("--images: required (or --scene-dir)");
+    if (job.cameras_path.empty()) return Status::error("--cameras: required (or --scene-dir)");
+    if (job.init_path.empty()) return Status::error("--init: required");
+  } else if (!job.images_dir.empty() || !job.cameras_path.empty()) {
+    return Status::error("--scene-dir replaces --images and --cameras; give one or the other");
+  }
   MACRO_TRY(check_output("--out", job.out_path));
   if (!job.log_path.empty()) {
     MACRO_TRY(check_output("--log", job.log_path));
     if (job.log_path == job.out_path)
       return Status::error("--log and --out are the same file " + job.out_path);
   }
-  auto params = read_splat_params(job.init_path, job.limits);
-  if (!params) return params.status().with_context("--init");
-  auto cameras = load_cameras(job.cameras_path);
-  if (!cameras) return cameras.status().with_context("--cameras");
-  if (cameras->cameras.empty())
-    return Status::error("--cameras: " + job.cameras_path + " holds no cameras");
-  std::vector<TrainView> views;
-  for (const Camera& cam : cameras->cameras)
-    MACRO_TRY(check_pinhole(cam).with_context("--cameras"));
-  for (const Camera& cam : cameras->cameras) {
-    MACRO_ASSIGN_OR_RETURN(std::string path, find_view_image(job.images_dir, cam.name));
-    auto target = read_target(path, cam.width, cam.height);
-    if (!target) return target.status().with_context("--images");
-    views.push_back({cam, std::move(*target)});
-  }
+  std::optional<SplatParams> params;
+  std::vector<TrainView> views, test_views;
   TrainJobResult result;
+  std::string views_line;  // the log's first line for --scene-dir
+  if (from_scene) {
+    SceneDirOptions so;
+    so.data_factor = job.data_factor;
+    so.test_every = job.test_every;
+    const bool ply = job.init_path != "sfm" && job.init_path != "random" && !job.init_path.empty();
+    so.init = ply ? "random" : (job.init_path.empty() ? "sfm" : job.init_path);
+    if (ply) so.init_points = 0;
+    so.seed = job.seed;
+    MACRO_ASSIGN_OR_RETURN(SceneDirInputs in, load_scene_dir(job.scene_dir, so));
+    if (ply) {
+      auto p = read_splat_params(job.init_path, job.limits);
+      if (!p) return p.status().with_context("--init");
+      params = std::move(*p);
+    } else {
+      params = std::move(in.init);
+    }
+    views = std::move(in.train);
+    test_views = std::move(in.test);
+    result.scene_scale = in.scene_scale;
+    auto names = [](const std::vector<TrainView>& vs) {
+      std::string out = "[";
+      for (size_t i = 0; i < vs.size(); ++i)
+        out += (i ? ", " : "") + json_string(vs[i].camera.name);
+      return out + "]";
+    };
+    views_line = "{\"scene_dir\": " + json_string(job.scene_dir) +
+                 ", \"images\": " + json_string(in.images_dir) +
+                 ", \"split\": " + (in.split_path.empty() ? "null" : json_string(in.split_path)) +
+                 ", \"closeup_frames_skipped\": " + std::to_string(in.closeup_frames_skipped) +
+                 ", \"train_views\": " + names(views) + ", \"test_views\": " + names(test_views) +
+                 "}\n";
+  } else {
+    auto p = read_splat_params(job.init_path, job.limits);
+    if (!p) return p.status().with_context("--init");
+    params = std::move(*p);
+    auto cameras = load_cameras(job.cameras_path);
+    if (!cameras) return cameras.status().with_context("--cameras");
+    if (cameras->cameras.empty())
+      return Status::error("--cameras: " + job.cameras_path + " holds no cameras");
+    for (const Camera& cam : cameras->cameras)
+      MACRO_TRY(check_pinhole(cam).with_context("--cameras"));
+    for (const Camera& cam : cameras->cameras) {
+      MACRO_ASSIGN_OR_RETURN(std::string path, find_view_image(job.images_dir, cam.name));
+      auto target = read_target(path, cam.width, cam.height);
+      if (!target) return target.status().with_context("--images");
+      views.push_back({cam, std::move(*target)});
+    }
+    result.scene_scale = camera_extent_scale(*cameras);
+  }
+  for (const TrainView& v : views) result.train_views.push_back(v.camera.name);
+  for (const TrainView& v : test_views) result.test_views.push_back(v.camera.name);
+  result.initial_gaussians = params->size();
   result.gaussians = params->size();
   result.views = views.size();
-  result.scene_scale = job.scene_scale ? *job.scene_scale : camera_extent_scale(*cameras);
+  if (job.scene_scale) result.scene_scale = *job.scene_scale;
   if (!(result.scene_scale > 0))
     return Status::error("--scene-scale: not given, and the cameras' extent is " +
                          std::to_string(result.scene_scale) +
@@ -258,8 +332,16 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
   TrainOptions options;
   options.steps = job.steps;
   options.adam.scene_scale = result.scene_scale;
+  options.exponential_lr = job.lr_schedule == "gsplat";
+  options.shuffled_views = job.view_order == "shuffled";
+  options.sh_degree_interval = job.sh_degree_interval;
+  options.strategy = job.strategy == "default" ? Strategy::kDefault : Strategy::kNone;
+  options.default_strategy.max_gaussians = job.limits.max_gaussians;
+  options.seed = job.seed;
   AtomicFile log;
   if (!job.log_path.empty()) MACRO_TRY(log.open(job.log_path).with_context("--log"));
+  if (!job.log_path.empty() && !views_line.empty())
+    MACRO_TRY(log.write(views_line).with_context("--log"));
   const bool show = job.progress && !quiet();
   auto last_draw = std::chrono::steady_clock::now() - std::chrono::seconds(1);
   auto on_step = [&](const StepRecord& r) -> Status {
@@ -269,6 +351,14 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
           "{\"step\": " + std::to_string(r.step) + ", \"loss\": " + json_number(r.loss) +
           ", \"l1\": " + json_number(r.l1) + ", \"ssim\": " + json_number(r.ssim) +
           ", \"num_gaussians\": " + std::to_string(r.num_gaussians) +
+          ", \"view\": " + json_string(views[r.view].camera.name) +
+          ", \"sh_degree\": " + std::to_string(r.sh_degree) +
+          ", \"means_lr\": " + json_number(r.means_lr) +
+          (r.refine.refined ? ", \"duplicated\": " + std::to_string(r.refine.duplicated) +
+                                  ", \"split\": " + std::to_string(r.refine.split) +
+                                  ", \"pruned\": " + std::to_string(r.refine.pruned)
+                            : std::string()) +
+          (r.refine.reset ? ", \"opacity_reset\": true" : "") +
           ", \"seconds\": " + json_number(r.seconds) + "}\n";
       MACRO_TRY(log.write(line).with_context("--log"));
     }
@@ -285,6 +375,23 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
     return Status::ok();
   };
   MACRO_TRY(train(&*params, views, options, on_step, pool));
+  result.gaussians = params->size();
+  if (!test_views.empty()) {
+    MACRO_ASSIGN_OR_RETURN(EvalResult ev, evaluate_views(*params, test_views, pool));
+    result.evaluated = true;
+    result.test_psnr = ev.psnr;
+    result.test_ssim = ev.ssim;
+    if (!job.log_path.empty()) {
+      std::string line = "{\"eval\": \"test\", \"psnr\": " + json_number(ev.psnr) +
+                         ", \"ssim\": " + json_number(ev.ssim) + ", \"views\": [";
+      for (size_t i = 0; i < test_views.size(); ++i)
+        line += std::string(i ? ", " : "") +
+                "{\"name\": " + json_string(test_views[i].camera.name) +
+                ", \"psnr\": " + json_number(ev.view_psnr[i]) +
+                ", \"ssim\": " + json_number(ev.view_ssim[i]) + "}";
+      MACRO_TRY(log.write(line + "]}\n").with_context("--log"));
+    }
+  }
   MACRO_TRY(write_splat_params(*params, job.out_path).with_context("--out"));
   if (!job.log_path.empty()) MACRO_TRY(log.commit().with_context("--log"));
   result.seconds = result.records.empty() ? 0 : result.records.back().seconds;

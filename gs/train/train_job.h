@@ -21,6 +21,7 @@
 #include "attention/runtime/status.h"
 #include "gs/cameras/camera.h"
 #include "gs/formats/scene_io.h"
+#include "gs/train/scene_inputs.h"
 #include "gs/train/trainer.h"
 
 namespace macro::gs::train {
@@ -47,24 +48,32 @@ Result<GradJobResult> run_grad_job(const GradJob& job, ThreadPool& pool = Thread
 struct TrainJob {
   std::string images_dir;
   std::string cameras_path;
-  std::string init_path;  // Inria .ply
+  // Without scene_dir: an Inria .ply. With scene_dir: sfm (default), random, or an Inria .ply.
+  std::string init_path;
+  std::string scene_dir;  // --scene-dir (scene_inputs.h); replaces --images and --cameras
+  int data_factor = 1;    // --data-factor
+  int test_every = 8;     // --test-every (0: no hold-out)
   std::string out_path;   // .ply
   std::string log_path;   // JSONL, optional
   int steps = 30000;
   // gsplat's defaults where a flag is absent; only the values named in docs/training.md run.
-  std::string strategy = "default";         // --strategy: none
-  std::string lr_schedule = "exponential";  // --lr-schedule: constant
-  std::string view_order = "random";        // --view-order: sequential
-  int sh_degree_interval = 1000;            // --sh-degree-interval: 0
-  std::string mode = "classic";             // --mode: classic
-  std::optional<double> scene_scale;        // --scene-scale; absent: gsplat's camera extent
-  uint64_t seed = 42;                       // --seed (nothing in this milestone is random)
-  bool progress = true;                     // stderr progress (also off when quiet())
-  LoadLimits limits;
+  std::string strategy = "default";     // --strategy: default | none
+  std::string lr_schedule = "gsplat";   // --lr-schedule: gsplat | constant
+  std::string view_order = "shuffled";  // --view-order: shuffled | sequential
+  int sh_degree_interval = 1000;        // --sh-degree-interval: 0 = every band from the start
+  std::string mode = "classic";         // --mode: classic
+  std::optional<double> scene_scale;    // --scene-scale; absent: gsplat's camera extent
+  uint64_t seed = 42;                   // --seed: view order and split samples
+  bool progress = true;                 // stderr progress (also off when quiet())
+  LoadLimits limits;  // limits.max_gaussians (--max-gaussians) also caps densification
 };
 
 struct TrainJobResult {
-  size_t gaussians = 0, views = 0;
+  size_t gaussians = 0, views = 0;  // gaussians: after training; views: training views
+  size_t initial_gaussians = 0;
+  std::vector<std::string> train_views, test_views;  // camera names
+  bool evaluated = false;  // test views existed: PSNR / SSIM on them after training
+  double test_psnr = 0, test_ssim = 0;
   double scene_scale = 1;
   std::vector<StepRecord> records;
   double seconds = 0;

@@ -1,8 +1,11 @@
 // The training loop (trainer.h).
 #include "gs/train/trainer.h"
 
+#include <algorithm>
 #include <chrono>
 #include <string>
+
+#include "gs/train/schedule.h"
 
 namespace macro::gs::train {
 namespace {
@@ -42,22 +45,43 @@ Status train(SplatParams* params, const std::vector<TrainView>& views, const Tra
     return Status::error("train: steps " + std::to_string(options.steps) + ", expected >= 0");
   for (const TrainView& v : views) MACRO_TRY(check_view(v));
   SplatAdam adam(*params, options.adam);
+  const double means_lr0 = adam.means_lr();
+  ViewOrder order(views.size(), options.shuffled_views, options.seed);
+  NormalRng normal(options.seed ^ 0x5851F42D4C957F2Dull);
+  DefaultStrategyState strategy_state;
   DiffRenderer renderer;
+  DiffRenderOptions render = options.render;
   DiffImage image;
   SplatGrads grads;
   std::vector<double> v_color;
   const auto t0 = std::chrono::steady_clock::now();
   for (int step = 0; step < options.steps; ++step) {
-    const TrainView& view = views[size_t(step) % views.size()];
-    MACRO_TRY(renderer.forward(*params, view.camera, options.render, &image, pool)
+    const size_t view_index = order.next();
+    const TrainView& view = views[view_index];
+    render.sh_degree =
+        std::min(options.render.sh_degree,
+                 active_sh_degree(step, options.sh_degree_interval, params->sh_degree));
+    MACRO_TRY(renderer.forward(*params, view.camera, render, &image, pool)
                   .with_context("step " + std::to_string(step)));
     MACRO_ASSIGN_OR_RETURN(LossValue loss,
                            photometric_loss(image.color.data(), view.target.data(), image.width,
                                             image.height, &v_color, pool));
     renderer.backward(*params, v_color.data(), nullptr, &grads, pool);
-    adam.step(grads, params, pool);
     StepRecord rec;
+    rec.means_lr = adam.means_lr();
+    adam.step(grads, params, pool);
+    if (options.exponential_lr)
+      adam.set_means_lr(means_lr0 * means_lr_factor(step + 1, options.steps));
+    if (options.strategy == Strategy::kDefault) {
+      auto rep = default_strategy_step(options.default_strategy, step, options.adam.scene_scale,
+                                       grads.means2d, renderer.visible(), image.width, image.height,
+                                       normal, params, &adam, &strategy_state);
+      if (!rep) return rep.status().with_context("step " + std::to_string(step));
+      rec.refine = *rep;
+    }
     rec.step = step;
+    rec.view = view_index;
+    rec.sh_degree = render.sh_degree;
     rec.loss = loss.loss;
     rec.l1 = loss.l1;
     rec.ssim = loss.ssim;

@@ -2,10 +2,11 @@
 // classic differentiable render (diff_render.h), loss 0.8 L1 + 0.2 (1 - SSIM) (loss.h), Adam per
 // parameter group (adam.h).
 //
-// What this milestone does: a fixed set of Gaussians (no densification or pruning, gsplat
-// strategy "none"), constant learning rates, views in order (step s uses view s % V), every SH
-// band from the first step. Deterministic: the same inputs give the same bits for any thread
-// count.
+// Per step s (gsplat simple_trainer's order): the view (in order, s % V, or a fresh permutation
+// per epoch), the active SH degree min(s / interval, degree), forward, loss, backward, Adam, the
+// means' rate set for the next step (exponential schedule), then the strategy (none: a fixed set
+// of Gaussians; default: strategy_default.h). Deterministic: the same inputs and seed give the
+// same bits for any thread count.
 //
 // Legend: N Gaussians, V views, H x W pixels of a view.
 #pragma once
@@ -21,6 +22,7 @@
 #include "gs/train/adam.h"
 #include "gs/train/diff_render.h"
 #include "gs/train/loss.h"
+#include "gs/train/strategy_default.h"
 
 namespace macro::gs::train {
 
@@ -29,18 +31,30 @@ struct TrainView {
   std::vector<float> target;  // [H,W,3] in the camera's size, linear values (8-bit: byte / 255)
 };
 
+enum class Strategy { kNone, kDefault };
+
 struct TrainOptions {
   int steps = 30000;
   AdamOptions adam;
-  DiffRenderOptions render;
+  DiffRenderOptions render;     // render.sh_degree is replaced by the active degree per step
+  bool exponential_lr = false;  // gsplat: means lr x 0.01^(s / steps)
+  bool shuffled_views = false;  // false: step s uses view s % V
+  int sh_degree_interval = 0;   // 0: every band from the first step
+  Strategy strategy = Strategy::kNone;
+  DefaultStrategyOptions default_strategy;
+  uint64_t seed = 42;  // view order and split samples
 };
 
 // One step's record (the JSONL log's fields).
 struct StepRecord {
   int step = 0;  // 0-based; the loss is that of the parameters before this step's update
   double loss = 0, l1 = 0, ssim = 0;
-  size_t num_gaussians = 0;
-  double seconds = 0;  // wall time since training started, after this step
+  size_t num_gaussians = 0;  // after this step's strategy
+  int sh_degree = 0;         // the active degree of this step
+  size_t view = 0;           // index into the views
+  double means_lr = 0;       // the means' rate this step used
+  RefineReport refine;       // what the strategy did after this step
+  double seconds = 0;        // wall time since training started, after this step
 };
 
 // One forward and backward of the loss on one view: the render, the loss and every gradient.
