@@ -135,6 +135,8 @@ MethodFn enhance_method_fn(EnhanceMethod method, BenchMethodSettings settings) {
     MACRO_ASSIGN_OR_RETURN(EnhanceResult r, enhance_closeup(c.inputs, e));
     MethodOutput out;
     out.image = std::move(r.image);
+    out.enhancer = r.enhancer;
+    out.planes_dropped = method == EnhanceMethod::kDifix ? 0 : r.planes_dropped;  // no bins
     const EnhanceTimings& t = r.timings;
     const std::pair<const char*, double> stages[] = {
         {"render", t.ms_render}, {"plan", t.ms_plan},     {"views", t.ms_views},
@@ -156,6 +158,8 @@ MethodFn transfer_method_fn(TransferSource source) {
     MACRO_ASSIGN_OR_RETURN(EnhanceResult r, enhance_closeup(c.inputs, e));
     MethodOutput out;
     out.image = std::move(r.image);
+    out.enhancer = r.enhancer;
+    out.planes_dropped = source == TransferSource::kWhole ? 0 : r.planes_dropped;
     const EnhanceTimings& t = r.timings;
     out.stages.push_back({"render", t.ms_render / 1000.0, true});
     out.stages.push_back({"plan", t.ms_plan / 1000.0, true});
@@ -380,6 +384,8 @@ std::string record_to_json_line(const BenchRecord& r) {
   j["seconds_per_closeup"] = r.seconds_per_closeup;
   j["width"] = r.width;
   j["height"] = r.height;
+  if (!r.enhancer.empty()) j["enhancer"] = r.enhancer;
+  if (r.planes_dropped) j["planes_dropped"] = r.planes_dropped;
   return j.dump() + "\n";
 }
 
@@ -417,10 +423,16 @@ Result<BenchRecord> record_from_json(const std::string& line, const std::string&
   if (j.contains("training_frame") && j["training_frame"].is_string())
     r.training_frame = j["training_frame"].get<std::string>();
   if (j.contains("reason") && j["reason"].is_string()) r.reason = j["reason"].get<std::string>();
+  if (j.contains("enhancer") && j["enhancer"].is_string())
+    r.enhancer = j["enhancer"].get<std::string>();
   double d = 0;
   if (j.contains("pair_index")) {
     MACRO_TRY(num(j["pair_index"], "pair_index", d));
     r.pair_index = int(d);
+  }
+  if (j.contains("planes_dropped")) {
+    MACRO_TRY(num(j["planes_dropped"], "planes_dropped", d));
+    r.planes_dropped = int(d);
   }
   if (j.contains("depth_ratio")) MACRO_TRY(num(j["depth_ratio"], "depth_ratio", r.depth_ratio));
   if (j.contains("options") && j["options"].is_object())
@@ -595,6 +607,8 @@ BenchRecord run_work_item(const BenchWorkItem& item, const MethodRegistry& regis
   Result<MethodOutput> out = method->run(context);
   if (!out) return skip("no output: " + out.status().message());
   if (out->image.data.empty()) return skip("no output: the method produced an empty image");
+  r.enhancer = out->enhancer;
+  r.planes_dropped = out->planes_dropped;
   for (const MethodStage& s : out->stages) {
     r.seconds.push_back(s);
     if (s.per_closeup) r.seconds_per_closeup += s.seconds;

@@ -67,6 +67,8 @@ struct MethodStage {
 struct MethodOutput {
   gs::Image image;  // the prediction (any size; resized to the GT size for scoring)
   std::vector<MethodStage> stages;
+  std::string enhancer;    // what ran (EnhanceResult::enhancer); "" for 3dgs
+  int planes_dropped = 0;  // empty k-means bins: the release fails the scene (bench_report.h)
 };
 
 struct MethodContext {
@@ -168,6 +170,8 @@ struct BenchRecord {
   std::vector<MethodStage> seconds;  // load, method stages, metrics
   double seconds_per_closeup = 0;
   int width = 0, height = 0;
+  std::string enhancer;    // JSON "enhancer", absent when empty
+  int planes_dropped = 0;  // JSON "planes_dropped" (0 when absent)
   std::string key() const;
 };
 
