@@ -33,13 +33,17 @@ constexpr const char* kUsage =
     "                       [--dinov2 F] [--dreamsim F] [--quiet] [--threads N]\n"
     "       macro bench merge FILE.jsonl... --out FILE.jsonl\n"
     "       macro bench report --results FILE.jsonl --out REPORT_DIR\n"
+    "                       [--scene-failure released|pair]\n"
     "  methods: 3dgs, transfer, transfer-whole (weight-free, docs/transfer.md), difix, macro,\n"
     "           macro-unmasked (the Difix network methods need --weights).\n"
     "  run     scores every (close-up pair, method, option set) of the scene folders under DIR\n"
     "          against closeup_gt/<frame>, appending one JSON line per record; a rerun resumes.\n"
     "          Option lists form a grid; each method records only the options it uses.\n"
     "  merge   joins shard results (deduplicated, work-list order), written atomically.\n"
-    "  report  table.md, table.csv and SVG + PNG charts (mean over scenes of scene means).\n";
+    "  report  table.md, table.csv and SVG + PNG charts (mean over scenes of scene means).\n"
+    "          --scene-failure released (default, paper-comparable): a scene with an empty\n"
+    "          k-means bin in any pair drops out of that method's average, as in the release;\n"
+    "          pair: those pairs count (the plane is dropped). table.md names the rule used.\n";
 
 std::vector<std::string> split_list(const std::string& text) {
   std::vector<std::string> out;
@@ -105,13 +109,17 @@ int run_merge(Args& args) {
 int run_report(Args& args) {
   const std::string results = args.required("--results");
   const std::string out = args.required("--out");
+  const std::string failure = args.value_or("--scene-failure", "released");
   if (Status s = args.finish(); !s) return fail("bench report", s);
+  auto rule = enhance::parse_scene_failure_rule(failure);
+  if (!rule) return fail("bench report", rule.status());
   if (!file_exists(results)) return fail("bench report", Status::error(results + ": not found"));
   auto records = enhance::read_records(results);
   if (!records) return fail("bench report", records.status());
   std::vector<std::string> written;
-  if (Status s = enhance::write_report(*records, out, &written); !s) return fail("bench report", s);
-  const auto configs = enhance::aggregate_records(*records);
+  if (Status s = enhance::write_report(*records, out, &written, *rule); !s)
+    return fail("bench report", s);
+  const auto configs = enhance::aggregate_records(*records, *rule);
   const std::string table = enhance::table_markdown(configs);
   std::fwrite(table.data(), 1, table.size(), stdout);
   std::printf("bench report: %zu files -> %s\n", written.size(), out.c_str());

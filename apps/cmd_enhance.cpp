@@ -4,6 +4,7 @@
 #include <cstdlib>
 
 #include "apps/args.h"
+#include "apps/geometry_flags.h"
 #include "attention/runtime/progress.h"
 #include "enhance/enhance.h"
 
@@ -18,6 +19,7 @@ constexpr const char* kUsage =
     "         [--occlusion] [--threads N] [--quiet]\n"
     "         [--enhancer transfer|difix] [--side-by-side FILE.png]\n"
     "         [--upsampler lanczos|pft-sr] [--upsampler-weights DIR]\n"
+    "%s"
     "  DIR is a DL3DV-Closeup scene folder (see macro plan --help). DIFIX_DIR is the Difix-ref\n"
     "  pipeline in diffusers layout (Hugging Face nvidia/difix_ref: unet/, vae/, text_encoder/,\n"
     "  tokenizer/, scheduler/, model_index.json), needed by --enhancer difix. Without\n"
@@ -38,12 +40,14 @@ constexpr const char* kUsage =
     "  --upsampler: how crops reach the model size: lanczos (Pillow-exact, the default) or pft-sr\n"
     "  (the released PFT-SR light network, x4/x2 passes then Lanczos; difix enhancer only). It\n"
     "  reads 103_PFT_light_SRx4_finetune.pth and 101_PFT_light_SRx2_scratch.pth (or .safetensors)\n"
-    "  from --upsampler-weights DIR (default data/weights/pft-sr); docs/pft.md.\n";
+    "  from --upsampler-weights DIR (default data/weights/pft-sr); docs/pft.md.\n"
+    "  The output line names the method and the enhancer that ran: without --weights, --method\n"
+    "  macro|difix runs the weight-free transfer enhancer (\"enhancer transfer (weight-free)\").\n";
 
 int run_enhance(std::vector<std::string> argv) {
   Args args(std::move(argv));
   if (args.flag("--help")) {
-    std::printf("%s", kUsage);
+    std::printf(kUsage, kGeometryUsage);
     return 0;
   }
   if (Status s = apply_common_flags(args); !s) return fail("enhance", s);
@@ -66,6 +70,7 @@ int run_enhance(std::vector<std::string> argv) {
   const std::string side_by_side = args.value_or("--side-by-side", "");
   o.upsampler = args.value_or("--upsampler", "lanczos");
   o.upsampler_weights = args.value_or("--upsampler-weights", "");
+  const GeometryFlags geometry = read_geometry_flags(args);
   if (Status s = args.finish(); !s)
     return fail("enhance", Status::error(s.message() + " (macro enhance --help for usage)"));
   auto m = enhance::parse_method(method);
@@ -91,6 +96,7 @@ int run_enhance(std::vector<std::string> argv) {
   auto cr = enhance::parse_crop_mode(crop);
   if (!cr) return fail("enhance", cr.status());
   o.plan.crops.crop = *cr;
+  if (Status s = apply_geometry_flags(geometry, &o.plan); !s) return fail("enhance", s);
   auto en = enhance::parse_enhancer(enhancer);
   if (!en) return fail("enhance", en.status());
   o.enhancer = *en;
@@ -107,9 +113,10 @@ int run_enhance(std::vector<std::string> argv) {
     if (Status s = enhance::write_side_by_side(side_by_side, in.scene_dir, in.closeup, *r); !s)
       return fail("enhance", s);
   if (!quiet())
-    std::printf("enhance: %s, method %s, %d views, model %dx%d, %.0f ms -> %s (%dx%d)\n",
-                in.closeup.c_str(), enhance::method_name(o.method), r->views, r->model.w,
-                r->model.h, r->timings.ms_total, out.c_str(), r->image.width, r->image.height);
+    std::printf(
+        "enhance: %s, method %s, enhancer %s, %d views, model %dx%d, %.0f ms -> %s (%dx%d)\n",
+        in.closeup.c_str(), enhance::method_name(o.method), r->enhancer.c_str(), r->views,
+        r->model.w, r->model.h, r->timings.ms_total, out.c_str(), r->image.width, r->image.height);
   return 0;
 }
 

@@ -3,6 +3,7 @@
 #include <cstdio>
 
 #include "apps/args.h"
+#include "apps/geometry_flags.h"
 #include "attention/runtime/progress.h"
 #include "enhance/macro/plan.h"
 
@@ -15,6 +16,7 @@ constexpr const char* kUsage =
     "         [--mask released|paper|none] [--scale axis|per-plane]\n"
     "         [--crop full|tight|composite] [--occlusion] [--upsampler lanczos|pft-sr]\n"
     "         [--debug-dir D]\n"
+    "%s"
     "  DIR is a DL3DV-Closeup scene folder: images/, sparse/0 (or transforms.json), split.json "
     "and\n"
     "  the trained splat (docs/macro.md lists where it is looked for). Defaults are the released\n"
@@ -24,7 +26,7 @@ constexpr const char* kUsage =
 int run_plan(std::vector<std::string> argv) {
   Args args(std::move(argv));
   if (args.flag("--help")) {
-    std::printf("%s", kUsage);
+    std::printf(kUsage, kGeometryUsage);
     return 0;
   }
   if (Status s = apply_common_flags(args); !s) return fail("plan", s);
@@ -46,6 +48,7 @@ int run_plan(std::vector<std::string> argv) {
   const std::string crop = args.value_or("--crop", "full");
   const std::string upsampler = args.value_or("--upsampler", "lanczos");
   o.occlusion = args.flag("--occlusion");
+  const GeometryFlags geometry = read_geometry_flags(args);
   if (Status s = args.finish(); !s)
     return fail("plan", Status::error(s.message() + " (macro plan --help for usage)"));
   if (planes == "auto") {
@@ -68,6 +71,7 @@ int run_plan(std::vector<std::string> argv) {
   auto cr = enhance::parse_crop_mode(crop);
   if (!cr) return fail("plan", cr.status());
   o.crops.crop = *cr;
+  if (Status s = apply_geometry_flags(geometry, &o); !s) return fail("plan", s);
   auto up = enhance::make_upsampler(upsampler);
   if (!up) return fail("plan", up.status());
 

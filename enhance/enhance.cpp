@@ -157,6 +157,8 @@ Result<EnhanceResult> enhance_by_transfer(const SceneInputs& in, const EnhanceOp
   res.timings.ms_plan = plan.timings.ms_total - plan.timings.ms_closeup;
   res.render = render_image(plan.closeup_color, plan.closeup.width, plan.closeup.height);
   res.model = plan.model;
+  res.enhancer = enhancer_label(Enhancer::kTransfer);
+  res.planes_dropped = plan.planes.dropped;
   note("render", res.timings.ms_render);
   note("plan", res.timings.ms_plan,
        std::to_string(plan.ref_candidates.size()) + " refs, " +
@@ -238,6 +240,7 @@ Status render_only(EnhanceWork& work) {
                 .with_context("close-up '" + in.closeup.name + "'"));
   res.render = render_image(r.color, W, H);
   res.image = res.render;
+  res.enhancer = "none";
   res.timings.ms_render = ms_since(t0);
   note("render", res.timings.ms_render, std::to_string(W) + "x" + std::to_string(H));
   res.timings.ms_total = ms_since(work.t_all);
@@ -284,6 +287,8 @@ Status plan_closeup(EnhanceWork& work) {
   res.timings.ms_plan = plan.timings.ms_total - plan.timings.ms_closeup;
   res.render = render_image(plan.closeup_color, W, H);
   res.model = plan.model;
+  res.enhancer = enhancer_label(Enhancer::kDifix);
+  res.planes_dropped = plan.planes.dropped;
   note("render", res.timings.ms_render, std::to_string(W) + "x" + std::to_string(H));
   {
     char buf[160];
@@ -316,7 +321,8 @@ Status build_network_views(EnhanceWork& work) {
     views = std::move(warp.images);
     for (const BlockSparseMask& m : warp.masks.masks) masks.level.push_back(&m);
   } else if (o.method == EnhanceMethod::kDifix) {
-    views.push_back(resize_lanczos(res.render, plan.model.w, plan.model.h, *pool));
+    MACRO_ASSIGN_OR_RETURN(gs::Image cu, resize_closeup(res.render, plan.model, po.closeup_resize));
+    views.push_back(std::move(cu));
     if (plan.ref_candidates.empty()) return Status::error("no reference was selected");
     MACRO_ASSIGN_OR_RETURN(gs::Image ref, load_candidate_image(in, plan.ref_candidates[0]));
     views.push_back(resize_lanczos(ref, plan.model.w, plan.model.h, *pool));

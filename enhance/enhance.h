@@ -47,6 +47,10 @@ Result<EnhanceMethod> parse_method(const std::string& text);
 // the plane mask / with every crop visible to every plane; 3dgs ignores it.
 enum class Enhancer { kDifix, kTransfer };
 const char* enhancer_name(Enhancer enhancer);  // "difix", "transfer"
+// What ran, for output lines and JSON: "transfer (weight-free)" or "difix (network)".
+inline const char* enhancer_label(Enhancer e) {
+  return e == Enhancer::kTransfer ? "transfer (weight-free)" : "difix (network)";
+}
 Result<Enhancer> parse_enhancer(const std::string& text);
 
 struct EnhanceOptions {
@@ -79,6 +83,8 @@ struct EnhanceResult {
   int masked_levels = 0;
   std::string ctx_source;  // "text_encoder (cache hit|computed)", the --ctx file, or ""
   double transfer_confidence = 0;  // enhancer transfer: mean token confidence
+  std::string enhancer;            // enhancer_label of the enhancer that ran; "none" for 3dgs
+  int planes_dropped = 0;  // empty k-means bins dropped by the plan (the release fails the scene)
   EnhanceTimings timings;
 };
 

@@ -322,6 +322,48 @@ TEST_CASE("bench report: scene means then the mean of scene means, n/c never ave
   CHECK(format_metric("psnr", std::nullopt) == "n/c");
 }
 
+TEST_CASE(
+    "bench report: --scene-failure released drops a scene with an empty k-means bin, pair "
+    "keeps it",
+    "[harness]") {
+  std::vector<BenchRecord> recs = {
+      hand_record("A", 0, "m", {{"psnr", 10}}, 1.0),
+      hand_record("A", 1, "m", {{"psnr", 20}}, 1.0),
+      hand_record("B", 0, "m", {{"psnr", 30}}, 1.0),
+      hand_record("A", 0, "x", {{"psnr", 12}}, 1.0),
+  };
+  recs[1].planes_dropped = 1;  // the release raises on this pair: scene A fails for "m"
+  recs[1].enhancer = "transfer (weight-free)";
+  for (BenchRecord& r : recs) {
+    auto back = record_from_json(record_to_json_line(r), "test");
+    REQUIRE(back.is_ok());
+    r = *back;
+  }
+  CHECK(recs[1].planes_dropped == 1);
+  CHECK(recs[1].enhancer == "transfer (weight-free)");
+  CHECK(record_to_json_line(recs[0]).find("planes_dropped") == std::string::npos);
+
+  const auto released = aggregate_records(recs);  // the default
+  REQUIRE(released.size() == 2);
+  CHECK(released[0].rule == SceneFailureRule::kReleased);
+  CHECK(released[0].metric.at("psnr") == Approx(30));  // scene A out of m's average
+  CHECK(released[0].scenes == 1);
+  CHECK(released[0].scenes_failed == 1);
+  CHECK(released[0].pairs_ok == 1);
+  CHECK(released[0].pairs_skipped == 2);
+  CHECK(released[1].metric.at("psnr") == Approx(12));  // x had no failure in A
+  CHECK(released[1].scenes_failed == 0);
+  CHECK(table_markdown(released).find("Scene failures: released rule") != std::string::npos);
+
+  const auto pair = aggregate_records(recs, SceneFailureRule::kPair);
+  CHECK(pair[0].metric.at("psnr") == Approx(22.5));  // (mean(10, 20) + 30) / 2
+  CHECK(pair[0].scenes_failed == 0);
+  CHECK(table_markdown(pair).find("Scene failures: pair rule") != std::string::npos);
+  CHECK(*parse_scene_failure_rule("pair") == SceneFailureRule::kPair);
+  CHECK_THAT(parse_scene_failure_rule("scene").status().message(),
+             Catch::Contains("--scene-failure"));
+}
+
 // Each line of our SVG is the prolog, the <svg> / </svg> pair, a self-closing element or a
 // <text>..</text> element with escaped content.
 void check_svg(const std::string& path) {

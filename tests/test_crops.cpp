@@ -54,7 +54,11 @@ TEST_CASE("crop scale and centre match the analytic answers", "[macro][crops]") 
   const std::vector<int> order = test::planes_far_to_near(f.scene.geometry, f.cu);
   std::vector<CropRejection> rej;
   const Size2 model{320, 176};
-  const auto crops = compute_crops(f.cud, f.planes, f.refs, {"ref_a", "ref_b"}, model, {}, &rej);
+  // The analytic centroid below unprojects pixel centres (our convention): --pixel-coords centre.
+  CropOptions centres;
+  centres.pixel = PixelCoords::kCentre;
+  const auto crops =
+      compute_crops(f.cud, f.planes, f.refs, {"ref_a", "ref_b"}, model, centres, &rej);
   REQUIRE(crops.size() + rej.size() == 6);
   REQUIRE(crops.size() >= 5);
   // Bin-major view order.
@@ -159,4 +163,78 @@ TEST_CASE("crop validity, canvas padding, per-plane scale and tight crops", "[ma
   }
   INFO("tight/full view pixels " << double(tight_tokens) / double(full_tokens));
   CHECK(tight_tokens < full_tokens);
+}
+
+namespace {
+
+// A close-up W x H with power-of-two intrinsics (exact arithmetic), identity pose, flat depth z,
+// one plane; the reference is the same camera at half the size.
+struct FlatPair {
+  gs::Camera cu, ref;
+  DepthView cud;
+  PlaneResult planes;
+  FlatPair() {
+    cu.name = "cu";
+    cu.width = 32;
+    cu.height = 16;
+    cu.fx = cu.fy = 32;
+    cu.cx = 16;
+    cu.cy = 8;
+    cu.R.setIdentity();
+    cu.t.setZero();
+    ref = cu.resized(16, 8);
+    ref.name = "ref";
+    cud.camera = cu;
+    cud.depth.assign(size_t(cu.width) * cu.height, 2.f);
+    planes.width = cu.width;
+    planes.height = cu.height;
+    planes.labels.assign(cud.depth.size(), 0);
+    DepthPlane p;
+    p.depth_median = 2.0;
+    p.inv_depth_centroid = 0.5;
+    p.pixels = int64_t(cud.depth.size());
+    planes.planes = {p};
+  }
+};
+
+}  // namespace
+
+TEST_CASE("crop centroid: integer pixel indices (released) or pixel centres (ours)",
+          "[macro][crops]") {
+  FlatPair f;
+  // Pixel (j, i) lands at u = (j + o) / 2, v = (i + o) / 2 in the half-size reference: the
+  // centroid is the mean of the indices over 2, plus o / 2.
+  CropOptions released;  // the default
+  CHECK(released.pixel == PixelCoords::kIndex);
+  auto a = compute_crops(f.cud, f.planes, {f.ref}, {"ref"}, {16, 8}, released);
+  REQUIRE(a.size() == 1);
+  CHECK(a[0].centre_u == 15.5 / 2);  // mean of j = 0..31 is 15.5
+  CHECK(a[0].centre_v == 7.5 / 2);   // mean of i = 0..15 is 7.5
+  CHECK(a[0].valid_pixels == 32 * 16);
+  CropOptions ours;
+  ours.pixel = PixelCoords::kCentre;
+  auto b = compute_crops(f.cud, f.planes, {f.ref}, {"ref"}, {16, 8}, ours);
+  REQUIRE(b.size() == 1);
+  CHECK(b[0].centre_u == 8.0);
+  CHECK(b[0].centre_v == 4.0);
+  CHECK(*parse_pixel_coords("index") == PixelCoords::kIndex);
+  CHECK(*parse_pixel_coords("centre") == PixelCoords::kCentre);
+  CHECK_THAT(parse_pixel_coords("middle").status().message(), Catch::Contains("--pixel-coords"));
+}
+
+TEST_CASE(
+    "crop padding mask: made at the reference size and resized (released) or at the model "
+    "size (ours)",
+    "[macro][crops]") {
+  // A 5 x 2 reference, a box 3 wide starting 2 columns left of it, a 3 x 2 model. At the
+  // reference size the canvas column of pixel x is floor(3x/5) = 0,0,1,1,2 -> reference column
+  // -2,-2,-1,-1,0: only the last is inside. Resized nearest to 3 (columns 0, 1, 3): all padding.
+  // Straight at the model size: floor(3x/3) = 0,1,2 -> -2,-1,0: the last is inside.
+  Crop c;
+  c.box = {-2, 0, 1, 2};
+  c.view = {3, 2};
+  const std::vector<uint8_t> at_ref = crop_reference_validity(c, 5, 2);
+  CHECK(at_ref == std::vector<uint8_t>{0, 0, 0, 0, 1, 0, 0, 0, 0, 1});
+  CHECK(resize_nearest(at_ref, 2, 5, 2, 3) == std::vector<uint8_t>{0, 0, 0, 0, 0, 0});
+  CHECK(crop_model_validity(c, 5, 2, {3, 2}) == std::vector<uint8_t>{0, 0, 1, 0, 0, 1});
 }

@@ -139,6 +139,8 @@ TEST_CASE("interrupts: SIGINT during macro enhance leaves no output, no temporar
   const int status = interrupt_and_wait(pid);
   CHECK(exited_by_interrupt(status));
   CHECK(slurp(out) == before);
+  // One line says so (printed by the signal handler, --quiet or not).
+  CHECK(slurp(tmp.file("log.txt")).find("interrupted: no output written\n") != std::string::npos);
   std::vector<std::string> left;
   for (auto& e : fs::directory_iterator(out_dir)) left.push_back(e.path().filename().string());
   CHECK(left == std::vector<std::string>{"e.png"});

@@ -183,3 +183,76 @@ TEST_CASE("scene inputs: splat search order, registered close-up, bad folders", 
   o.closeup = "";
   CHECK_FALSE(load_scene_inputs(o).is_ok());
 }
+
+TEST_CASE(
+    "plan geometry: released padding masks and 8-bit close-up resize by default, ours as "
+    "options",
+    "[macro][plan]") {
+  test::TempDir tmp("macro-plan-geometry");
+  const auto scene = small_scene();
+  REQUIRE(write_closeup_scene_folder(scene, tmp.path).is_ok());
+  SceneInputOptions so;
+  so.scene_dir = tmp.path;
+  so.closeup = "closeup.png";
+  auto in = load_scene_inputs(so);
+  REQUIRE(in.is_ok());
+  PlanOptions po;
+  CHECK(po.padding_mask == PaddingMaskSize::kReference);
+  CHECK(po.closeup_resize == CloseupResize::kU8);
+  CHECK(po.crops.pixel == PixelCoords::kIndex);
+  auto a = build_plan(*in, po);
+  REQUIRE(a.is_ok());
+  REQUIRE(!a->crops.empty());
+  PlanOptions ours = po;
+  ours.padding_mask = PaddingMaskSize::kModel;
+  ours.closeup_resize = CloseupResize::kFloat;
+  auto b = build_plan(*in, ours);
+  REQUIRE(b.is_ok());
+  REQUIRE(b->crops.size() == a->crops.size());
+  // Level-0 crop validity: released = the reference-size mask resized nearest to the level grid;
+  // ours = the model-size mask resized.
+  const TokenGrid& g = a->masks.grids[0];
+  const size_t nl = size_t(g.tokens());
+  for (size_t c = 0; c < a->crops.size(); ++c) {
+    const gs::Camera& rc = a->ref_cameras[size_t(a->crops[c].ref)];
+    const auto want_a = resize_nearest(crop_reference_validity(a->crops[c], rc.width, rc.height),
+                                       rc.height, rc.width, g.h, g.w);
+    const auto want_b =
+        resize_nearest(crop_model_validity(b->crops[c], rc.width, rc.height, b->model), b->model.h,
+                       b->model.w, g.h, g.w);
+    CHECK(std::vector<uint8_t>(a->masks.crop_valid[0].begin() + std::ptrdiff_t(c * nl),
+                               a->masks.crop_valid[0].begin() + std::ptrdiff_t((c + 1) * nl)) ==
+          want_a);
+    CHECK(std::vector<uint8_t>(b->masks.crop_valid[0].begin() + std::ptrdiff_t(c * nl),
+                               b->masks.crop_valid[0].begin() + std::ptrdiff_t((c + 1) * nl)) ==
+          want_b);
+  }
+  // The close-up view: quantised to 8 bits then 8-bit Lanczos (every value k / 255), or float.
+  auto up = make_upsampler("lanczos");
+  auto va = build_views(*a, *in, **up);
+  auto vb = build_views(*b, *in, **up);
+  REQUIRE(va.is_ok());
+  REQUIRE(vb.is_ok());
+  gs::Image cu(a->closeup.width, a->closeup.height, 3);
+  cu.data = a->closeup_color;
+  std::vector<uint8_t> u8(cu.data.size());
+  for (size_t i = 0; i < u8.size(); ++i)
+    u8[i] = uint8_t(std::lround(std::min(std::max(cu.data[i], 0.f), 1.f) * 255.f));
+  const auto want_u8 = resize_lanczos_u8(u8.data(), cu.width, cu.height, 3, a->model.w, a->model.h);
+  const gs::Image& got_u8 = va->images[0];
+  size_t off = 0;
+  for (size_t i = 0; i < want_u8.size(); ++i)
+    off += std::abs(got_u8.data[i] * 255.f - float(want_u8[i])) > 1e-3f;
+  CHECK(off == 0);
+  const gs::Image want_f = resize_lanczos(cu, a->model.w, a->model.h);
+  CHECK(vb->images[0].data == want_f.data);
+  CHECK(va->images[0].data != vb->images[0].data);
+  // The options are in the JSON.
+  auto j = nlohmann::json::parse(plan_to_json(*a));
+  CHECK(j["options"]["pixel_coords"] == "index");
+  CHECK(j["options"]["padding_mask"] == "reference");
+  CHECK(j["options"]["closeup_resize"] == "u8");
+  CHECK(nlohmann::json::parse(plan_to_json(*b))["options"]["padding_mask"] == "model");
+  CHECK_THAT(parse_padding_mask_size("x").status().message(), Catch::Contains("--padding-mask"));
+  CHECK_THAT(parse_closeup_resize("x").status().message(), Catch::Contains("--closeup-resize"));
+}

@@ -11,10 +11,11 @@
 
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/io/safetensors.h"
+#include "attention/runtime/limits.h"
 #include "gs/cameras/camera.h"
-#include "gs/synth/random_scene.h"
-#include "gs/raster/rasterizer.h"
 #include "gs/formats/scene_io.h"
+#include "gs/raster/rasterizer.h"
+#include "gs/synth/random_scene.h"
 #include "test_support.h"
 
 using namespace macro;
@@ -230,6 +231,36 @@ TEST_CASE("raster: bad inputs are clear errors", "[raster]") {
     REQUIRE_FALSE(r.is_ok());
     CHECK_THAT(r.status().message(), Catch::Contains("max_tile_pairs"));
   }
+}
+
+TEST_CASE("raster: a tile-pair default sized from too little memory refuses before binning",
+          "[raster][limits]") {
+  // 64 KiB available -> kMemoryFraction of it at kTilePairBytes a pair = 2730 pairs; 300
+  // frame-filling Gaussians on a 64x48 camera (12 tiles) need 3600.
+  const ResourceLimits saved = resource_limits();
+  set_available_memory_for_testing(64 << 10);
+  set_resource_limits(default_resource_limits());
+  const ResourceLimits sized = resource_limits();
+  RenderOptions opt;  // takes its max_tile_pairs from the sized limits
+  CHECK(sized.max_tile_pairs == uint64_t((64 << 10) * kMemoryFraction) / kTilePairBytes);
+  CHECK(opt.max_tile_pairs == sized.max_tile_pairs);
+  GaussianCloud cloud;
+  for (int k = 0; k < 300; ++k)
+    add_gaussian(cloud, 0.f, 0.f, 4.f + 0.01f * k, 1e3f, 0.5f, {1.f, 1.f, 1.f});
+  Rasterizer raster;
+  RenderResult result;
+  const Status s = raster.render_into(cloud, test_camera(), opt, &result);
+  REQUIRE_FALSE(s.is_ok());
+  INFO(s.message());
+  CHECK_THAT(s.message(), Catch::Contains("3600 (Gaussian, tile) pairs"));
+  CHECK_THAT(s.message(), Catch::Contains("memory available (a figure set for a test)"));
+  CHECK_THAT(s.message(), Catch::Contains("--max-tile-pairs"));
+  CHECK(result.color.empty());  // refused before the blend buffers (and the binning scratch)
+  CHECK(result.stats.tile_pairs == 3600);
+  set_available_memory_for_testing(0);
+  set_resource_limits(saved);
+  // The same scene under the default limits renders.
+  CHECK(raster.render_into(cloud, test_camera(), RenderOptions{}, &result).is_ok());
 }
 
 namespace {

@@ -144,3 +144,34 @@ TEST_CASE("greedy set cover: ties to the earliest, zero gain, repeats", "[macro]
   CHECK_FALSE(greedy_select(cov, names, 1, {0, 0, 0, 0}, G).is_ok());
   CHECK_FALSE(greedy_select({}, {}, 3, {}, G).is_ok());
 }
+
+TEST_CASE("coverage map: integer pixel indices (released) or pixel centres (ours)",
+          "[macro][refs]") {
+  // The close-up (256 x 256, the grid itself) and a candidate with the same pose and field of
+  // view at 128 x 128, flat depth 1, power-of-two intrinsics (exact arithmetic). Candidate pixel
+  // j lands at grid column 2 (j + o): the even columns with indices (released), the odd ones with
+  // pixel centres.
+  gs::Camera cu;
+  cu.name = "cu";
+  cu.width = cu.height = kCoverageGrid;
+  cu.fx = cu.fy = 128;
+  cu.cx = cu.cy = 128;
+  cu.R.setIdentity();
+  cu.t.setZero();
+  DepthView cand{cu.resized(128, 128), std::vector<float>(128 * 128, 1.f)};
+  const auto released = coverage_map(cand, cu);  // the default
+  const auto centres =
+      coverage_map(cand, cu, kCoverageGrid, ThreadPool::global(), PixelCoords::kCentre);
+  int64_t n_released = 0, n_centres = 0;
+  for (int i = 0; i < kCoverageGrid; ++i)
+    for (int j = 0; j < kCoverageGrid; ++j) {
+      const size_t k = size_t(i) * kCoverageGrid + size_t(j);
+      INFO("cell " << i << "," << j);
+      REQUIRE(released[k] == uint8_t(i % 2 == 0 && j % 2 == 0));
+      REQUIRE(centres[k] == uint8_t(i % 2 == 1 && j % 2 == 1));
+      n_released += released[k];
+      n_centres += centres[k];
+    }
+  CHECK(n_released == 128 * 128);
+  CHECK(n_centres == 128 * 128);
+}

@@ -1,6 +1,7 @@
 // `macro render` and `macro synth` end to end through the binary, on the committed default scene:
 // every output is written and agrees with the others; bad input exits non-zero with a message that
 // names the flag or file, and leaves no output or temporary behind.
+#include <sys/stat.h>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <filesystem>
@@ -266,6 +267,43 @@ TEST_CASE("a failed render job removes the outputs it already wrote", "[render][
   for (gs::RasterMode m : {gs::RasterMode::kClassic, gs::RasterMode::kAntialiased, gs::RasterMode::kMip}) {
     CHECK(gs::parse_raster_mode(gs::raster_mode_name(m)).value() == m);
   }
+}
+
+TEST_CASE("render outputs: /dev/null and a symlink survive a failed job; the CLI takes /dev/null",
+          "[render][render_cli][outputs]") {
+  struct stat st {};
+  REQUIRE(::stat("/dev/null", &st) == 0);
+  REQUIRE(S_ISCHR(st.st_mode));
+  REQUIRE(resolve_output("/dev/null")->kind == OutputTarget::kSpecial);  // the in-place path
+  test::TempDir dir("render_special"), logs("render_special_logs");
+  gs::RenderResult r;
+  r.width = 4;
+  r.height = 3;
+  r.color.assign(36, 0.5f);
+  r.alpha.assign(12, 1.f);
+  r.depth_sum.assign(12, 2.f);
+  r.inv_depth_sum.assign(12, 0.5f);
+  // The PNG goes through a symlink, the EXR to /dev/null, then the tensors fail: the undo removes
+  // neither.
+  REQUIRE(write_file_atomic(dir.file("target.png"), std::string("old")).is_ok());
+  std::filesystem::create_symlink("target.png", dir.file("link.png"));
+  gs::RenderOutputs o;
+  o.png = dir.file("link.png");
+  o.exr = "/dev/null";
+  o.tensors = dir.file("gone/a.safetensors");
+  CHECK(gs::check_render_outputs(gs::RenderOutputs{"/dev/null", "", "", ""}).is_ok());
+  Status s = gs::write_render_outputs(r, o, "scene", "cam", gs::RasterMode::kClassic);
+  REQUIRE_FALSE(s);
+  REQUIRE(::stat("/dev/null", &st) == 0);
+  CHECK(S_ISCHR(st.st_mode));
+  CHECK(std::filesystem::is_symlink(dir.file("link.png")));
+  CHECK(slurp(dir.file("target.png")).substr(1, 3) == "PNG");  // written through the link
+  // The CLI accepts /dev/null (its folder /dev is not writable to a user: no longer asked).
+  Run cli = run_macro("render " + scene_flags("train_03") + " --out-png /dev/null --quiet", logs);
+  INFO(cli.err);
+  CHECK(cli.rc == 0);
+  REQUIRE(::stat("/dev/null", &st) == 0);
+  CHECK(S_ISCHR(st.st_mode));
 }
 
 // End to end against the rasterizer goldens: the CLI's tensors are the golden render.

@@ -6,6 +6,7 @@
 
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/file_io.h"
+#include "attention/runtime/limits.h"
 #include "attention/runtime/thread_pool.h"
 #include "test_support.h"
 
@@ -70,4 +71,36 @@ TEST_CASE("atomic files: committed or absent, never partial", "[runtime][files]"
   REQUIRE_FALSE(big.is_ok());
   REQUIRE(big.status().message().find("limit") != std::string::npos);
   REQUIRE_FALSE(read_file(dir.file("missing")).is_ok());
+}
+
+TEST_CASE("resource limits: memory-bound defaults follow the available memory",
+          "[runtime][limits]") {
+  // No figure: the fixed caps.
+  const ResourceLimits caps = default_resource_limits(MemoryFigure{});
+  CHECK(caps.max_tile_pairs == (1ull << 31));
+  CHECK(caps.max_gaussians == 50'000'000);
+  CHECK(caps.max_tensor_bytes == (16ull << 30));
+  CHECK(caps.sized_from.empty());
+  // A laptop with 6 GiB free: half of it.
+  const uint64_t avail = 6ull << 30;
+  const ResourceLimits l =
+      default_resource_limits(MemoryFigure{avail, "MemAvailable in /proc/meminfo"});
+  const uint64_t budget = uint64_t(double(avail) * kMemoryFraction);
+  CHECK(l.max_tile_pairs == budget / kTilePairBytes);
+  CHECK(l.max_tile_pairs < (1ull << 31));
+  CHECK(l.max_gaussians == std::min<uint64_t>(50'000'000, budget / kGaussianBytes));
+  CHECK(l.max_tensor_bytes == budget);
+  CHECK(l.max_image_pixels == caps.max_image_pixels);
+  CHECK_THAT(l.sized_from, Catch::Contains("6.00 GiB") && Catch::Contains("MemAvailable"));
+  // A big machine keeps the caps.
+  const ResourceLimits big = default_resource_limits(MemoryFigure{1ull << 40, "x"});
+  CHECK(big.max_tile_pairs == caps.max_tile_pairs);
+  CHECK(big.max_tensor_bytes == caps.max_tensor_bytes);
+  // The injected figure wins over the measured one; 0 measures again.
+  set_available_memory_for_testing(12345);
+  CHECK(available_memory().bytes == 12345);
+  set_available_memory_for_testing(0);
+  const MemoryFigure m = available_memory();
+  CHECK(m.bytes > 0);  // /proc/meminfo on Linux
+  CHECK_FALSE(m.source.empty());
 }

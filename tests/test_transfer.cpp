@@ -248,6 +248,15 @@ TEST_CASE("transfer: macro enhance --enhancer transfer writes a PNG and a side-b
   REQUIRE(test::run_command(test::macro_exe() + " enhance --quiet --scene-dir " + dir +
                             " --closeup closeup.png --out " + tmp.file("default.png")) == 0);
   CHECK(fs::exists(tmp.file("default.png")));
+  // The output line names the enhancer that ran, not only the method.
+  REQUIRE(test::run_command(test::macro_exe() + " enhance --scene-dir " + dir +
+                            " --closeup closeup.png --method difix --out " + tmp.file("d.png") +
+                            " > " + tmp.file("line.txt") + " 2>/dev/null") == 0);
+  {
+    std::ifstream f(tmp.file("line.txt"));
+    std::string line((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    CHECK(line.find("method difix, enhancer transfer (weight-free),") != std::string::npos);
+  }
   CHECK(test::run_command(test::macro_exe() + " enhance --quiet --scene-dir " + dir +
                           " --closeup closeup.png --enhancer difix --out " + tmp.file("difix.png") +
                           " 2>/dev/null") != 0);

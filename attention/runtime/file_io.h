@@ -1,8 +1,16 @@
 // Reading user files with bounds, and writing outputs atomically.
 //
-// Every output goes through AtomicFile / write_file_atomic: the bytes are written to
-// "<path>.tmp-<pid>" in the same folder, flushed, and renamed over <path>. A failure or an
-// interrupt leaves no half-written file at <path> (and removes the temporary).
+// Every output goes through AtomicFile / write_file_atomic (or temp_path_for + commit_temp_file for
+// libraries that open the file themselves). What happens depends on what <path> is:
+//   - a regular file, or no file yet: the bytes go to "<path>.tmp-<pid>-<n>" in the same folder,
+//     are flushed, and renamed over <path>. A failure or an interrupt leaves no half-written file
+//     at <path> (and removes the temporary).
+//   - a symbolic link (or a chain of them): the same, at the file the link points to; the link is
+//     kept. A dangling link creates the file it names.
+//   - a character device or a FIFO (/dev/null, /dev/stdout, a named pipe): written in place,
+//     streamed; the node is never replaced by a regular file. Errors (ENOSPC from /dev/full, EPIPE)
+//     name the file. Such a write cannot be undone, so an error can leave bytes already written.
+//   - a directory, a socket or a block device: refused, naming what was found.
 #pragma once
 
 #include <cstdint>
@@ -28,6 +36,14 @@ struct FileStamp {
   bool operator==(const FileStamp& o) const { return size == o.size && mtime_ns == o.mtime_ns; }
 };
 FileStamp file_stamp(const std::string& path);
+
+// Where an output's bytes go (symlinks followed): a regular file (existing or new) replaced by
+// rename, or a special file written in place.
+struct OutputTarget {
+  enum Kind { kRegular, kSpecial } kind = kRegular;
+  std::string path;
+};
+Result<OutputTarget> resolve_output(const std::string& path);
 
 // Streamed atomic writer. write() calls accumulate; commit() renames into place. If the object is
 // destroyed without commit() the temporary is removed.
@@ -63,7 +79,8 @@ std::string temp_path_for(const std::string& path);
 Status commit_temp_file(const std::string& temp, const std::string& path);
 void remove_temp_file(const std::string& temp);
 
-// Temporaries still open are removed on SIGINT/SIGTERM (installed by the CLI).
+// On SIGINT/SIGTERM (installed by the CLI): temporaries still open are removed and one line is
+// printed on stderr ("interrupted: no output written", or that finished outputs were kept).
 void install_interrupt_cleanup();
 
 }  // namespace macro

@@ -29,8 +29,9 @@ bool quiet() {
   return v == 1;
 }
 
-Progress::Progress(std::string stage, size_t total)
+Progress::Progress(std::string stage, size_t total, double show_after_seconds)
     : stage_(std::move(stage)), total_(total), start_(std::chrono::steady_clock::now()) {
+  show_after_ = show_after_seconds;
   last_draw_ = start_ - std::chrono::seconds(1);
 }
 
@@ -59,8 +60,10 @@ void Progress::draw(bool final_line) {
   if (quiet()) return;
   auto now = std::chrono::steady_clock::now();
   if (!final_line && now - last_draw_ < std::chrono::milliseconds(250)) return;
-  last_draw_ = now;
   double elapsed = std::chrono::duration<double>(now - start_).count();
+  if (!shown_ && (final_line || elapsed < show_after_) && show_after_ > 0) return;
+  shown_ = true;
+  last_draw_ = now;
   std::string eta = "?";
   if (done_ > 0 && total_ >= done_) eta = format_seconds(elapsed * double(total_ - done_) / double(done_));
   std::fprintf(stderr, "\r[%s] %zu/%zu  elapsed %s  eta %s%s", stage_.c_str(), done_, total_,

@@ -14,7 +14,9 @@ bool quiet();
 
 class Progress {
  public:
-  Progress(std::string stage, size_t total);
+  // show_after_seconds > 0: nothing is drawn until the job has run that long (and no final line
+  // if it never was), so short jobs stay silent and long ones still show they are alive.
+  Progress(std::string stage, size_t total, double show_after_seconds = 0);
   ~Progress();
   void advance(size_t n = 1);
   void set(size_t done);
@@ -26,6 +28,8 @@ class Progress {
   size_t total_;
   size_t done_ = 0;
   bool finished_ = false;
+  double show_after_ = 0;
+  bool shown_ = false;
   std::chrono::steady_clock::time_point start_;
   std::chrono::steady_clock::time_point last_draw_;
   std::mutex mutex_;

@@ -218,6 +218,8 @@ std::string record_to_json_line(const BenchRecord& r) {
   j["seconds_per_closeup"] = r.seconds_per_closeup;
   j["width"] = r.width;
   j["height"] = r.height;
+  if (!r.enhancer.empty()) j["enhancer"] = r.enhancer;
+  if (r.planes_dropped) j["planes_dropped"] = r.planes_dropped;
   return j.dump() + "\n";
 }
 
@@ -255,10 +257,16 @@ Result<BenchRecord> record_from_json(const std::string& line, const std::string&
   if (j.contains("training_frame") && j["training_frame"].is_string())
     r.training_frame = j["training_frame"].get<std::string>();
   if (j.contains("reason") && j["reason"].is_string()) r.reason = j["reason"].get<std::string>();
+  if (j.contains("enhancer") && j["enhancer"].is_string())
+    r.enhancer = j["enhancer"].get<std::string>();
   double d = 0;
   if (j.contains("pair_index")) {
     MACRO_TRY(num(j["pair_index"], "pair_index", d));
     r.pair_index = int(d);
+  }
+  if (j.contains("planes_dropped")) {
+    MACRO_TRY(num(j["planes_dropped"], "planes_dropped", d));
+    r.planes_dropped = int(d);
   }
   if (j.contains("depth_ratio")) MACRO_TRY(num(j["depth_ratio"], "depth_ratio", r.depth_ratio));
   if (j.contains("options") && j["options"].is_object())
@@ -433,6 +441,8 @@ BenchRecord run_work_item(const BenchWorkItem& item, const MethodRegistry& regis
   Result<MethodOutput> out = method->run(context);
   if (!out) return skip("no output: " + out.status().message());
   if (out->image.data.empty()) return skip("no output: the method produced an empty image");
+  r.enhancer = out->enhancer;
+  r.planes_dropped = out->planes_dropped;
   for (const MethodStage& s : out->stages) {
     r.seconds.push_back(s);
     if (s.per_closeup) r.seconds_per_closeup += s.seconds;

@@ -100,6 +100,8 @@ struct BenchRecord {
   std::vector<MethodStage> seconds;  // load, method stages, metrics
   double seconds_per_closeup = 0;
   int width = 0, height = 0;
+  std::string enhancer;    // JSON "enhancer", absent when empty
+  int planes_dropped = 0;  // JSON "planes_dropped" (0 when absent)
   std::string key() const;
 };
 

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <set>
+#include <tuple>
 
 #include "attention/runtime/file_io.h"
 
@@ -33,7 +34,23 @@ struct Accum {
 };
 }  // namespace
 
-std::vector<ConfigResult> aggregate_records(const std::vector<BenchRecord>& records) {
+const char* scene_failure_rule_name(SceneFailureRule r) {
+  return r == SceneFailureRule::kPair ? "pair" : "released";
+}
+Result<SceneFailureRule> parse_scene_failure_rule(const std::string& t) {
+  if (t == "released") return SceneFailureRule::kReleased;
+  if (t == "pair") return SceneFailureRule::kPair;
+  return Status::error("--scene-failure: expected released or pair, found '" + t + "'");
+}
+
+std::vector<ConfigResult> aggregate_records(const std::vector<BenchRecord>& records,
+                                            SceneFailureRule rule) {
+  // Released rule: (config, scene) pairs with an empty k-means bin anywhere drop out whole.
+  std::set<std::tuple<std::string, std::string, std::string>> failed;
+  if (rule == SceneFailureRule::kReleased)
+    for (const BenchRecord& r : records)
+      if (r.ok && r.planes_dropped > 0)
+        failed.insert({r.method, canonical_options(r.options), r.scene});
   // config key -> scene -> metric -> accumulated pair values
   std::map<std::pair<std::string, std::string>, ConfigResult> configs;
   std::map<std::pair<std::string, std::string>, std::map<std::string, std::map<std::string, Accum>>>
@@ -46,6 +63,11 @@ std::vector<ConfigResult> aggregate_records(const std::vector<BenchRecord>& reco
       c.options_text = key.second;
       c.options_hash = r.options_hash;
       c.label = key.second.empty() ? r.method : r.method + " " + key.second;
+      c.rule = rule;
+    }
+    if (failed.count({key.first, key.second, r.scene})) {
+      ++c.pairs_skipped;  // its scene failed under the released rule
+      continue;
     }
     if (!r.ok) {
       ++c.pairs_skipped;
@@ -63,6 +85,10 @@ std::vector<ConfigResult> aggregate_records(const std::vector<BenchRecord>& reco
     c.pairs.push_back({r.depth_ratio, pair_values});
   }
   std::vector<ConfigResult> out;
+  for (const auto& f : failed) {
+    auto it = configs.find({std::get<0>(f), std::get<1>(f)});
+    if (it != configs.end()) ++it->second.scenes_failed;
+  }
   for (auto& [key, c] : configs) {
     std::map<std::string, Accum> of_means;
     for (auto& [scene, metrics] : per_scene[key]) {
@@ -145,6 +171,16 @@ std::string table_markdown(const std::vector<ConfigResult>& configs) {
     s += '\n';
   }
   s += "\nMean over scenes of the per-scene mean over pairs; n/c = not computed.\n";
+  size_t dropped = 0;
+  for (const ConfigResult& c : configs) dropped += c.scenes_failed;
+  if (configs.empty() || configs.front().rule == SceneFailureRule::kReleased) {
+    s += "Scene failures: released rule (--scene-failure released): a scene with an empty "
+         "k-means bin in any pair drops out of that method's average; " +
+         std::to_string(dropped) + " (method, scene) dropped, their pairs counted as skipped.\n";
+  } else {
+    s += "Scene failures: pair rule (--scene-failure pair): an empty k-means bin drops the plane "
+         "and the pair counts; only skipped pairs are left out.\n";
+  }
   return s;
 }
 
@@ -314,12 +350,12 @@ Chart chart_scene_bars(const std::vector<ConfigResult>& configs, const MetricCol
 }
 
 Status write_report(const std::vector<BenchRecord>& records, const std::string& dir,
-                    std::vector<std::string>* written) {
+                    std::vector<std::string>* written, SceneFailureRule rule) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec || !fs::is_directory(dir, ec))
     return Status::error(dir + ": cannot create the report folder: " + ec.message());
-  const std::vector<ConfigResult> configs = aggregate_records(records);
+  const std::vector<ConfigResult> configs = aggregate_records(records, rule);
   const auto put = [&](const std::string& name, const std::string& text) -> Status {
     const std::string path = (fs::path(dir) / name).string();
     MACRO_TRY(write_file_atomic(path, text));

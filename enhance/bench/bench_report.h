@@ -1,10 +1,15 @@
 // Benchmark tables and charts from harness records (enhance/bench/bench_harness.h).
 //
-// Protocol (docs/spec/macro-method.md §7, scripts/aggregate_results.py): for each configuration
-// (method + option set), each scene's mean over its "ok" pairs, then the mean of the scene means. A
-// metric that was never computed for a pair is not part of that pair's contribution; a scene with
-// no computed value of a metric has no scene mean for it, and a configuration whose scenes have
-// none prints "n/c" (never a number). Skipped pairs never enter a mean (they are counted).
+// Protocol (docs/spec/macro-method.md §7, scripts/aggregate_results.py): for each configuration (method +
+// option set), each scene's mean over its "ok" pairs, then the mean of the scene means. A metric
+// that was never computed for a pair is not part of that pair's contribution; a scene with no
+// computed value of a metric has no scene mean for it, and a configuration whose scenes have none
+// prints "n/c" (never a number). Skipped pairs never enter a mean (they are counted).
+// Scene failures (SceneFailureRule): under kReleased (the default, paper-comparable) a scene with
+// any pair whose plan dropped an empty k-means bin (record planes_dropped > 0; the release raises
+// there and the whole scene's pass fails, docs/benchmark.md) drops out of that
+// configuration's average; under kPair (ours) those pairs count like any other. table.md says
+// which rule was used and how many scenes it dropped.
 //
 // Outputs of write_report(DIR):
 //   table.md, table.csv          methods as rows; PSNR (up), SSIM (up), LPIPS (down), DINOv2 and
@@ -42,6 +47,10 @@ struct MetricColumn {
 };
 const std::vector<MetricColumn>& metric_columns();
 
+enum class SceneFailureRule { kReleased, kPair };
+const char* scene_failure_rule_name(SceneFailureRule rule);                  // "released", "pair"
+Result<SceneFailureRule> parse_scene_failure_rule(const std::string& text);  // --scene-failure
+
 struct ConfigResult {
   std::string method, options_text, options_hash;
   std::string label;  // "3dgs" or "macro K=3,P=4"
@@ -52,13 +61,16 @@ struct ConfigResult {
   std::map<std::string, std::map<std::string, double>> scene_means;
   size_t scenes = 0;  // scenes with at least one ok pair
   size_t pairs_ok = 0, pairs_skipped = 0;
+  SceneFailureRule rule = SceneFailureRule::kReleased;
+  size_t scenes_failed = 0;  // scenes dropped by the released rule (kPair: always 0)
   // (depth_ratio, metric name -> value) of every ok pair
   std::vector<std::pair<double, std::map<std::string, double>>> pairs;
 };
 
 // Configurations in order of first appearance in the (work-list ordered) records... sorted by
 // method then options text.
-std::vector<ConfigResult> aggregate_records(const std::vector<BenchRecord>& records);
+std::vector<ConfigResult> aggregate_records(const std::vector<BenchRecord>& records,
+                                            SceneFailureRule rule = SceneFailureRule::kReleased);
 
 // "16.22" style formatting per metric (PSNR 2 decimals, others 3, seconds 2) or "n/c".
 std::string format_metric(const std::string& name, std::optional<double> value);
@@ -74,6 +86,7 @@ Chart chart_scene_bars(const std::vector<ConfigResult>& configs, const MetricCol
 // Writes every file listed at the top into `dir` (created if missing), atomically. `written`
 // receives the paths.
 Status write_report(const std::vector<BenchRecord>& records, const std::string& dir,
-                    std::vector<std::string>* written = nullptr);
+                    std::vector<std::string>* written = nullptr,
+                    SceneFailureRule rule = SceneFailureRule::kReleased);
 
 }  // namespace macro::enhance

@@ -111,6 +111,8 @@ MethodFn enhance_method_fn(EnhanceMethod method, BenchMethodSettings settings) {
     MACRO_ASSIGN_OR_RETURN(EnhanceResult r, enhance_closeup(c.inputs, e));
     MethodOutput out;
     out.image = std::move(r.image);
+    out.enhancer = r.enhancer;
+    out.planes_dropped = method == EnhanceMethod::kDifix ? 0 : r.planes_dropped;  // no bins
     const EnhanceTimings& t = r.timings;
     const std::pair<const char*, double> stages[] = {
         {"render", t.ms_render}, {"plan", t.ms_plan},     {"views", t.ms_views},
@@ -132,6 +134,8 @@ MethodFn transfer_method_fn(TransferSource source) {
     MACRO_ASSIGN_OR_RETURN(EnhanceResult r, enhance_closeup(c.inputs, e));
     MethodOutput out;
     out.image = std::move(r.image);
+    out.enhancer = r.enhancer;
+    out.planes_dropped = source == TransferSource::kWhole ? 0 : r.planes_dropped;
     const EnhanceTimings& t = r.timings;
     out.stages.push_back({"render", t.ms_render / 1000.0, true});
     out.stages.push_back({"plan", t.ms_plan / 1000.0, true});

@@ -51,6 +51,8 @@ struct MethodStage {
 struct MethodOutput {
   gs::Image image;  // the prediction (any size; resized to the GT size for scoring)
   std::vector<MethodStage> stages;
+  std::string enhancer;    // what ran (EnhanceResult::enhancer); "" for 3dgs
+  int planes_dropped = 0;  // empty k-means bins: the release fails the scene (bench_report.h)
 };
 
 struct MethodContext {

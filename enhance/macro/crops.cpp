@@ -64,6 +64,7 @@ std::vector<Crop> compute_crops(const DepthView& cu, const PlaneResult& planes,
     const gs::Camera& c = refs[r];
     const Eigen::Matrix3d M = c.R * a.R.transpose();
     const Eigen::Vector3d b = c.t - M * a.t;
+    const double o = pixel_offset(opt.pixel);
     const size_t chunk = 16, chunks = (size_t(H) + chunk - 1) / chunk;
     std::vector<std::vector<PlaneAccum>> part(chunks, std::vector<PlaneAccum>(size_t(P)));
     pool.parallel_for(chunks, [&](size_t c0, size_t c1, int) {
@@ -75,8 +76,7 @@ std::vector<Crop> compute_crops(const DepthView& cu, const PlaneResult& planes,
             const double z = cu.depth[k];
             if (l < 0 || !(z > 0)) continue;
             const Eigen::Vector3d q =
-                M * Eigen::Vector3d((j + 0.5 - a.cx) / a.fx * z, (i + 0.5 - a.cy) / a.fy * z, z) +
-                b;
+                M * Eigen::Vector3d((j + o - a.cx) / a.fx * z, (i + o - a.cy) / a.fy * z, z) + b;
             if (!(q.z() > 0)) continue;
             const double u = c.fx * q.x() / q.z() + c.cx, v = c.fy * q.y() / q.z() + c.cy;
             if (!(u >= 0 && u < c.width && v >= 0 && v < c.height)) continue;
@@ -206,6 +206,24 @@ std::vector<uint8_t> crop_view_validity(const Crop& crop, int ref_w, int ref_h) 
   std::vector<uint8_t> m(size_t(vw) * vh);
   for (int y = 0; y < vh; ++y)
     for (int x = 0; x < vw; ++x) m[size_t(y) * vw + x] = row[size_t(y)] & col[size_t(x)];
+  return m;
+}
+
+std::vector<uint8_t> crop_reference_validity(const Crop& crop, int ref_w, int ref_h) {
+  const int bw = crop.box.width(), bh = crop.box.height();
+  std::vector<uint8_t> col(static_cast<size_t>(ref_w)), row(static_cast<size_t>(ref_h));
+  for (int x = 0; x < ref_w; ++x) {
+    const int rx = crop.box.x0 + nearest_index(x, bw, ref_w);
+    col[size_t(x)] = rx >= 0 && rx < ref_w;
+  }
+  for (int y = 0; y < ref_h; ++y) {
+    const int ry = crop.box.y0 + nearest_index(y, bh, ref_h);
+    row[size_t(y)] = ry >= 0 && ry < ref_h;
+  }
+  std::vector<uint8_t> m(size_t(ref_w) * size_t(ref_h));
+  for (int y = 0; y < ref_h; ++y)
+    for (int x = 0; x < ref_w; ++x)
+      m[size_t(y) * size_t(ref_w) + size_t(x)] = row[size_t(y)] & col[size_t(x)];
   return m;
 }
 

@@ -74,6 +74,7 @@ struct CropRejection {
 struct CropOptions {
   ScaleMode scale = ScaleMode::kOpticalAxis;
   CropMode crop = CropMode::kFull;
+  PixelCoords pixel = PixelCoords::kIndex;  // where close-up pixels are unprojected (centroid)
 };
 
 // Crops in view order (kComposite: the same crops as kFull): bin-major (plane 0 = farthest first),
@@ -89,6 +90,12 @@ std::vector<Crop> compute_crops(const DepthView& closeup, const PlaneResult& pla
 // Validity of the crop's view pixels (1 = inside the reference) [view.h * view.w]: view pixel x
 // maps to canvas column nearest_index(x, box width, view width).
 std::vector<uint8_t> crop_view_validity(const Crop& crop, int ref_width, int ref_height);
+
+// The released padding mask (docs/macro.md §5, §9): the crop's validity made at the reference
+// image's size [ref_height * ref_width]: pixel x samples canvas column nearest_index(x, box
+// width, ref_width) (the box-size mask resized nearest to the reference size), 1 where that lies
+// inside the reference. The mask levels are then resized from this size (plan.cpp).
+std::vector<uint8_t> crop_reference_validity(const Crop& crop, int ref_width, int ref_height);
 
 // The crop's validity on the model-size canvas [model.h * model.w]: crop_view_validity at the
 // top-left (view.w x view.h), kCanvasPad (plane_masks.h) elsewhere. A full crop (view == model)

@@ -15,7 +15,48 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+// As write_png stores a float render (gs/image_io.cpp): clamp, x255, round half up.
+uint8_t png_u8(float v) {
+  if (!(v > 0.f)) return 0;
+  if (v >= 1.f) return 255;
+  return static_cast<uint8_t>(v * 255.f + 0.5f);
+}
+
 }  // namespace
+
+const char* padding_mask_size_name(PaddingMaskSize m) {
+  return m == PaddingMaskSize::kModel ? "model" : "reference";
+}
+Result<PaddingMaskSize> parse_padding_mask_size(const std::string& t) {
+  if (t == "reference" || t == "released") return PaddingMaskSize::kReference;
+  if (t == "model") return PaddingMaskSize::kModel;
+  return Status::error("--padding-mask: expected reference or model, found '" + t + "'");
+}
+const char* closeup_resize_name(CloseupResize m) {
+  return m == CloseupResize::kFloat ? "float" : "u8";
+}
+Result<CloseupResize> parse_closeup_resize(const std::string& t) {
+  if (t == "u8" || t == "released") return CloseupResize::kU8;
+  if (t == "float") return CloseupResize::kFloat;
+  return Status::error("--closeup-resize: expected u8 or float, found '" + t + "'");
+}
+
+Result<gs::Image> resize_closeup(const gs::Image& cu, Size2 model, CloseupResize how) {
+  if (how == CloseupResize::kFloat) return LanczosUpsampler().resize(cu, model.w, model.h);
+  if (cu.width < 1 || cu.height < 1 || cu.channels < 1 || model.w < 1 || model.h < 1)
+    return Status::error("close-up resize: expected a non-empty image and size, found " +
+                         std::to_string(cu.width) + "x" + std::to_string(cu.height) + " -> " +
+                         std::to_string(model.w) + "x" + std::to_string(model.h));
+  std::vector<uint8_t> u8(cu.data.size());
+  for (size_t i = 0; i < u8.size(); ++i) u8[i] = png_u8(cu.data[i]);
+  const std::vector<uint8_t> out =
+      (cu.width == model.w && cu.height == model.h)
+          ? u8
+          : resize_lanczos_u8(u8.data(), cu.width, cu.height, cu.channels, model.w, model.h);
+  gs::Image img(model.w, model.h, cu.channels);
+  for (size_t i = 0; i < out.size(); ++i) img.data[i] = float(out[i]) / 255.f;
+  return img;
+}
 
 int MacroPlan::view_count() const {
   return 1 + int(options.crops.crop == CropMode::kComposite ? composites.size() : crops.size());
@@ -63,9 +104,10 @@ Result<MacroPlan> build_plan(const SceneInputs& in, const PlanOptions& o) {
       MACRO_TRY(raster.render_into(in.cloud, cam, o.render, &r, pool)
                     .with_context("reference candidate '" + cam.name + "'"));
       DepthView dv{cam, macro_depth(r)};
-      coverage[c] = coverage_map(dv, in.closeup, kCoverageGrid, pool);
+      coverage[c] = coverage_map(dv, in.closeup, kCoverageGrid, pool, o.crops.pixel);
       if (o.occlusion) {
-        visible.push_back(visible_fraction(plan.closeup_depth, dv, o.occlusion_tolerance, pool));
+        visible.push_back(
+            visible_fraction(plan.closeup_depth, dv, o.occlusion_tolerance, pool, o.crops.pixel));
         eligible[c] = visible.back() >= o.occlusion_min_visible;
       }
       progress.advance();
@@ -131,16 +173,30 @@ Result<MacroPlan> build_plan(const SceneInputs& in, const PlanOptions& o) {
     plan.masks_built = true;
   } else {
     // Tight crops sit on the model-size canvas, the rest marked kCanvasPad (plane_masks.h).
+    // Full crops, released: the padding mask at the reference size, each level resized from it;
+    // references of different sizes (not in the released data) meet at the model size.
     std::vector<int32_t> crop_plane;
     std::vector<std::vector<uint8_t>> valid;
+    bool at_ref = o.padding_mask == PaddingMaskSize::kReference && o.crops.crop == CropMode::kFull;
+    const int rw = plan.ref_cameras[0].width, rh = plan.ref_cameras[0].height;
+    for (const gs::Camera& rc : plan.ref_cameras)
+      at_ref = at_ref && rc.width == rw && rc.height == rh;
     for (const Crop& c : plan.crops) {
       crop_plane.push_back(c.plane);
       const gs::Camera& rc = plan.ref_cameras[size_t(c.ref)];
-      valid.push_back(crop_model_validity(c, rc.width, rc.height, plan.model));
+      if (o.padding_mask == PaddingMaskSize::kReference && o.crops.crop == CropMode::kFull) {
+        std::vector<uint8_t> v = crop_reference_validity(c, rc.width, rc.height);
+        valid.push_back(at_ref
+                            ? std::move(v)
+                            : resize_nearest(v, rc.height, rc.width, plan.model.h, plan.model.w));
+      } else {
+        valid.push_back(crop_model_validity(c, rc.width, rc.height, plan.model));
+      }
     }
+    const int vh = at_ref ? rh : plan.model.h, vw = at_ref ? rw : plan.model.w;
     MACRO_ASSIGN_OR_RETURN(
         plan.masks, build_plane_masks(o.mask, P, crop_plane, plan.latent_planes, plan.latent_h,
-                                      plan.latent_w, valid, plan.model.h, plan.model.w, grids));
+                                      plan.latent_w, valid, vh, vw, grids));
     plan.masks_built = true;
   }
   plan.timings.ms_masks = ms_since(t0);
@@ -154,7 +210,7 @@ Result<PlanViews> build_views(const MacroPlan& plan, const SceneInputs& in,
   gs::Image cu(plan.closeup.width, plan.closeup.height, 3);
   cu.data = plan.closeup_color;
   MACRO_ASSIGN_OR_RETURN(gs::Image cu_model,
-                         LanczosUpsampler().resize(cu, plan.model.w, plan.model.h));
+                         resize_closeup(cu, plan.model, plan.options.closeup_resize));
   v.images.push_back(std::move(cu_model));
   v.validity.emplace_back(size_t(plan.model.w) * plan.model.h, 1);
   std::vector<gs::Image> refs(plan.ref_cameras.size());
@@ -202,6 +258,9 @@ std::string plan_to_json(const MacroPlan& p) {
                   {"mask", mask_mode_name(p.options.mask)},
                   {"scale", scale_mode_name(p.options.crops.scale)},
                   {"crop", crop_mode_name(p.options.crops.crop)},
+                  {"pixel_coords", pixel_coords_name(p.options.crops.pixel)},
+                  {"padding_mask", padding_mask_size_name(p.options.padding_mask)},
+                  {"closeup_resize", closeup_resize_name(p.options.closeup_resize)},
                   {"occlusion", p.options.occlusion}};
   j["model_size"] = {p.model.w, p.model.h};
   j["planes"] = json::array();

@@ -27,11 +27,28 @@
 
 namespace macro::enhance {
 
+enum class PaddingMaskSize { kReference, kModel };
+const char* padding_mask_size_name(PaddingMaskSize m);
+Result<PaddingMaskSize> parse_padding_mask_size(const std::string& text);  // reference | model
+enum class CloseupResize { kU8, kFloat };
+const char* closeup_resize_name(CloseupResize m);
+Result<CloseupResize> parse_closeup_resize(const std::string& text);  // u8 | float
+// The close-up's model-size view (build_views [0]) by the chosen rule.
+Result<gs::Image> resize_closeup(const gs::Image& closeup, Size2 model, CloseupResize how);
+
 struct PlanOptions {
   int refs = 3;         // K
   PlaneOptions planes;  // P = 3, or auto
   MaskMode mask = MaskMode::kReleased;
-  CropOptions crops;
+  CropOptions crops;  // crops.pixel also sets where coverage-map pixels are unprojected
+  // Where the crops' padding masks are made before each attention level resizes them (nearest):
+  // kReference at the reference image's size, as released (docs/macro.md §9; the default);
+  // kModel at the model size (ours: one nearest resize fewer). Tight crops always use kModel.
+  PaddingMaskSize padding_mask = PaddingMaskSize::kReference;
+  // How the close-up render reaches the model size (build_views): kU8 quantised to 8 bits and
+  // resized by 8-bit Lanczos, as the release reads its PNG render (docs/macro.md §9; the
+  // default); kFloat the float render by float Lanczos (ours: no quantisation).
+  CloseupResize closeup_resize = CloseupResize::kU8;
   bool occlusion = false;  // discard candidates that cannot see the close-up (paper)
   double occlusion_tolerance = kOcclusionTolerance;
   double occlusion_min_visible = kOcclusionMinVisible;

@@ -7,6 +7,15 @@
 
 namespace macro::enhance {
 
+const char* pixel_coords_name(PixelCoords p) {
+  return p == PixelCoords::kCentre ? "centre" : "index";
+}
+Result<PixelCoords> parse_pixel_coords(const std::string& t) {
+  if (t == "index" || t == "released") return PixelCoords::kIndex;
+  if (t == "centre" || t == "center") return PixelCoords::kCentre;
+  return Status::error("--pixel-coords: expected index or centre, found '" + t + "'");
+}
+
 std::vector<float> macro_depth(const gs::RenderResult& r) {
   std::vector<float> d(r.depth_sum.size());
   for (size_t i = 0; i < d.size(); ++i)
@@ -15,7 +24,8 @@ std::vector<float> macro_depth(const gs::RenderResult& r) {
 }
 
 std::vector<uint8_t> coverage_map(const DepthView& cand, const gs::Camera& closeup, int grid,
-                                  ThreadPool& pool) {
+                                  ThreadPool& pool, PixelCoords pixel) {
+  const double o = pixel_offset(pixel);
   const gs::Camera g = closeup.resized(grid, grid);
   const gs::Camera& c = cand.camera;
   const int w = c.width, h = c.height;
@@ -36,7 +46,7 @@ std::vector<uint8_t> coverage_map(const DepthView& cand, const gs::Camera& close
       for (int i = int(bi * chunk); i < std::min(h, int((bi + 1) * chunk)); ++i)
         for (int j = 0; j < w; ++j) {
           const double z = cand.depth[size_t(i) * w + j];
-          const Eigen::Vector3d xc((j + 0.5 - c.cx) / c.fx * z, (i + 0.5 - c.cy) / c.fy * z, z);
+          const Eigen::Vector3d xc((j + o - c.cx) / c.fx * z, (i + o - c.cy) / c.fy * z, z);
           const Eigen::Vector3d q = M * xc + b;
           if (!(q.z() > 0)) continue;
           const double u = g.fx * q.x() / q.z() + g.cx, v = g.fy * q.y() / q.z() + g.cy;
@@ -51,7 +61,8 @@ std::vector<uint8_t> coverage_map(const DepthView& cand, const gs::Camera& close
 }
 
 double visible_fraction(const DepthView& cu, const DepthView& cand, double tolerance,
-                        ThreadPool& pool) {
+                        ThreadPool& pool, PixelCoords pixel) {
+  const double o = pixel_offset(pixel);
   const gs::Camera& a = cu.camera;
   const gs::Camera& c = cand.camera;
   const Eigen::Matrix3d M = c.R * a.R.transpose();
@@ -65,7 +76,8 @@ double visible_fraction(const DepthView& cu, const DepthView& cand, double toler
         if (!(z > 0)) continue;
         ++valid[i];
         const Eigen::Vector3d q =
-            M * Eigen::Vector3d((j + 0.5 - a.cx) / a.fx * z, (i + 0.5 - a.cy) / a.fy * z, z) + b;
+            M * Eigen::Vector3d((j + o - a.cx) / a.fx * z, (double(i) + o - a.cy) / a.fy * z, z) +
+            b;
         if (!(q.z() > 0)) continue;
         const double u = c.fx * q.x() / q.z() + c.cx, v = c.fy * q.y() / q.z() + c.cy;
         if (!(u >= 0 && u < c.width && v >= 0 && v < c.height)) continue;

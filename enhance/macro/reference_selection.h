@@ -33,6 +33,17 @@ inline constexpr float kDepthValidAlpha = 0.5f;       // evaluate.py: alpha < 0.
 inline constexpr double kOcclusionTolerance = 0.05;   // relative depth slack of the test
 inline constexpr double kOcclusionMinVisible = 0.01;  // fraction of close-up pixels seen
 
+// Where a pixel (column j, row i) sits when it is unprojected (coverage maps, crop centroids,
+// the occlusion test). kIndex: at (j, i), as the released code's meshgrid of pixel indices
+// (docs/macro.md §9; the default). kCentre: at its centre (j + 0.5, i + 0.5), the
+// convention of our cameras and renderer (docs/rasterizer.md); ours, kept as an option.
+enum class PixelCoords { kIndex, kCentre };
+const char* pixel_coords_name(PixelCoords p);
+Result<PixelCoords> parse_pixel_coords(const std::string& text);  // "index" | "centre"
+inline double pixel_offset(PixelCoords p) {
+  return p == PixelCoords::kCentre ? 0.5 : 0.0;
+}
+
 struct DepthView {
   gs::Camera camera;
   std::vector<float> depth;  // [H,W] at camera.width x camera.height
@@ -43,12 +54,13 @@ std::vector<float> macro_depth(const gs::RenderResult& render);
 
 // Coverage cells [G*G] (1 = covered) of the close-up by one candidate.
 std::vector<uint8_t> coverage_map(const DepthView& candidate, const gs::Camera& closeup,
-                                  int grid = kCoverageGrid,
-                                  ThreadPool& pool = ThreadPool::global());
+                                  int grid = kCoverageGrid, ThreadPool& pool = ThreadPool::global(),
+                                  PixelCoords pixel = PixelCoords::kIndex);
 
 // Fraction of the close-up's valid pixels that the candidate sees (the occlusion test above).
 double visible_fraction(const DepthView& closeup, const DepthView& candidate, double tolerance,
-                        ThreadPool& pool = ThreadPool::global());
+                        ThreadPool& pool = ThreadPool::global(),
+                        PixelCoords pixel = PixelCoords::kIndex);
 
 struct SelectedReference {
   int candidate = 0;  // index into the candidate list

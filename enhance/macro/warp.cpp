@@ -129,7 +129,8 @@ Result<WarpViews> build_warp_views(const MacroPlan& plan, const SceneInputs& in,
   const int W = plan.closeup.width, H = plan.closeup.height;
   gs::Image cu(W, H, 3);
   cu.data = plan.closeup_color;
-  wv.images.push_back(resize_lanczos(cu, m.w, m.h, pool));
+  MACRO_ASSIGN_OR_RETURN(gs::Image cu_model, resize_closeup(cu, m, plan.options.closeup_resize));
+  wv.images.push_back(std::move(cu_model));
   wv.validity.emplace_back(size_t(m.w) * size_t(m.h), 1);
   std::vector<gs::Image> warped_model(K);
   std::vector<std::vector<uint8_t>> valid_model(K);

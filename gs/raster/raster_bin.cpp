@@ -82,7 +82,10 @@ size_t bin_scratch_bytes(size_t n, size_t pairs, int tiles) {
 }
 
 void bin_stage(const Projected& proj, const CameraF& cam, TileRule rule, uint64_t pairs,
-               Arena& scratch, Binned* out, ThreadPool& pool) {
+               Arena& scratch, Binned* out, ThreadPool& pool, Progress* progress) {
+  const auto step = [progress] {
+    if (progress) progress->advance();
+  };
   const size_t n = proj.n;
   const int tiles = cam.tiles_x * cam.tiles_y;
   scratch.reset(bin_scratch_bytes(n, pairs, tiles));
@@ -148,6 +151,7 @@ void bin_stage(const Projected& proj, const CameraF& cam, TileRule rule, uint64_
     std::swap(iin, iout);
   }
   const uint32_t* order = iin;  // [V] Gaussian ids front to back
+  step();
 
   // 2. Records in depth order; the record at rank k owns pairs [offset[k], offset[k+1]).
   TileSplat* sorted = out->splats;
@@ -165,6 +169,7 @@ void bin_stage(const Projected& proj, const CameraF& cam, TileRule rule, uint64_
   offset[0] = 0;
   for (size_t k = 0; k < v; ++k) offset[k + 1] = offset[k] + sorted_tiles[k];
   MACRO_CHECK(offset[v] == pairs);
+  step();
   pool.parallel_for(
       v,
       [&](size_t begin, size_t end, int) {
@@ -180,6 +185,7 @@ void bin_stage(const Projected& proj, const CameraF& cam, TileRule rule, uint64_
       },
       1024);
 
+  step();
   // 3. Stable counting sort of the pairs by tile, over C fixed chunks.
   const size_t chunk = (pairs + kBinChunks - 1) / kBinChunks;
   pool.parallel_for(
@@ -216,6 +222,7 @@ void bin_stage(const Projected& proj, const CameraF& cam, TileRule rule, uint64_
         }
       },
       1);
+  step();
 }
 
 }  // namespace macro::gs::raster

@@ -235,7 +235,8 @@ void blend_tile_reference(const Binned& bins, const CameraF& cam, int t, const B
 }  // namespace
 
 void blend_stage(const Binned& bins, const CameraF& cam, const RasterKernels& kernels,
-                 bool reference, const BlendOutputs& out, ThreadPool& pool, BlendTotals* totals) {
+                 bool reference, const BlendOutputs& out, ThreadPool& pool, BlendTotals* totals,
+                 Progress* progress) {
   const int tiles = cam.tiles_x * cam.tiles_y;
   std::atomic<uint64_t> evals{0}, blended{0};
   std::vector<std::unique_ptr<TileScratch>> scratch(size_t(pool.size()));
@@ -254,6 +255,7 @@ void blend_stage(const Binned& bins, const CameraF& cam, const RasterKernels& ke
         }
         evals += counters.evals;
         blended += counters.blended;
+        if (progress) progress->advance(end - begin);
       },
       2);
   totals->evals = evals;

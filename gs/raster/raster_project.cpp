@@ -226,7 +226,7 @@ CameraF make_camera_f(const Camera& camera) {
 
 void project_stage(const GaussianCloud& cloud, const CameraF& cam, const ProjectParams& params,
                    const RasterKernels& kernels, const Projected& out, ThreadPool& pool,
-                   ProjectCounts* counts) {
+                   ProjectCounts* counts, Progress* progress) {
   const size_t n = cloud.size();
   const ProjectInput in{
       cloud.position.data(), cloud.scale.data(), cloud.rotation.data(), cloud.opacity.data(), &cam,
@@ -266,6 +266,7 @@ void project_stage(const GaussianCloud& cloud, const CameraF& cam, const Project
         faint += c_faint;
         offscreen += c_off;
         pairs += c_pairs;
+        if (progress) progress->advance(end - begin);
       },
       4096);
   counts->visible = visible;

@@ -21,6 +21,7 @@
 #include <cstdlib>
 #include <memory>
 
+#include "attention/runtime/progress.h"
 #include "attention/runtime/thread_pool.h"
 #include "gs/cameras/camera.h"
 #include "gs/constants.h"
@@ -103,7 +104,7 @@ struct ProjectCounts {
 
 void project_stage(const GaussianCloud& cloud, const CameraF& cam, const ProjectParams& params,
                    const RasterKernels& kernels, const Projected& out, ThreadPool& pool,
-                   ProjectCounts* counts);
+                   ProjectCounts* counts, Progress* progress = nullptr);  // progress: Gaussians
 
 // Outputs of bin.
 struct Binned {
@@ -112,13 +113,16 @@ struct Binned {
   uint32_t* tile_start = nullptr;  // [TX*TY+1] tile t owns pair[tile_start[t], tile_start[t+1])
 };
 
+inline constexpr size_t kBinSteps = 4;  // depth sort, records, pairs, tile sort
+
 // Scratch the bin stage needs, in bytes, for V visible Gaussians and P pairs.
 size_t bin_scratch_bytes(size_t n, size_t pairs, int tiles);
 // Sorts the visible Gaussians by depth (LSD radix on the float bits, stable, ties by id) and
 // groups the pairs by tile with a stable counting pass: the result equals a stable sort of the
 // 64-bit keys (tile << 32 | depth bits) with ties broken by Gaussian id.
 void bin_stage(const Projected& proj, const CameraF& cam, TileRule rule, uint64_t pairs,
-               Arena& scratch, Binned* out, ThreadPool& pool);
+               Arena& scratch, Binned* out, ThreadPool& pool,
+               Progress* progress = nullptr);  // progress: kBinSteps steps
 
 struct BlendOutputs {
   float* color;          // [H,W,3]
@@ -132,7 +136,8 @@ struct BlendTotals {
 };
 // reference = true: the naive per-pixel scalar loop over the whole tile list (the baseline).
 void blend_stage(const Binned& bins, const CameraF& cam, const RasterKernels& kernels,
-                 bool reference, const BlendOutputs& out, ThreadPool& pool, BlendTotals* totals);
+                 bool reference, const BlendOutputs& out, ThreadPool& pool, BlendTotals* totals,
+                 Progress* progress = nullptr);  // progress: tiles
 
 // ---- Tile coverage, shared by project (counting) and bin (emitting) so both agree exactly. ----
 

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <string>
 
+#include "attention/runtime/limits.h"
 #include "attention/runtime/progress.h"
 #include "gs/raster/raster_stages.h"
 
@@ -25,6 +26,8 @@ Rasterizer::Rasterizer(Rasterizer&&) noexcept = default;
 Rasterizer& Rasterizer::operator=(Rasterizer&&) noexcept = default;
 
 namespace {
+
+constexpr double kStageProgressSeconds = 1.0;  // a stage shows progress after this long
 
 Status check_inputs(const GaussianCloud& cloud, const Camera& camera, const RenderOptions& o) {
   MACRO_TRY(camera.validate().with_context("render: camera '" + camera.name + "'"));
@@ -99,7 +102,13 @@ Status Rasterizer::render_into(const GaussianCloud& cloud, const Camera& camera,
   proj.depth_key = ws_->project.carve<uint32_t>(n);
   const RasterKernels& kernels = raster_kernels();
   ProjectCounts counts;
-  project_stage(cloud, cam, params, kernels, proj, pool, &counts);
+  // Each stage shows progress on stderr once it has run kStageProgressSeconds (a frame-filling
+  // scene can take seconds per stage); renders that finish sooner print nothing.
+  const std::string stage = "render '" + camera.name + "': ";
+  {
+    Progress progress(stage + "project", n, kStageProgressSeconds);
+    project_stage(cloud, cam, params, kernels, proj, pool, &counts, &progress);
+  }
   result.stats.ms_project = ms_since(t_start);
   result.stats.visible = counts.visible;
   result.stats.culled_depth = counts.culled_depth;
@@ -108,16 +117,29 @@ Status Rasterizer::render_into(const GaussianCloud& cloud, const Camera& camera,
   result.stats.culled_offscreen = counts.culled_offscreen;
   result.stats.tile_pairs = counts.pairs;
   const uint64_t limit = std::min<uint64_t>(options.max_tile_pairs, 0xffffffffull);
-  if (counts.pairs > limit)
-    return Status::error("render: the scene needs " + std::to_string(counts.pairs) +
-                         " (Gaussian, tile) pairs for camera '" + camera.name +
-                         "', more than the limit " + std::to_string(limit) +
-                         " (--max-tile-pairs, RenderOptions::max_tile_pairs)");
+  if (counts.pairs > limit) {
+    // Refused before the binning buffers are allocated. A default sized from the memory
+    // (limits.h) says so, with what the pairs would take.
+    const ResourceLimits& rl = resource_limits();
+    const bool sized = !rl.sized_from.empty() && options.max_tile_pairs == rl.max_tile_pairs &&
+                       rl.max_tile_pairs < ResourceLimits{}.max_tile_pairs;
+    return Status::error(
+        "render: the scene needs " + std::to_string(counts.pairs) +
+        " (Gaussian, tile) pairs for camera '" + camera.name + "', more than the limit " +
+        std::to_string(limit) + " (--max-tile-pairs, RenderOptions::max_tile_pairs)" +
+        (sized ? "; binning them would take " + format_bytes(counts.pairs * kTilePairBytes) +
+                     ", and the limit is " + rl.sized_from +
+                     ": lower the resolution or the Gaussian count, or free memory"
+               : std::string()));
+  }
 
   // Bin.
   const auto t_bin = std::chrono::steady_clock::now();
   Binned bins;
-  bin_stage(proj, cam, params.rule, counts.pairs, ws_->bin, &bins, pool);
+  {
+    Progress progress(stage + "bin", raster::kBinSteps, kStageProgressSeconds);
+    bin_stage(proj, cam, params.rule, counts.pairs, ws_->bin, &bins, pool, &progress);
+  }
   result.stats.ms_bin = ms_since(t_bin);
 
   // Blend.
@@ -135,7 +157,11 @@ Status Rasterizer::render_into(const GaussianCloud& cloud, const Camera& camera,
                    result.inv_depth_sum.data(),
                    {options.background[0], options.background[1], options.background[2]}};
   BlendTotals totals;
-  blend_stage(bins, cam, kernels, options.naive_baseline, out, pool, &totals);
+  {
+    Progress progress(stage + "blend", size_t(cam.tiles_x) * size_t(cam.tiles_y),
+                      kStageProgressSeconds);
+    blend_stage(bins, cam, kernels, options.naive_baseline, out, pool, &totals, &progress);
+  }
   result.stats.ms_blend = ms_since(t_blend);
   result.stats.kernel = options.naive_baseline ? "naive" : kernels.name;
   result.stats.evals_per_pixel = double(totals.evals) / double(pixels);

@@ -1,6 +1,7 @@
 // Render one camera to files (see render_job.h).
 #include "gs/raster/render_job.h"
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -20,7 +21,17 @@ namespace {
 Status check_output(const char* kind, const std::string& path) {
   if (path.empty()) return Status::ok();
   namespace fs = std::filesystem;
-  const fs::path folder = fs::path(path).parent_path();
+  // Symlinks are followed (the file they point to is replaced); a device or FIFO is written in
+  // place (file_io.h), so only it needs to be writable.
+  auto resolved = resolve_output(path);
+  if (!resolved) return resolved.status().with_context(kind);
+  const OutputTarget& target = *resolved;
+  if (target.kind == OutputTarget::kSpecial) {
+    if (::access(target.path.c_str(), W_OK) != 0)
+      return Status::error(std::string(kind) + ": " + path + ": is not writable");
+    return Status::ok();
+  }
+  const fs::path folder = fs::path(target.path).parent_path();
   const std::string parent = folder.empty() ? std::string(".") : folder.string();
   if (is_directory(path)) {
     return Status::error(std::string(kind) + ": " + path + ": is a folder, expected a file path");
@@ -84,8 +95,13 @@ Status write_render_outputs(const RenderResult& r, const RenderOutputs& o, const
                          "x" + std::to_string(h));
   }
   std::vector<std::string> written;
+  // Undo removes only regular files named directly: never a device or FIFO (/dev/null!), never
+  // a symlink or the file it points to.
   auto undo = [&](Status s) {
-    for (const std::string& p : written) std::remove(p.c_str());
+    for (const std::string& p : written) {
+      struct stat st {};
+      if (::lstat(p.c_str(), &st) == 0 && S_ISREG(st.st_mode)) std::remove(p.c_str());
+    }
     return s;
   };
   if (!o.png.empty()) {

@@ -16,7 +16,9 @@
 //   depth_png  inverse depth for viewing: inv_depth_sum / max over the image, colour-mapped
 //              (gs/image_io.h colormap: dark = far or empty, bright = near)
 // Every output folder is checked before loading anything; if a write fails after others
-// succeeded, the outputs this job already wrote are removed, so a failed job leaves no files.
+// succeeded, the outputs this job already wrote are removed, so a failed job leaves no files
+// (regular files only: a device or FIFO output such as /dev/null, and a symlink and its target,
+// are left as they are; file_io.h).
 #pragma once
 
 #include <string>
