@@ -21,7 +21,7 @@ int main(int argc, char** argv) {
     std::fprintf(out, "usage: macro <command> [flags]   (macro <command> --help for its flags)\n\n");
     for (const auto& c : cmds) std::fprintf(out, "  %-12s %s\n", c.name, c.summary);
     std::fprintf(out,
-                 "\ncommon flags: --threads N, --quiet, -h/--help, --isa scalar|avx2|avx512|avx512bf16|amx\n"
+                 "\ncommon flags: --threads N, --quiet, --isa scalar|avx2|avx512|avx512bf16|amx\n"
                  "cpu: %s, best path %s\n",
                  cpu_features().brand.c_str(), isa_name(best_isa()));
   };
