@@ -201,9 +201,10 @@ int run_enhance(std::vector<std::string> argv) {
     if (Status s = enhance::write_side_by_side(side_by_side, in.scene_dir, in.closeup, *r); !s)
       return fail("enhance", s);
   if (!quiet())
-    std::printf("enhance: %s, method %s, %d views, model %dx%d, %.0f ms -> %s (%dx%d)\n",
-                in.closeup.c_str(), enhance::method_name(o.method), r->views, r->model.w,
-                r->model.h, r->timings.ms_total, out.c_str(), r->image.width, r->image.height);
+    std::printf("enhance: %s, method %s, %s, model %dx%d, %.0f ms -> %s (%dx%d)\n",
+                in.closeup.c_str(), enhance::method_name(o.method),
+                count_noun(size_t(r->views), "view").c_str(), r->model.w, r->model.h,
+                r->timings.ms_total, out.c_str(), r->image.width, r->image.height);
   return 0;
 }
 

@@ -178,10 +178,10 @@ Result<EnhanceResult> enhance_by_transfer(const SceneInputs& in, const EnhanceOp
   res.timings.ms_transfer = ms_since(t0);
   {
     char buf[200];
-    std::snprintf(buf, sizeof buf,
-                  "%s, %d sources, %d keys, %d/%d tokens, mean confidence %.3f (attention %.0f ms)",
-                  transfer_source_name(tp.source), int(sources.size()), tr.keys, tr.transferred,
-                  tr.token_h * tr.token_w, tr.mean_confidence, tr.timings.ms_attention);
+    std::snprintf(
+        buf, sizeof buf, "%s, %s, %d keys, %d/%d tokens, mean confidence %.3f (attention %.0f ms)",
+        transfer_source_name(tp.source), count_noun(sources.size(), "source").c_str(), tr.keys,
+        tr.transferred, tr.token_h * tr.token_w, tr.mean_confidence, tr.timings.ms_attention);
     note("transfer", res.timings.ms_transfer, buf);
   }
   res.timings.ms_total = ms_since(t_all);

@@ -198,8 +198,8 @@ Result<Camera> CameraSet::find(const std::string& name) const {
     }
     return Status::error(msg + "; give the full path");
   }
-  std::string msg = where + ": no camera named '" + name + "' among " +
-                    std::to_string(cameras.size()) + " cameras";
+  std::string msg =
+      where + ": no camera named '" + name + "' among " + count_noun(cameras.size(), "camera");
   if (!cameras.empty()) {
     msg += " (available: ";
     const size_t shown = std::min<size_t>(cameras.size(), 5);
