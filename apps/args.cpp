@@ -1,8 +1,11 @@
 #include "apps/args.h"
 
+#include <cctype>
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
+#include <system_error>
 
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/limits.h"
@@ -27,12 +30,15 @@ Args::Args(std::vector<std::string> argv) : argv_(std::move(argv)), used_(argv_.
   used_.assign(argv_.size(), false);
 }
 
-void Args::fail(const std::string& message) { errors_.push_back(message); }
+void Args::fail(const std::string& message) {
+  errors_.push_back(message);
+}
 
 bool Args::flag(const std::string& name) {
   bool found = false;
   for (size_t i = 0; i < argv_.size(); ++i) {
-    if (!used_[i] && argv_[i] == name) {
+    // -h is --help for every command.
+    if (!used_[i] && (argv_[i] == name || (name == "--help" && argv_[i] == "-h"))) {
       used_[i] = true;
       found = true;
     }
@@ -110,8 +116,8 @@ std::vector<double> Args::doubles_or(const std::string& name, std::vector<double
     char* end = nullptr;
     double x = std::strtod(part.c_str(), &end);
     if (part.empty() || *end != '\0' || x != x) {
-      fail(name + ": expected " + std::to_string(count) + " comma-separated numbers, found '" +
-           *v + "'");
+      fail(name + ": expected " + std::to_string(count) + " comma-separated numbers, found '" + *v +
+           "'");
       return fallback;
     }
     out.push_back(x);
@@ -139,8 +145,10 @@ std::vector<std::string> Args::positionals() {
 Status Args::finish() {
   for (size_t i = 0; i < argv_.size(); ++i) {
     if (!used_[i]) {
-      if (argv_[i].rfind("--", 0) == 0) fail(argv_[i] + ": unknown flag");
-      else fail("unexpected argument '" + argv_[i] + "'");
+      if (argv_[i].rfind("--", 0) == 0)
+        fail(argv_[i] + ": unknown flag");
+      else
+        fail("unexpected argument '" + argv_[i] + "'");
     }
   }
   if (errors_.empty()) return Status::ok();
@@ -184,6 +192,53 @@ Status apply_common_flags(Args& args) {
 }
 
 namespace {
+std::string lower(std::string s) {
+  for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+Status make_dirs(const std::filesystem::path& dir, const std::string& what) {
+  if (dir.empty()) return Status::ok();
+  std::error_code ec;
+  if (std::filesystem::is_directory(dir, ec)) return Status::ok();
+  std::filesystem::create_directories(dir, ec);
+  if (ec || !std::filesystem::is_directory(dir))
+    return Status::error(what + ": cannot create the folder '" + dir.string() + "'" +
+                         (ec ? " (" + ec.message() + ")" : std::string(" (a file is in the way)")));
+  return Status::ok();
+}
+}  // namespace
+
+Status check_output_name(const std::string& path, const std::string& what,
+                         const std::vector<std::string>& extensions) {
+  if (path.empty()) return Status::error(what + ": expected a file name, found an empty value");
+  if (!extensions.empty()) {
+    const std::string name = lower(std::filesystem::path(path).filename().string());
+    bool ok = false;
+    std::string list;
+    for (const std::string& e : extensions) {
+      ok = ok || (name.size() > e.size() && name.compare(name.size() - e.size(), e.size(), e) == 0);
+      list += (list.empty() ? "" : ", ") + e;
+    }
+    if (!ok)
+      return Status::error(what + " '" + path + "': the extension decides the format; expected " +
+                           list + ", found '" + std::filesystem::path(path).extension().string() +
+                           "'");
+  }
+  return Status::ok();
+}
+
+Status prepare_output(const std::string& path, const std::string& what,
+                      const std::vector<std::string>& extensions) {
+  MACRO_TRY(check_output_name(path, what, extensions));
+  return make_dirs(std::filesystem::path(path).parent_path(), what + " '" + path + "'");
+}
+
+Status prepare_output_dir(const std::string& path, const std::string& what) {
+  if (path.empty()) return Status::error(what + ": expected a folder, found an empty value");
+  return make_dirs(std::filesystem::path(path), what);
+}
+
+namespace {
 std::vector<Command>& registry() {
   static std::vector<Command> r;
   return r;
@@ -195,7 +250,9 @@ bool register_command(Command command) {
   return true;
 }
 
-const std::vector<Command>& commands() { return registry(); }
+const std::vector<Command>& commands() {
+  return registry();
+}
 
 int fail(const std::string& command, const Status& status) {
   std::fprintf(stderr, "macro %s: %s\n", command.c_str(), status.message().c_str());

@@ -1,6 +1,7 @@
 // Command-line parsing for the thin mains. A command declares its flags; anything else is an error.
 //   Args args(argv...);  args.flag("--quiet");  args.value("--scene")  ...  args.finish()
-// Values: "--key value" or "--key=value". Errors name the flag, what was expected and what was found.
+// Values: "--key value" or "--key=value". Errors name the flag, what was expected and what was
+// found.
 #pragma once
 
 #include <map>
@@ -9,6 +10,7 @@
 #include <vector>
 
 #include "attention/runtime/status.h"
+#include "attention/runtime/text.h"  // count_noun for messages
 
 namespace macro::cli {
 
@@ -42,7 +44,8 @@ class Args {
 };
 
 // Common flags every command accepts: --threads N, --quiet, --isa NAME, and the resource limits
-// --max-gaussians, --max-image-pixels, --max-tile-pairs, --max-tensor-bytes (limits.h). Applies them.
+// --max-gaussians, --max-image-pixels, --max-tile-pairs, --max-tensor-bytes (limits.h). Applies
+// them.
 Status apply_common_flags(Args& args);
 
 using CommandFn = int (*)(std::vector<std::string> argv);
@@ -54,6 +57,19 @@ struct Command {
 // Commands register themselves from their own file: static const bool r = register_command({...});
 bool register_command(Command command);
 const std::vector<Command>& commands();
+
+// Output rules, the same for every command: the extension decides the format, so a path whose
+// extension is not one of `extensions` (lower-case, with the dot, e.g. {".png"}) is refused with
+// the list; an empty list accepts any name. Missing parent folders are created (like mkdir -p).
+// `what` names the flag or argument in messages ("--out-png").
+// check_output_name checks the name only (call it with the other flags, before any work);
+// prepare_output checks it again and creates the folders (call it just before writing).
+Status check_output_name(const std::string& path, const std::string& what,
+                         const std::vector<std::string>& extensions);
+Status prepare_output(const std::string& path, const std::string& what,
+                      const std::vector<std::string>& extensions);
+// A folder given as an output (--out DIR): created with its parents when missing.
+Status prepare_output_dir(const std::string& path, const std::string& what);
 
 // Print "macro <command>: <message>" on stderr and return the exit code 1 (bad input).
 int fail(const std::string& command, const Status& status);

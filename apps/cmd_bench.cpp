@@ -1,5 +1,6 @@
-// macro bench run|merge|report: the evaluation harness (enhance/bench/bench_harness.h) and its tables and
-// charts (enhance/bench/bench_report.h). docs/benchmark.md describes the protocol and the files.
+// macro bench run|merge|report: the evaluation harness (enhance/bench/bench_harness.h) and its
+// tables and charts (enhance/bench/bench_report.h). docs/benchmark.md describes the protocol and
+// the files.
 #include <cstdio>
 #include <sstream>
 
@@ -19,7 +20,9 @@ bool register_bench_command(BenchCommand command) {
   bench_registry().push_back(command);
   return true;
 }
-const std::vector<BenchCommand>& bench_commands() { return bench_registry(); }
+const std::vector<BenchCommand>& bench_commands() {
+  return bench_registry();
+}
 
 namespace {
 
@@ -76,14 +79,16 @@ int run_run(Args& args) {
   auto sh = enhance::parse_shard(shard);
   if (!sh) return fail("bench run", sh.status());
   o.shard = *sh;
+  if (Status s = prepare_output(o.results, "--results", {".jsonl"}); !s)
+    return fail("bench run", s);
   const enhance::MethodRegistry registry = enhance::default_method_registry(settings);
   auto summary = enhance::run_benchmark(o, registry);
   if (!summary) return fail("bench run", summary.status());
   std::printf(
-      "bench run: %zu items in shard %d/%d, %zu already done, %zu run (%zu ok, %zu "
+      "bench run: %s in shard %d/%d, %zu already done, %zu run (%zu ok, %zu "
       "skipped) -> %s\n",
-      summary->work_items, o.shard.index, o.shard.count, summary->already_done, summary->ran,
-      summary->ok, summary->skipped, o.results.c_str());
+      count_noun(summary->work_items, "item").c_str(), o.shard.index, o.shard.count,
+      summary->already_done, summary->ran, summary->ok, summary->skipped, o.results.c_str());
   return 0;
 }
 
@@ -92,6 +97,7 @@ int run_merge(Args& args) {
   const std::vector<std::string> inputs = args.positionals();
   if (Status s = args.finish(); !s) return fail("bench merge", s);
   if (inputs.empty()) return fail("bench merge", Status::error("no input results file given"));
+  if (Status s = check_output_name(out, "--out", {".jsonl"}); !s) return fail("bench merge", s);
   std::vector<std::vector<enhance::BenchRecord>> lists;
   for (const std::string& path : inputs) {
     if (!file_exists(path)) return fail("bench merge", Status::error(path + ": not found"));
@@ -100,9 +106,10 @@ int run_merge(Args& args) {
     lists.push_back(std::move(*records));
   }
   const auto merged = enhance::merge_records(lists);
+  if (Status s = prepare_output(out, "--out", {".jsonl"}); !s) return fail("bench merge", s);
   if (Status s = enhance::write_records_atomic(out, merged); !s) return fail("bench merge", s);
-  std::printf("bench merge: %zu records from %zu files -> %s\n", merged.size(), inputs.size(),
-              out.c_str());
+  std::printf("bench merge: %s from %s -> %s\n", count_noun(merged.size(), "record").c_str(),
+              count_noun(inputs.size(), "file").c_str(), out.c_str());
   return 0;
 }
 
@@ -114,6 +121,7 @@ int run_report(Args& args) {
   auto rule = enhance::parse_scene_failure_rule(failure);
   if (!rule) return fail("bench report", rule.status());
   if (!file_exists(results)) return fail("bench report", Status::error(results + ": not found"));
+  if (Status s = prepare_output_dir(out, "--out"); !s) return fail("bench report", s);
   auto records = enhance::read_records(results);
   if (!records) return fail("bench report", records.status());
   std::vector<std::string> written;
@@ -122,7 +130,7 @@ int run_report(Args& args) {
   const auto configs = enhance::aggregate_records(*records, *rule);
   const std::string table = enhance::table_markdown(configs);
   std::fwrite(table.data(), 1, table.size(), stdout);
-  std::printf("bench report: %zu files -> %s\n", written.size(), out.c_str());
+  std::printf("bench report: %s -> %s\n", count_noun(written.size(), "file").c_str(), out.c_str());
   return 0;
 }
 
@@ -132,7 +140,7 @@ void print_usage(std::FILE* to) {
 }
 
 int run_bench(std::vector<std::string> argv) {
-  if (argv.empty() || argv[0] == "--help" || argv[0] == "help") {
+  if (argv.empty() || argv[0] == "--help" || argv[0] == "-h" || argv[0] == "help") {
     print_usage(argv.empty() ? stderr : stdout);
     return argv.empty() ? 1 : 0;
   }

@@ -70,16 +70,17 @@ int run_root(enhance::RootParams rp) {
                               "<scene>/sparse/0, <scene>/sparse or <scene>/colmap/sparse/0); " +
                               std::to_string(ignored.size()) + " other sub-folders"));
   rp.progress = !quiet();
+  if (!rp.out_dir.empty())
+    if (Status s = prepare_output_dir(rp.out_dir, "--out-dir"); !s) return fail("bench pairs", s);
   auto ranking = enhance::rank_scenes(rp);
   if (!ranking) return fail("bench pairs", ranking.status());
   if (Status s = enhance::write_ranking(*ranking, rp); !s) return fail("bench pairs", s);
   std::fputs(enhance::ranking_markdown(*ranking, rp).c_str(), stdout);
   const std::string dir = enhance::ranking_dir(rp);
   std::printf(
-      "bench pairs: %zu scenes, %d with pairs, %d failed, %d selected -> %s/ranking.{json,"
-      "md,csv}\n",
-      ranking->scenes.size(), ranking->constructed, ranking->failed, ranking->selected,
-      dir.c_str());
+      "bench pairs: %s, %d with pairs, %d failed, %d selected -> %s/ranking.{json,md,csv}\n",
+      count_noun(ranking->scenes.size(), "scene").c_str(), ranking->constructed, ranking->failed,
+      ranking->selected, dir.c_str());
   if (ranking->constructed == 0)
     return fail("bench pairs",
                 Status::error("every scene of " + rp.root + " failed (reasons above)"));
@@ -173,6 +174,7 @@ int run_pairs(Args& args) {
 
   const std::string scene = *scene_arg;
   const std::string out = *out_arg;
+  if (Status s = check_output_name(out, "--out", {".json"}); !s) return fail("bench pairs", s);
   if (name.empty()) {  // the scene folder's name ("/data/scene/" -> "scene")
     fs::path dir = fs::absolute(scene).lexically_normal();
     if (dir.filename().empty()) dir = dir.parent_path();
@@ -180,22 +182,28 @@ int run_pairs(Args& args) {
   }
   auto built = enhance::load_and_construct(scene, name, p);
   if (!built) return fail("bench pairs", built.status());
-  log_info("bench pairs", std::to_string(built->cameras.cameras.size()) + " cameras, " +
-                              std::to_string(built->num_points) + " points from " + built->model);
+  log_info("bench pairs", count_noun(built->cameras.cameras.size(), "camera") + ", " +
+                              count_noun(size_t(built->num_points), "point") + " from " +
+                              built->model);
   const enhance::PairConstruction& pc = built->pc;
   if (Status s = enhance::check_pairs_found(pc, p); !s)
     return fail("bench pairs", s.with_context(built->model));
   if (pc.training.size() < size_t(p.training_views))
     log_info("bench pairs", "warning: the training pool holds " +
-                                std::to_string(pc.train_pool.size()) + " cameras, fewer than " +
-                                std::to_string(p.training_views) + " training views; all are used");
+                                count_noun(pc.train_pool.size(), "camera") + ", fewer than " +
+                                count_noun(size_t(p.training_views), "training view") +
+                                "; all are used");
+  if (Status s = prepare_output(out, "--out", {".json"}); !s) return fail("bench pairs", s);
   if (Status s = enhance::write_scene_split(*built, p, out, want_gt); !s)
     return fail("bench pairs", s);
   std::printf(
-      "bench pairs: %zu cameras (%zu without points), %zu candidate pairs, scene score %.6g; "
-      "%zu training views, %zu close-up pairs (%zu test frames unpaired) -> %s\n",
-      built->cameras.cameras.size(), pc.no_depth.size(), pc.candidates.size(), pc.score.score,
-      pc.training.size(), pc.eval_pairs.size(), pc.unpaired_tests.size(), out.c_str());
+      "bench pairs: %s (%zu without points), %s, scene score %.6g; %s, %s (%zu test frames "
+      "unpaired) -> %s\n",
+      count_noun(built->cameras.cameras.size(), "camera").c_str(), pc.no_depth.size(),
+      count_noun(pc.candidates.size(), "candidate pair").c_str(), pc.score.score,
+      count_noun(pc.training.size(), "training view").c_str(),
+      count_noun(pc.eval_pairs.size(), "close-up pair").c_str(), pc.unpaired_tests.size(),
+      out.c_str());
   return 0;
 }
 

@@ -1,5 +1,5 @@
-// macro bench synth: the SynthClose benchmark (enhance/datasets/synth_close.h) written as DL3DV-Closeup
-// scene folders, ready for `macro bench run --root DIR`.
+// macro bench synth: the SynthClose benchmark (enhance/datasets/synth_close.h) written as
+// DL3DV-Closeup scene folders, ready for `macro bench run --root DIR`.
 #include <chrono>
 #include <cstdio>
 #include <memory>
@@ -23,7 +23,7 @@ constexpr const char* kUsage =
 int run_synth(Args& args) {
   enhance::SynthCloseOptions o;
   const std::string out = args.required("--out");
-  o.scenes = args.int_or("--scenes", 0, 0, 1000);
+  o.scenes = args.int_or("--scenes", 0, 1, 1000);  // absent: the size's own count
   o.seed = uint64_t(args.int_or("--seed", 1, 0, 2147483647));
   const std::string size = args.value_or("--size", "full");
   o.write_gt_ply = !args.flag("--no-gt-ply");
@@ -31,6 +31,7 @@ int run_synth(Args& args) {
   auto parsed = enhance::parse_synthclose_size(size);
   if (!parsed) return fail("bench synth", parsed.status());
   o.size = *parsed;
+  if (Status s = prepare_output_dir(out, "--out"); !s) return fail("bench synth", s);
   std::unique_ptr<Progress> progress;
   o.progress = [&](size_t done, size_t total) {
     if (!progress) progress = std::make_unique<Progress>("bench synth", total);
@@ -41,11 +42,10 @@ int run_synth(Args& args) {
   if (progress) progress->finish();
   if (!summary) return fail("bench synth", summary.status());
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::printf(
-      "bench synth: %d scenes, %d close-up pairs, %zu GT / %zu reconstruction Gaussians, "
-      "%.1f s -> %s\n",
-      summary->scenes, summary->pairs, summary->gt_gaussians, summary->recon_gaussians, secs,
-      out.c_str());
+  std::printf("bench synth: %s, %s, %zu GT / %zu reconstruction Gaussians, %.1f s -> %s\n",
+              count_noun(size_t(summary->scenes), "scene").c_str(),
+              count_noun(size_t(summary->pairs), "close-up pair").c_str(), summary->gt_gaussians,
+              summary->recon_gaussians, secs, out.c_str());
   return 0;
 }
 

@@ -35,6 +35,9 @@ int run_convert(std::vector<std::string> argv) {
                  files.size());
     return 2;
   }
+  // The extension decides the format; checked (and the folder made) before IN is read.
+  if (Status s = prepare_output(files[1], "OUT", {".ply", ".splat", ".spz"}); !s)
+    return fail("convert", s);
   gs::LoadReport report;
   Result<gs::GaussianCloud> cloud = gs::load_scene(files[0], limits, &report);
   if (!cloud) return fail("convert", cloud.status());

@@ -44,6 +44,84 @@ constexpr const char* kUsage =
     "  The output line names the method and the enhancer that ran: without --weights, --method\n"
     "  macro|difix runs the weight-free transfer enhancer (\"enhancer transfer (weight-free)\").\n";
 
+// Which options each method and enhancer uses (the README's usage table): an option given with a
+// value other than its default that the chosen method or enhancer would ignore is refused here,
+// before the scene is loaded. `given` maps each such flag to whether it was set.
+struct GivenOptions {
+  bool weights, ctx, precision, refs, planes, max_planes, mask, crop, occlusion, upsampler,
+      upsampler_weights, enhancer;
+};
+
+Status check_option_use(const enhance::EnhanceOptions& o, const GivenOptions& g, bool planes_auto) {
+  using enhance::EnhanceMethod;
+  using enhance::Enhancer;
+  const std::string method = enhance::method_name(o.method);
+  auto refuse = [&](const std::string& flag, const std::string& why) {
+    return Status::error(flag + ": not used by --method " + method + " --enhancer " +
+                         enhance::enhancer_name(o.enhancer) + " (" + why +
+                         "); leave it out (the README's usage table lists which options apply)");
+  };
+  if (o.method == EnhanceMethod::k3dgs) {
+    const std::pair<const char*, bool> unused[] = {{"--enhancer", g.enhancer},
+                                                   {"--weights", g.weights},
+                                                   {"--ctx", g.ctx},
+                                                   {"--precision", g.precision},
+                                                   {"--refs", g.refs},
+                                                   {"--planes", g.planes},
+                                                   {"--max-planes", g.max_planes},
+                                                   {"--mask", g.mask},
+                                                   {"--crop", g.crop},
+                                                   {"--occlusion", g.occlusion},
+                                                   {"--upsampler", g.upsampler},
+                                                   {"--upsampler-weights", g.upsampler_weights}};
+    for (const auto& [flag, set] : unused)
+      if (set)
+        return Status::error(std::string(flag) +
+                             ": not used by --method 3dgs (the raw render: no references, planes, "
+                             "crops or network); leave it out");
+    return Status::ok();
+  }
+  if (g.max_planes && !planes_auto)
+    return Status::error("--max-planes: only with --planes auto (it caps the automatic count)");
+  if (o.enhancer == Enhancer::kTransfer) {
+    if (o.method == EnhanceMethod::kWarp)
+      return Status::error(
+          "--method warp needs --enhancer difix --weights DIR (the transfer enhancer takes its "
+          "detail from crops or whole references)");
+    if (g.weights) return refuse("--weights", "the transfer enhancer uses no network");
+    if (g.ctx) return refuse("--ctx", "the text context feeds the Difix network only");
+    if (g.precision) return refuse("--precision", "the network precision; no network runs");
+    if (g.upsampler)
+      return Status::error("--upsampler " + o.upsampler +
+                           ": the transfer enhancer takes detail from the crops at their own "
+                           "resolution and does not upsample them; use it with --enhancer difix "
+                           "--weights DIR, or leave --upsampler at lanczos");
+    if (g.upsampler_weights) return refuse("--upsampler-weights", "no upsampler runs");
+    if (g.crop && o.method != EnhanceMethod::kDifix)
+      return refuse("--crop",
+                    "the transfer resamples each crop to the whole close-up frame; "
+                    "only --crop full");
+  }
+  if (o.method == EnhanceMethod::kDifix) {
+    if (g.refs && o.enhancer == Enhancer::kDifix)
+      return refuse("--refs", "difix uses one reference");
+    if (g.planes || g.max_planes)
+      return refuse("--planes", "difix takes whole references, no planes");
+    if (g.mask) return refuse("--mask", "difix uses no attention mask");
+    if (g.crop) return refuse("--crop", "difix takes whole references, no crops");
+  }
+  if (o.method == EnhanceMethod::kMacroUnmasked && g.mask)
+    return refuse("--mask", "macro-unmasked is macro with mask 'none'");
+  if (o.method == EnhanceMethod::kWarp) {
+    if (g.crop) return refuse("--crop", "whole warped frames replace the crops");
+    if (g.upsampler) return refuse("--upsampler", "the warped frames are not upsampled");
+    if (g.upsampler_weights) return refuse("--upsampler-weights", "no upsampler runs");
+  }
+  if (g.upsampler_weights && !g.upsampler)
+    return Status::error("--upsampler-weights: only with --upsampler pft-sr");
+  return Status::ok();
+}
+
 int run_enhance(std::vector<std::string> argv) {
   Args args(std::move(argv));
   if (args.flag("--help")) {
@@ -66,13 +144,20 @@ int run_enhance(std::vector<std::string> argv) {
   const std::string mask = args.value_or("--mask", "released");
   const std::string crop = args.value_or("--crop", "full");
   o.plan.occlusion = args.flag("--occlusion");
-  const std::string enhancer = args.value_or("--enhancer", o.weights.empty() ? "transfer" : "difix");
+  const std::optional<std::string> enhancer_flag = args.value("--enhancer");
+  const bool enhancer_given = enhancer_flag.has_value();
+  const std::string enhancer =
+      enhancer_flag ? *enhancer_flag : (o.weights.empty() ? "transfer" : "difix");
   const std::string side_by_side = args.value_or("--side-by-side", "");
   o.upsampler = args.value_or("--upsampler", "lanczos");
   o.upsampler_weights = args.value_or("--upsampler-weights", "");
   const GeometryFlags geometry = read_geometry_flags(args);
   if (Status s = args.finish(); !s)
     return fail("enhance", Status::error(s.message() + " (macro enhance --help for usage)"));
+  const GivenOptions given{
+      !o.weights.empty(), !o.ctx_path.empty(),      precision != "fp32",          o.plan.refs != 3,
+      planes != "3",      max_planes != 5,          mask != "released",           crop != "full",
+      o.plan.occlusion,   o.upsampler != "lanczos", !o.upsampler_weights.empty(), enhancer_given};
   auto m = enhance::parse_method(method);
   if (!m) return fail("enhance", m.status());
   o.method = *m;
@@ -100,6 +185,11 @@ int run_enhance(std::vector<std::string> argv) {
   auto en = enhance::parse_enhancer(enhancer);
   if (!en) return fail("enhance", en.status());
   o.enhancer = *en;
+  if (Status s = check_option_use(o, given, o.plan.planes.automatic); !s) return fail("enhance", s);
+  if (Status s = check_output_name(out, "--out", {".png"}); !s) return fail("enhance", s);
+  if (!side_by_side.empty())
+    if (Status s = check_output_name(side_by_side, "--side-by-side", {".png"}); !s)
+      return fail("enhance", s);
   // Missing weights fail before the scene is even loaded.
   if (o.method != enhance::EnhanceMethod::k3dgs && o.enhancer == enhance::Enhancer::kDifix)
     if (Status s = enhance::check_difix_weights(o.weights); !s) return fail("enhance", s);
@@ -107,16 +197,20 @@ int run_enhance(std::vector<std::string> argv) {
   auto inputs = enhance::load_scene_inputs(in);
   if (!inputs) return fail("enhance", inputs.status());
   for (const std::string& n : inputs->notes) log_info("enhance", n);
+  if (Status s = prepare_output(out, "--out", {".png"}); !s) return fail("enhance", s);
+  if (!side_by_side.empty())
+    if (Status s = prepare_output(side_by_side, "--side-by-side", {".png"}); !s)
+      return fail("enhance", s);
   auto r = enhance::enhance_to_file(*inputs, o, out);
   if (!r) return fail("enhance", r.status());
   if (!side_by_side.empty())
     if (Status s = enhance::write_side_by_side(side_by_side, in.scene_dir, in.closeup, *r); !s)
       return fail("enhance", s);
   if (!quiet())
-    std::printf(
-        "enhance: %s, method %s, enhancer %s, %d views, model %dx%d, %.0f ms -> %s (%dx%d)\n",
-        in.closeup.c_str(), enhance::method_name(o.method), r->enhancer.c_str(), r->views,
-        r->model.w, r->model.h, r->timings.ms_total, out.c_str(), r->image.width, r->image.height);
+    std::printf("enhance: %s, method %s, enhancer %s, %s, model %dx%d, %.0f ms -> %s (%dx%d)\n",
+                in.closeup.c_str(), enhance::method_name(o.method), r->enhancer.c_str(),
+                count_noun(size_t(r->views), "view").c_str(), r->model.w, r->model.h,
+                r->timings.ms_total, out.c_str(), r->image.width, r->image.height);
   return 0;
 }
 

@@ -38,6 +38,7 @@ int run_nn_run(std::vector<std::string> argv) {
   if (!p) return fail("nn-run", p.status().with_context("--precision"));
   opt.precision = *p;
   opt.pool = &ThreadPool::global();
+  if (Status s = prepare_output(opt.out, "--out", {".safetensors"}); !s) return fail("nn-run", s);
   if (Status s = nets::nn_run(opt); !s) return fail("nn-run", s);
   return 0;
 }

@@ -74,28 +74,32 @@ int run_plan(std::vector<std::string> argv) {
   if (Status s = apply_geometry_flags(geometry, &o); !s) return fail("plan", s);
   auto up = enhance::make_upsampler(upsampler);
   if (!up) return fail("plan", up.status());
+  if (Status s = check_output_name(out, "--out", {".json"}); !s) return fail("plan", s);
 
   auto inputs = enhance::load_scene_inputs(in);
   if (!inputs) return fail("plan", inputs.status());
   for (const std::string& note : inputs->notes) log_info("plan", note);
   auto plan = enhance::build_plan(*inputs, o);
   if (!plan) return fail("plan", plan.status());
+  if (Status s = prepare_output(out, "--out", {".json"}); !s) return fail("plan", s);
   if (!debug_dir.empty()) {
+    if (Status s = prepare_output_dir(debug_dir, "--debug-dir"); !s) return fail("plan", s);
     auto views = enhance::build_views(*plan, *inputs, **up);
     if (!views) return fail("plan", views.status());
     if (Status s = enhance::write_plan_debug(*plan, *views, debug_dir); !s) return fail("plan", s);
   }
   if (Status s = enhance::write_plan_json(*plan, out); !s) return fail("plan", s);
   if (!quiet()) {
-    std::printf("plan: %s (%s pose), %zu candidates -> refs", in.closeup.c_str(),
-                plan->closeup_pose_source.c_str(), inputs->candidates.size());
+    std::printf("plan: %s (%s pose), %s -> refs", in.closeup.c_str(),
+                plan->closeup_pose_source.c_str(),
+                count_noun(inputs->candidates.size(), "candidate").c_str());
     for (const auto& r : plan->selection.refs) std::printf(" %s", r.name.c_str());
-    std::printf(
-        " (coverage %.1f%%), %zu planes, %zu crops (%zu rejected), %d views, model %dx%d, %.0f ms "
-        "-> %s\n",
-        100.0 * plan->selection.coverage_fraction(), plan->planes.planes.size(), plan->crops.size(),
-        plan->rejected.size(), plan->view_count(), plan->model.w, plan->model.h,
-        plan->timings.ms_total, out.c_str());
+    std::printf(" (coverage %.1f%%), %s, %s (%zu rejected), %s, model %dx%d, %.0f ms -> %s\n",
+                100.0 * plan->selection.coverage_fraction(),
+                count_noun(plan->planes.planes.size(), "plane").c_str(),
+                count_noun(plan->crops.size(), "crop").c_str(), plan->rejected.size(),
+                count_noun(size_t(plan->view_count()), "view").c_str(), plan->model.w,
+                plan->model.h, plan->timings.ms_total, out.c_str());
   }
   return 0;
 }

@@ -40,13 +40,16 @@ int run_synth(std::vector<std::string> argv) {
   p.kind = *parsed_kind;
   auto scene = gs::generate_synthetic_scene(p);
   if (!scene) return fail("synth", scene.status());
+  if (Status s = prepare_output_dir(out, "--out"); !s) return fail("synth", s);
   if (Status s = gs::write_synthetic_scene(*scene, out); !s) return fail("synth", s);
   if (!quiet()) {
-    std::printf("synth: %zu Gaussians, %zu cameras (%zu close-ups), %zu planes, %zu spheres, "
-                "%zu rods -> %s/{scene.ply,cameras.json,geometry.json}\n",
-                scene->cloud.size(), scene->cameras.cameras.size(),
-                scene->geometry.closeups.size(), scene->geometry.planes.size(),
-                scene->geometry.spheres.size(), scene->geometry.rods.size(), out.c_str());
+    std::printf("synth: %s, %s (%s), %s, %s, %s -> %s/{scene.ply,cameras.json,geometry.json}\n",
+                count_noun(scene->cloud.size(), "Gaussian").c_str(),
+                count_noun(scene->cameras.cameras.size(), "camera").c_str(),
+                count_noun(scene->geometry.closeups.size(), "close-up").c_str(),
+                count_noun(scene->geometry.planes.size(), "plane").c_str(),
+                count_noun(scene->geometry.spheres.size(), "sphere").c_str(),
+                count_noun(scene->geometry.rods.size(), "rod").c_str(), out.c_str());
   }
   return 0;
 }

@@ -31,10 +31,12 @@ int run_synth_weights(std::vector<std::string> argv) {
   std::vector<std::string> rest = args.positionals();
   if (Status s = args.finish(); !s) return fail("synth-weights", s);
   if (dtype != "f32" && dtype != "bf16")
-    return fail("synth-weights", Status::error("--dtype: expected f32 or bf16, found '" + dtype + "'"));
+    return fail("synth-weights",
+                Status::error("--dtype: expected f32 or bf16, found '" + dtype + "'"));
   nets::SyntheticCheckpointOptions options;
   options.seed = uint64_t(seed);
   options.bf16 = dtype == "bf16";
+  if (Status s = prepare_output_dir(out, "--out"); !s) return fail("synth-weights", s);
   Status s;
   if (pipeline) {
     if (manifest || rest.size() != 1)
@@ -47,7 +49,8 @@ int run_synth_weights(std::vector<std::string> argv) {
                                                  "--pipeline UNET_MANIFEST VAE_MANIFEST"));
     if (class_name != "UNet2DConditionModel" && class_name != "AutoencoderKL")
       return fail("synth-weights", Status::error("--class: expected UNet2DConditionModel or "
-                                                 "AutoencoderKL, found '" + class_name + "'"));
+                                                 "AutoencoderKL, found '" +
+                                                 class_name + "'"));
     s = nets::write_synthetic_component(*manifest, out, class_name, options);
   }
   if (!s) return fail("synth-weights", s);
@@ -56,7 +59,8 @@ int run_synth_weights(std::vector<std::string> argv) {
 }
 
 const bool registered = register_command(
-    {"synth-weights", "synthetic full-size checkpoint folder from a tensor manifest", run_synth_weights});
+    {"synth-weights", "synthetic full-size checkpoint folder from a tensor manifest",
+     run_synth_weights});
 
 }  // namespace
 }  // namespace macro::cli

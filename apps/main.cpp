@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "apps/args.h"
+#include "apps/version.h"
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/file_io.h"
 
@@ -28,6 +29,10 @@ int main(int argc, char** argv) {
       !std::strcmp(argv[1], "help")) {
     usage(argc < 2 ? stderr : stdout);
     return argc < 2 ? 2 : 0;
+  }
+  if (!std::strcmp(argv[1], "--version") || !std::strcmp(argv[1], "version")) {
+    std::fputs(cli::version_text().c_str(), stdout);
+    return 0;
   }
   for (const auto& c : cmds) {
     if (std::strcmp(argv[1], c.name) == 0) return c.run(std::vector<std::string>(argv + 2, argv + argc));

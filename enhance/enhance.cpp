@@ -21,6 +21,7 @@
 #include "attention/nets/scheduler.h"
 #include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/progress.h"
+#include "attention/runtime/text.h"
 #include "enhance/macro/warp.h"
 #include "gs/raster/rasterizer.h"
 
@@ -161,9 +162,9 @@ Result<EnhanceResult> enhance_by_transfer(const SceneInputs& in, const EnhanceOp
   res.planes_dropped = plan.planes.dropped;
   note("render", res.timings.ms_render);
   note("plan", res.timings.ms_plan,
-       std::to_string(plan.ref_candidates.size()) + " refs, " +
-           std::to_string(plan.planes.planes.size()) + " planes, " +
-           std::to_string(plan.crops.size()) + " crops");
+       count_noun(plan.ref_candidates.size(), "ref") + ", " +
+           count_noun(plan.planes.planes.size(), "plane") + ", " +
+           count_noun(plan.crops.size(), "crop"));
   t0 = Clock::now();
   MACRO_ASSIGN_OR_RETURN(std::vector<TransferSourceImage> sources,
                          plan_transfer_sources(plan, in, tp.source, *pool));
@@ -179,10 +180,10 @@ Result<EnhanceResult> enhance_by_transfer(const SceneInputs& in, const EnhanceOp
   res.timings.ms_transfer = ms_since(t0);
   {
     char buf[200];
-    std::snprintf(buf, sizeof buf,
-                  "%s, %d sources, %d keys, %d/%d tokens, mean confidence %.3f (attention %.0f ms)",
-                  transfer_source_name(tp.source), int(sources.size()), tr.keys, tr.transferred,
-                  tr.token_h * tr.token_w, tr.mean_confidence, tr.timings.ms_attention);
+    std::snprintf(
+        buf, sizeof buf, "%s, %s, %d keys, %d/%d tokens, mean confidence %.3f (attention %.0f ms)",
+        transfer_source_name(tp.source), count_noun(sources.size(), "source").c_str(), tr.keys,
+        tr.transferred, tr.token_h * tr.token_w, tr.mean_confidence, tr.timings.ms_attention);
     note("transfer", res.timings.ms_transfer, buf);
   }
   res.timings.ms_total = ms_since(t_all);
@@ -291,11 +292,12 @@ Status plan_closeup(EnhanceWork& work) {
   res.planes_dropped = plan.planes.dropped;
   note("render", res.timings.ms_render, std::to_string(W) + "x" + std::to_string(H));
   {
-    char buf[160];
-    std::snprintf(buf, sizeof buf, "%zu refs, %zu planes, %zu crops (--crop %s), model %dx%d",
-                  plan.ref_candidates.size(), plan.planes.planes.size(), plan.crops.size(),
-                  crop_mode_name(plan.options.crops.crop), plan.model.w, plan.model.h);
-    note("plan", res.timings.ms_plan, buf);
+    note("plan", res.timings.ms_plan,
+         count_noun(plan.ref_candidates.size(), "ref") + ", " +
+             count_noun(plan.planes.planes.size(), "plane") + ", " +
+             count_noun(plan.crops.size(), "crop") + " (--crop " +
+             crop_mode_name(plan.options.crops.crop) + "), model " + std::to_string(plan.model.w) +
+             "x" + std::to_string(plan.model.h));
   }
   return Status::ok();
 }
@@ -337,7 +339,7 @@ Status build_network_views(EnhanceWork& work) {
   res.views = int(views.size());
   res.timings.ms_views = ms_since(t0);
   note("views", res.timings.ms_views,
-       std::to_string(res.views) + " views" +
+       count_noun(size_t(res.views), "view") +
            (masks.level.empty() ? ", no mask"
                                 : std::string(", mask '") + mask_mode_name(plan.masks.mode) + "'"));
   return Status::ok();

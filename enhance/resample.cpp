@@ -7,8 +7,8 @@
 #include <filesystem>
 
 #include "attention/nets/pft.h"
-#include "attention/runtime/progress.h"
 #include "attention/runtime/io/safetensors.h"
+#include "attention/runtime/progress.h"
 
 namespace macro::enhance {
 namespace {
@@ -136,8 +136,8 @@ std::vector<uint8_t> resize_lanczos_u8(const uint8_t* src, int w, int h, int c, 
   return resize_pillow_u8(src, w, h, c, out_w, out_h, PillowFilter::kLanczos, pool);
 }
 
-std::vector<uint8_t> resize_pillow_u8(const uint8_t* src, int w, int h, int c, int out_w,
-                                      int out_h, PillowFilter filter, ThreadPool& pool) {
+std::vector<uint8_t> resize_pillow_u8(const uint8_t* src, int w, int h, int c, int out_w, int out_h,
+                                      PillowFilter filter, ThreadPool& pool) {
   MACRO_CHECK(src && w > 0 && h > 0 && c > 0 && out_w > 0 && out_h > 0);
   std::vector<uint8_t> mid;
   const uint8_t* hsrc = src;
@@ -305,8 +305,10 @@ Result<std::shared_ptr<const PftSrUpsampler::Models>> PftSrUpsampler::models() c
   if (!missing.empty()) {
     std::string list;
     for (size_t i = 0; i < missing.size(); ++i) list += (i ? " and " : "") + missing[i];
+    std::error_code ec;  // the folder as an absolute path, so the message says where
+    const std::filesystem::path dir = std::filesystem::absolute(weights_dir_, ec);
     return Status::error("upsampler pft-sr: weights not available: " + list + " not found in " +
-                         weights_dir_ +
+                         (ec ? weights_dir_ : dir.lexically_normal().string()) +
                          " (the released PFT-SR light weights, read from params_ema; a "
                          ".safetensors with the same tensor names also works; see docs/pft.md); "
                          "or use --upsampler lanczos");
@@ -325,7 +327,9 @@ Result<std::shared_ptr<const PftSrUpsampler::Models>> PftSrUpsampler::models() c
   return models_;
 }
 
-Status PftSrUpsampler::ready() const { return models().status(); }
+Status PftSrUpsampler::ready() const {
+  return models().status();
+}
 
 Result<gs::Image> PftSrUpsampler::resize(const gs::Image& src, int out_w, int out_h) const {
   MACRO_ASSIGN_OR_RETURN(std::shared_ptr<const Models> m, models());
@@ -333,15 +337,14 @@ Result<gs::Image> PftSrUpsampler::resize(const gs::Image& src, int out_w, int ou
     const nets::PftNet& net = scale == 4 ? *m->x4 : *m->x2;
     const auto t0 = std::chrono::steady_clock::now();
     std::unique_ptr<Progress> progress;
-    const std::string stage = "pft-sr x" + std::to_string(scale) + " " +
-                              std::to_string(in.width) + "x" + std::to_string(in.height);
+    const std::string stage = "pft-sr x" + std::to_string(scale) + " " + std::to_string(in.width) +
+                              "x" + std::to_string(in.height);
     auto on_layer = [&](int done, int total) {
       if (!progress && ms_since(t0) > 1000.0) progress = std::make_unique<Progress>(stage, total);
       if (progress) progress->set(size_t(done));
     };
-    MACRO_ASSIGN_OR_RETURN(std::vector<float> y,
-                           net.forward(in.data.data(), in.height, in.width,
-                                       &ThreadPool::global(), on_layer));
+    MACRO_ASSIGN_OR_RETURN(std::vector<float> y, net.forward(in.data.data(), in.height, in.width,
+                                                             &ThreadPool::global(), on_layer));
     gs::Image out(in.width * scale, in.height * scale, 3);
     out.data = std::move(y);
     return out;

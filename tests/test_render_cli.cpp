@@ -41,7 +41,9 @@ Run run_macro(const std::string& args, const test::TempDir& logs) {
   return r;
 }
 
-std::string default_scene() { return test::source_dir() + "/data/scenes/default"; }
+std::string default_scene() {
+  return test::source_dir() + "/data/scenes/default";
+}
 std::string scene_flags(const std::string& camera = "closeup") {
   return "--scene " + default_scene() + "/scene.ply --cameras " + default_scene() +
          "/cameras.json --camera " + camera;
@@ -104,7 +106,8 @@ TEST_CASE("macro render writes PNG, EXR, safetensors and inverse-depth PNG that 
   size_t mismatched = 0;
   for (size_t p = 0; p < n; ++p) {
     for (int c = 0; c < 3; ++c) {
-      worst_rgb = std::max(worst_rgb, double(std::abs((*exr->find(names[c]))[p] - (*color)[p * 3 + c])));
+      worst_rgb =
+          std::max(worst_rgb, double(std::abs((*exr->find(names[c]))[p] - (*color)[p * 3 + c])));
     }
     const float a = (*alpha)[p];
     const float want = a >= 1e-6f ? (*depth_sum)[p] / a : 0.f;
@@ -131,7 +134,8 @@ TEST_CASE("macro render writes PNG, EXR, safetensors and inverse-depth PNG that 
   CHECK(depth_png->height == H);
 }
 
-TEST_CASE("macro render --quiet prints nothing, and every mode and a scene folder render", "[render][render_cli]") {
+TEST_CASE("macro render --quiet prints nothing, and every mode and a scene folder render",
+          "[render][render_cli]") {
   test::TempDir dir("render_cli"), logs("render_cli_logs");
   Run r = run_macro("render " + scene_flags("train_03") + " --out-png " + dir.file("a.png") +
                         " --mode antialiased --sh-degree 0 --threads 1 --quiet",
@@ -146,8 +150,8 @@ TEST_CASE("macro render --quiet prints nothing, and every mode and a scene folde
                     logs);
   INFO(f.err);
   CHECK(f.rc == 0);
-  Run m = run_macro("render " + scene_flags("closeup_03") + " --out-tensors " + dir.file("m.safetensors") +
-                        " --mode mip --quiet",
+  Run m = run_macro("render " + scene_flags("closeup_03") + " --out-tensors " +
+                        dir.file("m.safetensors") + " --mode mip --quiet",
                     logs);
   CHECK(m.rc == 0);
   CHECK(files_in(dir.path).size() == 3);
@@ -162,16 +166,21 @@ TEST_CASE("macro render refuses bad input by name and leaves no files", "[render
     std::string args;
     std::vector<std::string> must_name;
   };
-  std::ofstream(dir.path + "/../render_cli_junk.ply") << "ply\nformat binary_little_endian 1.0\nelement vertex 1000000\nend_header\nxx";
+  std::ofstream(dir.path + "/../render_cli_junk.ply")
+      << "ply\nformat binary_little_endian 1.0\nelement vertex 1000000\nend_header\nxx";
   const std::string junk = dir.path + "/../render_cli_junk.ply";
   std::vector<Case> cases = {
       {"missing scene",
-       "--scene " + dir.file("nope.ply") + " --cameras " + default_scene() + "/cameras.json --camera closeup" + outs,
+       "--scene " + dir.file("nope.ply") + " --cameras " + default_scene() +
+           "/cameras.json --camera closeup" + outs,
        {"nope.ply"}},
-      {"corrupt scene", "--scene " + junk + " --cameras " + default_scene() + "/cameras.json --camera closeup" + outs,
+      {"corrupt scene",
+       "--scene " + junk + " --cameras " + default_scene() + "/cameras.json --camera closeup" +
+           outs,
        {"render_cli_junk.ply"}},
       {"missing cameras",
-       "--scene " + default_scene() + "/scene.ply --cameras " + dir.file("cams.json") + " --camera closeup" + outs,
+       "--scene " + default_scene() + "/scene.ply --cameras " + dir.file("cams.json") +
+           " --camera closeup" + outs,
        {"cams.json"}},
       {"unknown camera", scene_flags("no_such_cam") + outs, {"no_such_cam", "train_00"}},
       {"background with two numbers", scene_flags() + outs + " --background 1,2", {"--background"}},
@@ -179,17 +188,24 @@ TEST_CASE("macro render refuses bad input by name and leaves no files", "[render
       {"background out of range", scene_flags() + outs + " --background 2,0,0", {"--background"}},
       {"bad mode", scene_flags() + outs + " --mode fancy", {"--mode", "fancy"}},
       {"bad sh degree", scene_flags() + outs + " --sh-degree 7", {"--sh-degree"}},
-      {"more Gaussians than allowed", scene_flags() + outs + " --max-gaussians 1000", {"scene.ply"}},
+      {"more Gaussians than allowed",
+       scene_flags() + outs + " --max-gaussians 1000",
+       {"scene.ply"}},
       {"unknown flag", scene_flags() + outs + " --colour red", {"--colour"}},
       {"no --scene", "--cameras x.json --camera closeup" + outs, {"--scene"}},
-      {"no --cameras with a scene file", "--scene " + default_scene() + "/scene.ply --camera closeup" + outs,
+      {"no --cameras with a scene file",
+       "--scene " + default_scene() + "/scene.ply --camera closeup" + outs,
        {"--cameras"}},
-      {"scene folder without scene.ply", "--scene " + dir.path + "/.. --camera closeup" + outs, {"scene.ply"}},
+      {"scene folder without scene.ply",
+       "--scene " + dir.path + "/.. --camera closeup" + outs,
+       {"scene.ply"}},
       {"no output", scene_flags(), {"--out-png"}},
-      {"output folder missing", scene_flags() + outs + " --out-depth-png " + dir.file("missing/d.png"),
-       {"missing/d.png"}},
+      {"wrong output extension",
+       scene_flags() + outs + " --out-depth-png " + dir.file("missing/d.jpg"),
+       {"missing/d.jpg", ".png"}},
       {"output is a folder", scene_flags() + " --out-png " + dir.path, {dir.path}},
-      {"same output twice", scene_flags() + " --out-png " + dir.file("c.png") + " --out-depth-png " + dir.file("c.png"),
+      {"same output twice",
+       scene_flags() + " --out-png " + dir.file("c.png") + " --out-depth-png " + dir.file("c.png"),
        {"c.png"}},
   };
   for (const Case& c : cases) {
@@ -205,8 +221,10 @@ TEST_CASE("macro render refuses bad input by name and leaves no files", "[render
 TEST_CASE("macro synth writes the same files for the same seed and refuses bad flags",
           "[render][render_cli]") {
   test::TempDir a("synth_cli"), b("synth_cli"), logs("synth_cli_logs");
-  Run r1 = run_macro("synth --out " + a.path + " --seed 3 --gaussians 8000 --width 160 --height 90", logs);
-  Run r2 = run_macro("synth --out " + b.path + " --seed 3 --gaussians 8000 --width 160 --height 90 --quiet", logs);
+  Run r1 = run_macro("synth --out " + a.path + " --seed 3 --gaussians 8000 --width 160 --height 90",
+                     logs);
+  Run r2 = run_macro(
+      "synth --out " + b.path + " --seed 3 --gaussians 8000 --width 160 --height 90 --quiet", logs);
   INFO(r1.err);
   REQUIRE(r1.rc == 0);
   REQUIRE(r2.rc == 0);
@@ -220,9 +238,10 @@ TEST_CASE("macro synth writes the same files for the same seed and refuses bad f
     CHECK(*x == *y);
   }
   // The synthetic scene renders through the CLI.
-  Run rr = run_macro("render --scene " + a.file("scene.ply") + " --cameras " + a.file("cameras.json") +
-                         " --camera closeup --out-png " + a.file("c.png") + " --quiet",
-                     logs);
+  Run rr =
+      run_macro("render --scene " + a.file("scene.ply") + " --cameras " + a.file("cameras.json") +
+                    " --camera closeup --out-png " + a.file("c.png") + " --quiet",
+                logs);
   CHECK(rr.rc == 0);
   test::TempDir c("synth_cli");
   Run bad = run_macro("synth --out " + c.path + " --kind cubes", logs);
@@ -264,7 +283,8 @@ TEST_CASE("a failed render job removes the outputs it already wrote", "[render][
   CHECK_FALSE(gs::write_render_outputs(r, o, "scene", "cam", gs::RasterMode::kClassic));
   CHECK(files_in(dir.path).empty());
   // Mode names round-trip.
-  for (gs::RasterMode m : {gs::RasterMode::kClassic, gs::RasterMode::kAntialiased, gs::RasterMode::kMip}) {
+  for (gs::RasterMode m :
+       {gs::RasterMode::kClassic, gs::RasterMode::kAntialiased, gs::RasterMode::kMip}) {
     CHECK(gs::parse_raster_mode(gs::raster_mode_name(m)).value() == m);
   }
 }
@@ -311,8 +331,9 @@ TEST_CASE("macro render --out-tensors reproduces the raster goldens", "[render][
   test::TempDir dir("render_cli"), logs("render_cli_logs");
   const std::string g = test::golden_dir() + "/raster/random-sh3";
   for (const char* cam : {"front", "closeup"}) {
-    Run r = run_macro("render --scene " + g + "/scene.ply --cameras " + g + "/cameras.json --camera " +
-                          cam + " --out-tensors " + dir.file(std::string(cam) + ".safetensors") + " --quiet",
+    Run r = run_macro("render --scene " + g + "/scene.ply --cameras " + g +
+                          "/cameras.json --camera " + cam + " --out-tensors " +
+                          dir.file(std::string(cam) + ".safetensors") + " --quiet",
                       logs);
     INFO(cam << ": " << r.err);
     REQUIRE(r.rc == 0);

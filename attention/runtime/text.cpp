@@ -32,4 +32,9 @@ std::string format_fixed(double v, int decimals) {
   return print("%.*f", decimals, v);
 }
 
+std::string count_noun(size_t count, const std::string& singular, const std::string& plural) {
+  return std::to_string(count) + " " +
+         (count == 1 ? singular : (plural.empty() ? singular + "s" : plural));
+}
+
 }  // namespace macro

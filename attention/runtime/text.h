@@ -6,8 +6,10 @@
 //   format_number(v, 6)   "%g"    printf's default 6 significant digits: pair-construction messages
 //   format_fixed(v, 2)    "%.2f"  fixed decimals: SVG coordinates of the benchmark charts
 // The result is never truncated (any double, any precision up to 17 / 40 digits).
+//   count_noun(1, "plane")    "1 plane"; count_noun(3, "plane") "3 planes" (counts in messages)
 #pragma once
 
+#include <cstddef>
 #include <string>
 
 namespace macro {
@@ -17,5 +19,8 @@ std::string format_number(double v, int significant = 9);
 
 // printf "%.{decimals}f" of v; decimals in [0, 40].
 std::string format_fixed(double v, int decimals);
+
+// "<count> <noun>": the singular for one, else `plural` (default: the singular + "s").
+std::string count_noun(size_t count, const std::string& singular, const std::string& plural = "");
 
 }  // namespace macro

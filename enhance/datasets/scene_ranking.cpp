@@ -279,7 +279,7 @@ std::string ranking_json(const SceneRanking& ranking, const RootParams& rp) {
 
 std::string ranking_markdown(const SceneRanking& ranking, const RootParams& rp) {
   std::string md = "# Scene ranking (appendix D.4)\n\n";
-  md += "Root `" + rp.root + "`: " + std::to_string(ranking.scenes.size()) + " scenes, " +
+  md += "Root `" + rp.root + "`: " + count_noun(ranking.scenes.size(), "scene") + ", " +
         std::to_string(ranking.constructed) + " with pairs, " + std::to_string(ranking.failed) +
         " failed, " + std::to_string(ranking.selected) + " selected";
   if (rp.min_score) md += " (--min-score " + format_number(*rp.min_score, 6) + ")";

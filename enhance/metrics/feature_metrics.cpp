@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <map>
 #include <mutex>
 
@@ -13,12 +14,19 @@
 namespace macro::enhance {
 namespace {
 
+// A path as messages show it: absolute, so "expected at" says where from any working folder.
+std::string shown_path(const std::string& path) {
+  std::error_code ec;
+  const std::filesystem::path a = std::filesystem::absolute(path, ec);
+  return ec ? path : a.lexically_normal().string();
+}
+
 // The entry for absent weights (callers check file_exists first).
 MetricValue not_computed(const char* name, const std::string& path) {
   MetricValue m;
   m.name = name;
   m.computed = false;
-  m.reason = std::string("weights not supplied (expected at ") + path + ")";
+  m.reason = std::string("weights not supplied (expected at ") + shown_path(path) + ")";
   return m;
 }
 

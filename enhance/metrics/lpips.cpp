@@ -3,6 +3,7 @@
 #include "enhance/metrics/lpips.h"
 
 #include <cmath>
+#include <filesystem>
 
 #include "attention/nets/weights.h"
 #include "attention/runtime/bundled_data.h"
@@ -104,6 +105,16 @@ std::string default_lpips_folder() {
   });
 }
 
+namespace {
+// A path as messages show it: absolute, so "expected at" says where from any working folder.
+std::string shown_path(const std::string& path) {
+  std::error_code ec;
+  const std::filesystem::path a = std::filesystem::absolute(path, ec);
+  return ec ? path : a.lexically_normal().string();
+}
+
+}  // namespace
+
 Result<LpipsAlex> LpipsAlex::load(const std::string& backbone_path, const std::string& heads_path,
                                   Isa isa) {
   const std::string folder =
@@ -112,11 +123,11 @@ Result<LpipsAlex> LpipsAlex::load(const std::string& backbone_path, const std::s
       backbone_path.empty() ? folder + "/" + kAlexBackboneFile : backbone_path;
   const std::string hpath = heads_path.empty() ? folder + "/" + kLpipsHeadsFile : heads_path;
   if (!file_exists(bpath))
-    return Status::error("LPIPS-Alex backbone not supplied (expected at " + bpath +
+    return Status::error("LPIPS-Alex backbone not supplied (expected at " + shown_path(bpath) +
                          "; convert torchvision's alexnet weights to safetensors with the names "
                          "features.{0,3,6,8,10}.{weight,bias} and pass --lpips-backbone)");
   if (!file_exists(hpath))
-    return Status::error("LPIPS v0.1 alex heads not found (expected at " + hpath + ")");
+    return Status::error("LPIPS v0.1 alex heads not found (expected at " + shown_path(hpath) + ")");
 
   LpipsAlex net;
   net.backbone_path_ = bpath;

@@ -284,8 +284,8 @@ Result<Camera> CameraSet::find(const std::string& name) const {
                            ") was left out as invalid: " + r.message);
     }
   }
-  std::string msg = where + ": no camera named '" + name + "' among " +
-                    std::to_string(cameras.size()) + " cameras";
+  std::string msg =
+      where + ": no camera named '" + name + "' among " + count_noun(cameras.size(), "camera");
   if (!cameras.empty()) {
     msg += " (available: ";
     const size_t shown = std::min<size_t>(cameras.size(), 5);
