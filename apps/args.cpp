@@ -211,7 +211,13 @@ Status make_dirs(const std::filesystem::path& dir, const std::string& what) {
 Status check_output_name(const std::string& path, const std::string& what,
                          const std::vector<std::string>& extensions) {
   if (path.empty()) return Status::error(what + ": expected a file name, found an empty value");
-  if (!extensions.empty()) {
+  // A device or pipe (e.g. /dev/null, a named pipe) is written in place and has no extension:
+  // where the flag fixes the format (one extension), its name is not checked.
+  std::error_code ec;
+  const auto st = std::filesystem::status(path, ec);
+  const bool stream = !ec && (st.type() == std::filesystem::file_type::character ||
+                              st.type() == std::filesystem::file_type::fifo);
+  if (!extensions.empty() && !(stream && extensions.size() == 1)) {
     const std::string name = lower(std::filesystem::path(path).filename().string());
     bool ok = false;
     std::string list;

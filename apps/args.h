@@ -60,7 +60,9 @@ const std::vector<Command>& commands();
 
 // Output rules, the same for every command: the extension decides the format, so a path whose
 // extension is not one of `extensions` (lower-case, with the dot, e.g. {".png"}) is refused with
-// the list; an empty list accepts any name. Missing parent folders are created (like mkdir -p).
+// the list; an empty list accepts any name. An existing character device or FIFO (/dev/null, a
+// named pipe) is accepted where one extension fixes the format. Missing parent folders are created
+// (like mkdir -p).
 // `what` names the flag or argument in messages ("--out-png").
 // check_output_name checks the name only (call it with the other flags, before any work);
 // prepare_output checks it again and creates the folders (call it just before writing).

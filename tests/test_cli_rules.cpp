@@ -11,34 +11,16 @@
 #include "attention/runtime/text.h"
 #include "gs/image_io.h"
 #include "test_support.h"
+#include "tests/cli_run.h"
 
 using namespace macro;
 namespace fs = std::filesystem;
 
 namespace {
 
-struct Run {
-  int rc = -1;
-  std::string out, err;
-};
-
-std::string slurp(const std::string& path) {
-  std::ifstream f(path);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-// `macro <args>` with MACRO_QUIET unset (CTest sets it); stdout and stderr kept.
-Run run_macro(const std::string& args, const test::TempDir& logs) {
-  const std::string out = logs.file("stdout.txt"), err = logs.file("stderr.txt");
-  Run r;
-  r.rc = test::run_command("env -u MACRO_QUIET " + test::macro_exe() + " " + args + " >" + out +
-                           " 2>" + err);
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
-}
+using test::Run;
+using test::run_macro;
+using test::slurp;
 
 bool has(const std::string& text, const std::string& what) {
   return text.find(what) != std::string::npos;

@@ -13,33 +13,15 @@
 #include "gs/image_io.h"
 #include "gs/raster/render_job.h"
 #include "test_support.h"
+#include "tests/cli_run.h"
 
 using namespace macro;
 
 namespace {
 
-struct Run {
-  int rc = -1;
-  std::string out, err;
-};
-
-std::string slurp(const std::string& path) {
-  std::ifstream f(path);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-// Runs `macro <args>` with MACRO_QUIET unset (CTest sets it), output captured in `logs`.
-Run run_macro(const std::string& args, const test::TempDir& logs) {
-  const std::string out = logs.file("stdout.txt"), err = logs.file("stderr.txt");
-  Run r;
-  r.rc = test::run_command("env -u MACRO_QUIET " + test::macro_exe() + " " + args + " >" + out +
-                           " 2>" + err);
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
-}
+using test::Run;
+using test::run_macro;
+using test::slurp;
 
 std::string default_scene() {
   return test::source_dir() + "/data/scenes/default";
