@@ -18,7 +18,7 @@ int run_synth_weights(std::vector<std::string> argv) {
         "          | --pipeline UNET_MANIFEST.json VAE_MANIFEST.json)\n"
         "Writes config.json + diffusion_pytorch_model.safetensors (or a pipeline folder with\n"
         "model_index.json, unet/, vae/, scheduler/) from manifests such as\n"
-        "../shared/golden/manifests/{unet,vae}.json. Values are seeded random, not trained.\n");
+        "data/manifests/{unet,vae}.json. Values are seeded random, not trained.\n");
     return 0;
   }
   if (Status s = apply_common_flags(args); !s) return fail("synth-weights", s);

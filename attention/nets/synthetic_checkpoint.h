@@ -1,6 +1,6 @@
 // Synthetic checkpoints: a diffusers component folder (config.json + diffusion_pytorch_model.
 // safetensors) with the exact tensor names and shapes of a real download, listed in a manifest
-// (../shared/golden/manifests/{unet,vae}.json: {config, parameters, tensors: {name: {dtype, shape}},
+// (data/manifests/{unet,vae}.json: {config, parameters, tensors: {name: {dtype, shape}},
 // lora_targets?}), filled with seeded random values. Used to test loaders and to benchmark the
 // full-size networks without the real weights.
 //
