@@ -274,12 +274,9 @@ Result<GaussianCloud> decode_ply(const ply::Header& header, const uint8_t* data,
   return cloud;
 }
 
-Result<std::vector<uint8_t>> encode_ply(const GaussianCloud& cloud, const std::string& file) {
-  const size_t N = cloud.size();
-  const size_t K = static_cast<size_t>(cloud.sh_coeffs());
-  const size_t R = K - 1;
+std::string inria_ply_header(size_t N, size_t R, const std::string& comment) {
   std::string h = "ply\nformat binary_little_endian 1.0\n";
-  if (cloud.trained_antialiased) h += "comment SplatRenderMode: mip\n";
+  if (!comment.empty()) h += "comment " + comment + "\n";
   h += "element vertex " + std::to_string(N) + "\n";
   for (const char* name : {"x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"})
     h += std::string("property float ") + name + "\n";
@@ -288,6 +285,15 @@ Result<std::vector<uint8_t>> encode_ply(const GaussianCloud& cloud, const std::s
        {"opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"})
     h += std::string("property float ") + name + "\n";
   h += "end_header\n";
+  return h;
+}
+
+Result<std::vector<uint8_t>> encode_ply(const GaussianCloud& cloud, const std::string& file) {
+  const size_t N = cloud.size();
+  const size_t K = static_cast<size_t>(cloud.sh_coeffs());
+  const size_t R = K - 1;
+  const std::string h =
+      inria_ply_header(N, R, cloud.trained_antialiased ? "SplatRenderMode: mip" : "");
   const size_t floats = 9 + 3 * R + 8;
   std::vector<uint8_t> out(h.size() + N * floats * 4);
   std::memcpy(out.data(), h.data(), h.size());

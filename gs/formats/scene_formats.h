@@ -25,6 +25,10 @@ Result<GaussianCloud> decode_ply(const ply::Header& header, const uint8_t* data,
                                  const std::string& file, const LoadLimits& limits,
                                  LoadReport& report);
 Result<std::vector<uint8_t>> encode_ply(const GaussianCloud& cloud, const std::string& file);
+// The header of an Inria-layout binary .ply with N vertices and R higher SH coefficients per
+// channel (x y z nx ny nz f_dc_0..2 f_rest_0..3R-1 opacity scale_0..2 rot_0..3, all float);
+// `comment` (e.g. "SplatRenderMode: mip") goes in a comment line when not empty.
+std::string inria_ply_header(size_t N, size_t R, const std::string& comment = "");
 
 // SuperSplat / splat-transform compressed .ply (elements chunk, vertex, optional sh).
 bool is_compressed_ply(const ply::Header& header);

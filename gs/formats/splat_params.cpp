@@ -150,15 +150,7 @@ Result<SplatParams> read_splat_params(const std::string& path, const LoadLimits&
 std::vector<uint8_t> encode_splat_params(const SplatParams& p) {
   const size_t N = p.size();
   const size_t R = size_t(p.sh_rest());
-  std::string h =
-      "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(N) + "\n";
-  for (const char* prop : {"x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"})
-    h += std::string("property float ") + prop + "\n";
-  for (size_t j = 0; j < 3 * R; ++j) h += "property float f_rest_" + std::to_string(j) + "\n";
-  for (const char* prop :
-       {"opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"})
-    h += std::string("property float ") + prop + "\n";
-  h += "end_header\n";
+  const std::string h = formats::inria_ply_header(N, R);
   const size_t floats = 9 + 3 * R + 8;
   std::vector<uint8_t> out(h.size() + N * floats * 4);
   std::memcpy(out.data(), h.data(), h.size());
