@@ -2,6 +2,7 @@
 #include "enhance/scene_input.h"
 
 #include <algorithm>
+#include <cctype>
 #include <filesystem>
 
 #include "attention/runtime/file_io.h"
@@ -14,17 +15,47 @@ namespace {
 
 bool is_splat_file(const fs::path& p) {
   const std::string ext = p.extension().string();
-  return (ext == ".ply" || ext == ".splat" || ext == ".spz") && p.filename() != "points3D.ply";
+  return (ext == ".ply" || ext == ".splat" || ext == ".spz" || ext == ".sog" || ext == ".pt" ||
+          ext == ".ckpt") &&
+         p.filename() != "points3D.ply";
 }
 
+// A SOG folder: meta.json with its WebP images beside it.
+bool is_sog_folder(const fs::path& p) {
+  std::error_code ec;
+  return fs::is_regular_file(p / "meta.json", ec);
+}
+
+// The trailing number of a file name's stem ("ckpt_29999.pt" -> 29999), or -1.
+long trailing_number(const std::string& path) {
+  const std::string stem = fs::path(path).stem().string();
+  size_t k = stem.size();
+  while (k > 0 && std::isdigit(static_cast<unsigned char>(stem[k - 1]))) --k;
+  if (k == stem.size() || stem.size() - k > 15) return -1;
+  return std::stol(stem.substr(k));
+}
+
+// The splat files and SOG folders directly in `dir`, sorted by name.
 std::vector<std::string> splats_in(const fs::path& dir) {
   std::vector<std::string> out;
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) return out;
-  for (const auto& e : fs::directory_iterator(dir, ec))
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
     if (e.is_regular_file(ec) && is_splat_file(e.path())) out.push_back(e.path().string());
+    if (e.is_directory(ec) && is_sog_folder(e.path())) out.push_back(e.path().string());
+  }
   std::sort(out.begin(), out.end());
   return out;
+}
+
+// The latest of several outputs of one run: the highest trailing step number, else the last by
+// name.
+std::string latest(const std::vector<std::string>& files) {
+  std::string best = files.back();
+  long best_n = trailing_number(best);
+  for (const std::string& f : files)
+    if (trailing_number(f) > best_n) best_n = trailing_number(f), best = f;
+  return best;
 }
 
 }  // namespace
@@ -52,7 +83,8 @@ Result<std::string> find_scene_ply(const std::string& dir) {
   // 2. conventional names.
   for (const char* n : {"scene.ply", "point_cloud.ply", "splat.ply"})
     if (fs::is_regular_file(root / n, ec)) return (root / n).string();
-  // 3. the only splat file at the top.
+  // 3. the scene folder itself is a SOG folder, or the only splat file / SOG folder at the top.
+  if (is_sog_folder(root)) return root.string();
   std::vector<std::string> top = splats_in(root);
   if (top.size() == 1) return top[0];
   if (top.size() > 1) {
@@ -60,16 +92,17 @@ Result<std::string> find_scene_ply(const std::string& dir) {
     for (const auto& t : top) list += " " + fs::path(t).filename().string();
     return Status::error(dir + ": several splat files, pass --scene to choose one:" + list);
   }
-  // 4. common output folders; the last by name (e.g. the highest step).
-  for (const char* sub : {"results", "results/ply", "ply", "output"}) {
+  // 4. common output folders (gsplat writes results/ply/ and results/ckpts/); the highest step.
+  for (const char* sub : {"results", "results/ply", "ply", "output", "results/ckpts", "ckpts"}) {
     std::vector<std::string> f = splats_in(root / sub);
-    if (!f.empty()) return f.back();
+    if (!f.empty()) return latest(f);
   }
   return Status::error(
       dir +
       ": no trained splat found (looked for point_cloud/iteration_*/point_cloud.ply, "
-      "scene.ply, point_cloud.ply, splat.ply, a single *.ply/*.splat/*.spz, and "
-      "results/, results/ply/, ply/, output/); pass --scene");
+      "scene.ply, point_cloud.ply, splat.ply, a SOG folder (meta.json), a single "
+      "*.ply/*.splat/*.spz/*.sog/*.pt, and results/, results/ply/, ply/, output/, "
+      "results/ckpts/, ckpts/); pass --scene");
 }
 
 Result<SceneInputs> load_scene_inputs(const SceneInputOptions& o) {

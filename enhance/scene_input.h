@@ -55,8 +55,11 @@ struct SceneInputs {
 // Where the trained splat is looked for, first hit wins:
 //   1. DIR/point_cloud/iteration_<N>/point_cloud.ply, largest N (Inria / gsplat export);
 //   2. DIR/scene.ply, DIR/point_cloud.ply, DIR/splat.ply;
-//   3. the only *.ply/*.splat/*.spz directly in DIR;
-//   4. the same under DIR/results/, DIR/results/ply/, DIR/ply/, DIR/output/ (largest by name);
+//   3. DIR itself when it is a SOG folder (holds meta.json); else the only splat directly in DIR:
+//      a *.ply/*.splat/*.spz/*.sog file, a gsplat checkpoint (*.pt, *.ckpt) or a SOG folder;
+//   4. the same under DIR/results/, DIR/results/ply/, DIR/ply/, DIR/output/, DIR/results/ckpts/,
+//      DIR/ckpts/ (gsplat's layout): the highest trailing step number (ckpt_29999.pt over
+//      ckpt_6999.pt), else the last by name;
 // points3D.ply (COLMAP points) is never taken. Several candidates at step 3 is an error listing
 // them.
 Result<std::string> find_scene_ply(const std::string& dir);

@@ -6,8 +6,8 @@
 #include <nlohmann/json.hpp>
 
 #include "attention/runtime/file_io.h"
-#include "enhance/macro/plan.h"
 #include "enhance/datasets/synth_scene_folder.h"
+#include "enhance/macro/plan.h"
 #include "test_support.h"
 
 using namespace macro;
@@ -161,6 +161,18 @@ TEST_CASE("scene inputs: splat search order, registered close-up, bad folders", 
   CHECK(*find_scene_ply(tmp.file("a")) ==
         tmp.file("a/point_cloud/iteration_30000/point_cloud.ply"));
   CHECK_FALSE(find_scene_ply(tmp.file("missing")).is_ok());
+  // gsplat's layout: the highest step, by number not by name.
+  touch("g/results/ckpts/ckpt_6999.pt");
+  touch("g/results/ckpts/ckpt_29999.pt");
+  CHECK(*find_scene_ply(tmp.file("g")) == tmp.file("g/results/ckpts/ckpt_29999.pt"));
+  // A SOG folder inside the scene folder, and a scene folder that is a SOG folder.
+  touch("s/playbot/meta.json");
+  CHECK(*find_scene_ply(tmp.file("s")) == tmp.file("s/playbot"));
+  touch("s/playbot.sog");
+  CHECK_FALSE(find_scene_ply(tmp.file("s")).is_ok());  // two candidates: named in the error
+  touch("s/playbot/scene.ply");                        // does not matter: s/ is what is searched
+  touch("t/meta.json");
+  CHECK(*find_scene_ply(tmp.file("t")) == tmp.file("t"));
 
   // A close-up registered in COLMAP: its pose comes from there and it is not a candidate.
   SynthFolderOptions so;
