@@ -23,10 +23,12 @@ inline std::string slurp(const std::string& path) {
 }
 
 // `macro <args>`; stdout and stderr kept in `logs` (stdout.txt, stderr.txt) and returned.
-inline Run run_macro(const std::string& args, const TempDir& logs) {
+// `env`: extra NAME=VALUE assignments for the run.
+inline Run run_macro(const std::string& args, const TempDir& logs, const std::string& env = "") {
   const std::string out = logs.file("stdout.txt"), err = logs.file("stderr.txt");
   Run r;
-  r.rc = run_command("env -u MACRO_QUIET " + macro_exe() + " " + args + " >" + out + " 2>" + err);
+  r.rc = run_command("env -u MACRO_QUIET " + env + " " + macro_exe() + " " + args + " >" + out +
+                     " 2>" + err);
   r.out = slurp(out);
   r.err = slurp(err);
   return r;

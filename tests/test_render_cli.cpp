@@ -139,6 +139,27 @@ TEST_CASE("macro render --quiet prints nothing, and every mode and a scene folde
   CHECK(files_in(dir.path).size() == 3);
 }
 
+TEST_CASE("the rasterizer's stages print progress only once they run past their delay",
+          "[render][render_cli]") {
+  test::TempDir dir("render_cli_progress"), logs("render_cli_progress_logs");
+  const std::string args = "render " + scene_flags() + " --out-png " + dir.file("p.png");
+  // A short render is silent on stderr: every stage ends before its 1 s threshold.
+  Run quick = run_macro(args, logs);
+  REQUIRE(quick.rc == 0);
+  CHECK_FALSE(contains(quick.err, "elapsed"));
+  // With the delay at 0 each stage draws its line: stage, count, elapsed and ETA.
+  Run shown = run_macro(args, logs, "MACRO_PROGRESS_AFTER=0");
+  INFO(shown.err);
+  REQUIRE(shown.rc == 0);
+  for (const char* stage : {"project]", "bin]", "blend]"}) CHECK(contains(shown.err, stage));
+  CHECK(contains(shown.err, "elapsed"));
+  CHECK(contains(shown.err, "eta"));
+  // --quiet silences them even then.
+  Run silent = run_macro(args + " --quiet", logs, "MACRO_PROGRESS_AFTER=0");
+  REQUIRE(silent.rc == 0);
+  CHECK(silent.err.empty());
+}
+
 TEST_CASE("macro render refuses bad input by name and leaves no files", "[render][render_cli]") {
   test::TempDir dir("render_cli"), logs("render_cli_logs");
   const std::string outs = " --out-png " + dir.file("c.png") + " --out-exr " + dir.file("c.exr") +

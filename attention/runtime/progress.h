@@ -15,7 +15,8 @@ bool quiet();
 class Progress {
  public:
   // show_after_seconds > 0: nothing is drawn until the job has run that long (and no final line
-  // if it never was), so short jobs stay silent and long ones still show they are alive.
+  // if it never was), so short jobs stay silent and long ones still show they are alive. The
+  // environment variable MACRO_PROGRESS_AFTER=S (seconds, 0 = at once) overrides that delay.
   Progress(std::string stage, size_t total, double show_after_seconds = 0);
   ~Progress();
   void advance(size_t n = 1);
