@@ -10,13 +10,16 @@ namespace macro::cli {
 namespace {
 
 constexpr const char* kUsage =
-    "usage: macro undistort --scene-dir IN --out OUT [--strict]\n"
+    "usage: macro undistort --scene-dir IN --out OUT [--k-handover gsplat|centred] [--strict]\n"
     "  Undistorts every image of IN with its camera (OpenCV, as gsplat's COLMAP parser does:\n"
     "  alpha 0, bilinear, cropped to the valid region) and writes OUT with pinhole cameras:\n"
     "  images/, sparse/0/ (COLMAP text, PINHOLE, points3D copied), split.json with the new\n"
     "  intrinsics and closeup_gt/ undistorted if IN has them, other top-level files copied.\n"
     "  --scene-dir  folder with images/ and cameras (sparse/0, transforms.json or cameras.json)\n"
     "  --out        the new folder (not IN)\n"
+    "  --k-handover gsplat: COLMAP's K goes to OpenCV as it is, as gsplat's parser does (the\n"
+    "               images gsplat trains on; default). centred: K shifted to OpenCV's integer\n"
+    "               pixel centres and back, exact in COLMAP's pixel convention\n"
     "  --strict     any invalid camera entry is an error (default: left out, warned)\n";
 
 int run_undistort(std::vector<std::string> argv) {
@@ -30,12 +33,19 @@ int run_undistort(std::vector<std::string> argv) {
   const std::string out = args.required("--out");
   gs::CameraLoadOptions options;
   options.strict = args.flag("--strict");
+  gs::KHandover handover = gs::KHandover::kGsplat;
+  const std::string handover_text = args.value_or("--k-handover", "gsplat");
   if (Status s = args.finish(); !s) {
     std::fprintf(stderr, "macro undistort: %s (macro undistort --help for usage)\n",
                  s.message().c_str());
     return 2;
   }
-  auto report = gs::undistort_scene_folder(in, out, options);
+  if (!gs::parse_k_handover(handover_text, &handover)) {
+    std::fprintf(stderr, "macro undistort: --k-handover: expected gsplat or centred, found '%s'\n",
+                 handover_text.c_str());
+    return 2;
+  }
+  auto report = gs::undistort_scene_folder(in, out, options, handover);
   if (!report) return fail("undistort", report.status());
   for (const gs::RejectedCamera& r : report->rejected) {
     std::fprintf(stderr, "macro undistort: warning: entry %d%s left out: %s\n", r.index,

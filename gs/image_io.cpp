@@ -17,8 +17,9 @@
 // ---- stb, instantiated once ---------------------------------------------------------------------
 namespace {
 // stb_image_write's deflate replaced by zlib (smaller files, the same bytes everywhere).
-constexpr int kPngZlibLevel = 3;  // 960x540 render: 3 cost ~30 ms CPU for 459 KB, 6 ~100 ms for 406 KB
-constexpr int kExrZipLevel = 1;   // float renders barely compress: level 4 was 1% smaller, slower
+constexpr int kPngZlibLevel =
+    3;  // 960x540 render: 3 cost ~30 ms CPU for 459 KB, 6 ~100 ms for 406 KB
+constexpr int kExrZipLevel = 1;  // float renders barely compress: level 4 was 1% smaller, slower
 unsigned char* zlib_compress_for_stb(unsigned char* data, int data_len, int* out_len, int quality) {
   uLongf cap = compressBound(static_cast<uLong>(data_len));
   auto* out = static_cast<unsigned char*>(std::malloc(cap));
@@ -70,7 +71,9 @@ constexpr uint64_t kMaxDeflateRatio = 1100;  // deflate's limit is ~1032:1
 constexpr uint64_t kMaxOtherRatio = 8192;    // JPEG/BMP/TGA decoded bytes per file byte
 constexpr uint64_t kMaxExrRatio = 8192;      // EXR float bytes per file byte
 
-std::string dims(uint64_t w, uint64_t h) { return std::to_string(w) + "x" + std::to_string(h); }
+std::string dims(uint64_t w, uint64_t h) {
+  return std::to_string(w) + "x" + std::to_string(h);
+}
 
 Status check_size(const std::string& name, int64_t w, int64_t h, const ImageLimits& limits) {
   if (w <= 0 || h <= 0) {
@@ -111,7 +114,8 @@ Status check_tga_size(const uint8_t* bytes, size_t size, const std::string& name
   const uint32_t cmap_length = uint32_t(bytes[5]) | (uint32_t(bytes[6]) << 8);
   const uint32_t cmap_bits = bytes[7], pixel_bits = bytes[16];
   const uint64_t pixel_bytes = std::max<uint64_t>(1, (pixel_bits + 7) / 8);
-  const uint64_t header = 18 + id_length + (colormap_type ? cmap_length * ((cmap_bits + 7) / 8) : 0);
+  const uint64_t header =
+      18 + id_length + (colormap_type ? cmap_length * ((cmap_bits + 7) / 8) : 0);
   const uint64_t data = uint64_t(w) * uint64_t(h) * pixel_bytes;
   const bool rle = image_type >= 9;
   const uint64_t available = size > header ? size - header : 0;
@@ -123,8 +127,12 @@ Status check_tga_size(const uint8_t* bytes, size_t size, const std::string& name
   return Status::ok();
 }
 
-bool is_jpeg(const uint8_t* b, size_t n) { return n >= 3 && b[0] == 0xFF && b[1] == 0xD8 && b[2] == 0xFF; }
-bool is_bmp(const uint8_t* b, size_t n) { return n >= 2 && b[0] == 'B' && b[1] == 'M'; }
+bool is_jpeg(const uint8_t* b, size_t n) {
+  return n >= 3 && b[0] == 0xFF && b[1] == 0xD8 && b[2] == 0xFF;
+}
+bool is_bmp(const uint8_t* b, size_t n) {
+  return n >= 2 && b[0] == 'B' && b[1] == 'M';
+}
 
 // BMP: stb reads missing rows of an uncompressed bitmap as zeros, so the rows the header promises
 // (from bfOffBits, the stride of 4-byte-aligned rows and |height|) must fit in the file.
@@ -147,18 +155,18 @@ Status check_bmp_size(const uint8_t* b, size_t size, const std::string& name, in
   const uint64_t stride = (uint64_t(w) * bits + 31) / 32 * 4;
   const uint64_t need = uint64_t(data_offset) + stride * uint64_t(h);
   if (need > size) {
-    return Status::error(name + ": BMP header says " + dims(w, h) + " with " +
-                         std::to_string(bits) + "-bit pixels from byte " +
-                         std::to_string(data_offset) + ", " + std::to_string(need) +
-                         " bytes, but the file has only " + std::to_string(size) +
-                         ": truncated or corrupt");
+    return Status::error(
+        name + ": BMP header says " + dims(w, h) + " with " + std::to_string(bits) +
+        "-bit pixels from byte " + std::to_string(data_offset) + ", " + std::to_string(need) +
+        " bytes, but the file has only " + std::to_string(size) + ": truncated or corrupt");
   }
   return Status::ok();
 }
 
 }  // namespace
 
-// ---- PNG / JPEG read -----------------------------------------------------------------------------
+// ---- PNG / JPEG read
+// -----------------------------------------------------------------------------
 
 Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string& name,
                            const ImageLimits& limits) {
@@ -172,7 +180,8 @@ Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string&
   // only "too large").
   static constexpr uint8_t kPngMagic[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
   bool is_png = false;
-  if (size >= 26 && std::memcmp(bytes, kPngMagic, 8) == 0 && std::memcmp(bytes + 12, "IHDR", 4) == 0) {
+  if (size >= 26 && std::memcmp(bytes, kPngMagic, 8) == 0 &&
+      std::memcmp(bytes + 12, "IHDR", 4) == 0) {
     auto be32 = [&](size_t at) {
       return (uint32_t(bytes[at]) << 24) | (uint32_t(bytes[at + 1]) << 16) |
              (uint32_t(bytes[at + 2]) << 8) | uint32_t(bytes[at + 3]);
@@ -183,7 +192,8 @@ Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string&
     // ~1032x, so a file much smaller than raw / 1032 is truncated or lies about its size.
     const uint32_t depth = bytes[24], type = bytes[25];
     const uint32_t samples = type == 2 ? 3 : type == 4 ? 2 : type == 6 ? 4 : 1;
-    const uint64_t raw = uint64_t(ph) * (1 + (uint64_t(pw) * samples * std::max(depth, 1u) + 7) / 8);
+    const uint64_t raw =
+        uint64_t(ph) * (1 + (uint64_t(pw) * samples * std::max(depth, 1u) + 7) / 8);
     if (raw > kMaxDeflateRatio * uint64_t(size) + 4096) {
       return Status::error(name + ": header says " + dims(pw, ph) + " but the file has only " +
                            std::to_string(size) + " bytes: truncated or corrupt");
@@ -201,7 +211,8 @@ Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string&
   // A header may lie about the size, and the decoder allocates from it. PNG was checked above
   // against its raw size; other formats get a loose bound (a flat JPEG compresses a few hundred
   // to one).
-  if (!is_png && uint64_t(w) * uint64_t(h) * uint64_t(comp) > kMaxOtherRatio * uint64_t(size) + 4096) {
+  if (!is_png &&
+      uint64_t(w) * uint64_t(h) * uint64_t(comp) > kMaxOtherRatio * uint64_t(size) + 4096) {
     return Status::error(name + ": header says " + dims(w, h) + " but the file has only " +
                          std::to_string(size) + " bytes: truncated or corrupt");
   }
@@ -237,9 +248,10 @@ Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string&
     if (!px) {
       // stb tries each decoder in turn and reports the last one's complaint ("bad png sig" for a
       // broken JPEG), so the message names the format the header announced.
-      const char* kind = is_png ? "PNG" : is_jpeg(bytes, size) ? "JPEG"
-                                      : is_bmp(bytes, size)    ? "BMP"
-                                                               : "TGA";
+      const char* kind = is_png                 ? "PNG"
+                         : is_jpeg(bytes, size) ? "JPEG"
+                         : is_bmp(bytes, size)  ? "BMP"
+                                                : "TGA";
       return Status::error(name + ": cannot decode the " + dims(w, h) + " " + kind + " image (" +
                            std::string(stbi_failure_reason()) + "): truncated or corrupt");
     }
@@ -262,7 +274,8 @@ Result<Image> read_image(const std::string& path, const ImageLimits& limits) {
   return decode_image(bytes.data(), bytes.size(), path, limits);
 }
 
-// ---- PNG write -----------------------------------------------------------------------------------
+// ---- PNG write
+// -----------------------------------------------------------------------------------
 
 namespace {
 uint8_t to_u8(float v) {
@@ -277,28 +290,58 @@ void append_bytes(void* context, void* data, int size) {
 }
 }  // namespace
 
-Result<std::vector<uint8_t>> encode_png(const Image& image) {
+namespace {
+// The 8-bit samples of `image` for an encoder named `format`, after checking channels and size.
+Result<std::vector<uint8_t>> to_u8_samples(const Image& image, const char* format) {
   const int c = image.channels;
   if (c != 1 && c != 3 && c != 4) {
-    return Status::error("PNG: expected 1, 3 or 4 channels, found " + std::to_string(c));
+    return Status::error(std::string(format) + ": expected 1, 3 or 4 channels, found " +
+                         std::to_string(c));
   }
   if (image.width <= 0 || image.height <= 0 || image.width > (1 << 24) ||
       image.height > (1 << 24)) {
-    return Status::error("PNG: expected a positive size below 16M, found " +
+    return Status::error(std::string(format) + ": expected a positive size below 16M, found " +
                          dims(image.width, image.height));
   }
   if (image.data.size() != image.pixels() * size_t(c)) {
-    return Status::error("PNG: image data holds " + std::to_string(image.data.size()) +
-                         " values, expected " + std::to_string(image.pixels() * size_t(c)));
+    return Status::error(std::string(format) + ": image data holds " +
+                         std::to_string(image.data.size()) + " values, expected " +
+                         std::to_string(image.pixels() * size_t(c)));
   }
   std::vector<uint8_t> px(image.data.size());
   for (size_t k = 0; k < px.size(); ++k) px[k] = to_u8(image.data[k]);
+  return px;
+}
+}  // namespace
+
+Result<std::vector<uint8_t>> encode_png(const Image& image) {
+  MACRO_ASSIGN_OR_RETURN(std::vector<uint8_t> px, to_u8_samples(image, "PNG"));
   std::vector<uint8_t> out;
-  if (!stbi_write_png_to_func(append_bytes, &out, image.width, image.height, c, px.data(),
-                              image.width * c)) {
+  if (!stbi_write_png_to_func(append_bytes, &out, image.width, image.height, image.channels,
+                              px.data(), image.width * image.channels)) {
     return Status::error("PNG: encoding failed");
   }
   return out;
+}
+
+Result<std::vector<uint8_t>> encode_jpeg(const Image& image, int quality) {
+  if (quality < 1 || quality > 100) {
+    return Status::error("JPEG: quality must be 1..100, found " + std::to_string(quality));
+  }
+  if (image.channels == 4) return Status::error("JPEG: has no alpha; expected 1 or 3 channels");
+  MACRO_ASSIGN_OR_RETURN(std::vector<uint8_t> px, to_u8_samples(image, "JPEG"));
+  std::vector<uint8_t> out;
+  if (!stbi_write_jpg_to_func(append_bytes, &out, image.width, image.height, image.channels,
+                              px.data(), quality)) {
+    return Status::error("JPEG: encoding failed");
+  }
+  return out;
+}
+
+Status write_jpeg(const std::string& path, const Image& image, int quality) {
+  auto bytes = encode_jpeg(image, quality);
+  if (!bytes) return bytes.status().with_context(path);
+  return write_file_atomic(path, bytes->data(), bytes->size());
 }
 
 Status write_png(const std::string& path, const Image& image) {
@@ -307,7 +350,8 @@ Status write_png(const std::string& path, const Image& image) {
   return write_file_atomic(path, bytes->data(), bytes->size());
 }
 
-// ---- EXR -----------------------------------------------------------------------------------------
+// ---- EXR
+// -----------------------------------------------------------------------------------------
 
 Status write_exr(const std::string& path, int width, int height,
                  const std::vector<ExrChannel>& channels, ExrCompression compression) {
@@ -317,7 +361,8 @@ Status write_exr(const std::string& path, int width, int height,
   if (channels.empty()) return Status::error(path + ": EXR: no channels to write");
   for (size_t k = 0; k < channels.size(); ++k) {
     if (channels[k].name.empty()) return Status::error(path + ": EXR: a channel has no name");
-    if (!channels[k].data) return Status::error(path + ": EXR: channel '" + channels[k].name + "' has no data");
+    if (!channels[k].data)
+      return Status::error(path + ": EXR: channel '" + channels[k].name + "' has no data");
     for (size_t m = 0; m < k; ++m) {
       if (channels[m].name == channels[k].name) {
         return Status::error(path + ": EXR: channel '" + channels[k].name + "' given twice");
@@ -334,8 +379,9 @@ Status write_exr(const std::string& path, int width, int height,
     Imf::FrameBuffer fb;
     for (const ExrChannel& ch : channels) {
       header.channels().insert(ch.name, Imf::Channel(Imf::FLOAT));
-      fb.insert(ch.name, Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(const_cast<float*>(ch.data)),
-                                    sizeof(float), sizeof(float) * size_t(width)));
+      fb.insert(ch.name,
+                Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(const_cast<float*>(ch.data)),
+                           sizeof(float), sizeof(float) * size_t(width)));
     }
     Imf::OutputFile file(temp.c_str(), header, 0);
     file.setFrameBuffer(fb);
@@ -398,8 +444,8 @@ Result<ExrImage> read_exr(const std::string& path, const ImageLimits& limits) {
     for (auto it = list.begin(); it != list.end(); ++it) {
       out.names.push_back(it.name());
       out.planes.emplace_back(size_t(w) * size_t(h), 0.f);
-      char* base = reinterpret_cast<char*>(out.planes.back().data()) -
-                   origin * ptrdiff_t(sizeof(float));
+      char* base =
+          reinterpret_cast<char*>(out.planes.back().data()) - origin * ptrdiff_t(sizeof(float));
       fb.insert(it.name(), Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * size_t(w)));
     }
     file.setFrameBuffer(fb);
@@ -410,15 +456,14 @@ Result<ExrImage> read_exr(const std::string& path, const ImageLimits& limits) {
   return out;
 }
 
-// ---- colour map ----------------------------------------------------------------------------------
+// ---- colour map
+// ----------------------------------------------------------------------------------
 
 void colormap(float value, float rgb[3]) {
   static constexpr float kStops[5][3] = {
       {0.05f, 0.03f, 0.22f},  // 0: far / empty
-      {0.40f, 0.10f, 0.55f},
-      {0.85f, 0.30f, 0.30f},
-      {0.98f, 0.65f, 0.15f},
-      {1.00f, 0.97f, 0.70f},  // 1: near
+      {0.40f, 0.10f, 0.55f}, {0.85f, 0.30f, 0.30f},
+      {0.98f, 0.65f, 0.15f}, {1.00f, 0.97f, 0.70f},  // 1: near
   };
   float v = std::isfinite(value) ? std::clamp(value, 0.f, 1.f) : 0.f;
   float x = v * 4.f;

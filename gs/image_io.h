@@ -1,4 +1,5 @@
-// Image files: PNG/JPEG read, 8-bit PNG write, OpenEXR float read/write with named channels.
+// Image files: PNG/JPEG read, 8-bit PNG and JPEG write, OpenEXR float read/write with named
+// channels.
 //
 // Legend: H x W pixels, C channels; data is row-major [H,W,C], row 0 at the top.
 //
@@ -10,9 +11,10 @@
 // PNG (8- or 16-bit, gray, gray+alpha, RGB, RGBA) and the other formats stb decodes (JPEG, BMP,
 // TGA) come back as float RGB in [0, 1] (value / 255 or / 65535; gray is copied to R, G, B; alpha
 // is dropped, not composited). Writing clamps to [0, 1] and rounds to 8 bits (round half up).
-// EXR holds 32-bit float channels under names (uncompressed unless asked) (e.g. R, G, B, A, depth); OpenEXR stores channels
-// sorted by name, so callers look channels up by name. All writes are atomic (temporary + rename).
-// No third-party type appears in this header (stb and OpenEXR live in image_io.cpp only).
+// EXR holds 32-bit float channels under names (uncompressed unless asked) (e.g. R, G, B, A, depth);
+// OpenEXR stores channels sorted by name, so callers look channels up by name. All writes are
+// atomic (temporary + rename). No third-party type appears in this header (stb and OpenEXR live in
+// image_io.cpp only).
 #pragma once
 
 #include <cstdint>
@@ -52,6 +54,10 @@ Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string&
 Status write_png(const std::string& path, const Image& image);
 // The bytes write_png would write (for tests and for callers that bundle files).
 Result<std::vector<uint8_t>> encode_png(const Image& image);
+// Baseline JPEG (stb: 4:2:0 up to quality 90, 4:4:4 above) from a 1- or 3-channel float image,
+// clamped and rounded as write_png; `quality` 1..100.
+Status write_jpeg(const std::string& path, const Image& image, int quality);
+Result<std::vector<uint8_t>> encode_jpeg(const Image& image, int quality);
 
 // One float plane [H,W] under a channel name.
 struct ExrChannel {

@@ -35,7 +35,8 @@ struct Reference {
   int roi[4];             // x y w h
 };
 
-// /usr/bin/python3 tests/fixtures/undistort_reference.py (OpenCV 4.6.0, Debian bookworm).
+// /usr/bin/python3 tests/fixtures/undistort_reference.py (OpenCV 4.6.0, Debian bookworm),
+// "centred" hand-over.
 constexpr Reference kReference[] = {
     {"OPENCV",
      227.76756286621094,
@@ -68,6 +69,59 @@ constexpr Reference kReference[] = {
      120.48397400222439,
      {0, 0, 319, 239}},
     {"OPENCV_FISHEYE", 124.96503610029487, 126.63123658163214, 160.5, 120.5, {0, 0, 320, 240}},
+};
+
+// The same script's "gsplat" hand-over (K unchanged): new K (OpenCV convention, as gsplat uses
+// it), roi, and the maps (x, y) at roi pixels (0, 0), (h/2, w/2), (h-1, w-1).
+struct GsplatReference {
+  const char* name;
+  double fx, fy, cx, cy;
+  int roi[4];
+  float maps[6];
+};
+constexpr GsplatReference kGsplatReference[] = {
+    {"OPENCV",
+     227.77403259277344,
+     242.33633422851562,
+     159.43891475213877,
+     119.9768892728689,
+     {0, 0, 319, 239},
+     {6.03297377, 9.20047188, 160.01825, 119.222076, 313.478973, 229.793365}},
+    {"OPENCV_K1",
+     302.98641967773438,
+     308.830810546875,
+     159.9112911679531,
+     119.72544673681841,
+     {0, 0, 319, 239},
+     {0.261824459, 0.196163952, 159.748077, 119.651001, 318.263977, 238.363892}},
+    {"FULL_OPENCV",
+     218.82546997070312,
+     237.92306518554688,
+     161.21100590016795,
+     119.04117488468182,
+     {0, 0, 319, 239},
+     {8.25407696, 13.6795521, 158.474136, 119.455887, 311.325439, 226.486511}},
+    {"SIMPLE_RADIAL",
+     231.46958923339844,
+     239.6749267578125,
+     159.50000218826699,
+     119.49999851242683,
+     {0, 0, 319, 239},
+     {6.4245286, 8.87790966, 159.459976, 119.478462, 312.871399, 230.379059}},
+    {"RADIAL",
+     262.04244995117188,
+     261.74859619140625,
+     159.0263876809895,
+     120.46790886589224,
+     {0, 0, 319, 239},
+     {0.00157947524, 0.0388646461, 159.474823, 119.597977, 318.823517, 238.923019}},
+    {"OPENCV_FISHEYE",
+     125.00896267658653,
+     126.6757488456077,
+     160.86567254206955,
+     120.6747717437477,
+     {0, 0, 320, 240},
+     {31.4165516, 23.6669369, 159.461288, 119.690346, 288.544678, 216.31041}},
 };
 
 // The cameras of undistort_reference.py, in its order.
@@ -140,7 +194,7 @@ TEST_CASE("undistort: new K and roi match OpenCV's reference numbers", "[undisto
   const std::vector<Camera> cams = reference_cameras();
   for (size_t k = 0; k < cams.size(); ++k) {
     INFO(cams[k].name);
-    auto u = plan_undistortion(cams[k]);
+    auto u = plan_undistortion(cams[k], KHandover::kCentred);
     REQUIRE(u);
     const Reference& r = kReference[k];
     CHECK(u->new_fx == Approx(r.fx).epsilon(1e-12));
@@ -159,26 +213,61 @@ TEST_CASE("undistort: new K and roi match OpenCV's reference numbers", "[undisto
   }
 }
 
-TEST_CASE("undistort: every output pixel samples where the lens formulas put it", "[undistort]") {
-  for (const Camera& c : reference_cameras()) {
-    INFO(c.name);
-    auto u = plan_undistortion(c);
+TEST_CASE("undistort: the gsplat hand-over matches OpenCV with COLMAP's K as it is",
+          "[undistort]") {
+  const std::vector<Camera> cams = reference_cameras();
+  for (size_t k = 0; k < cams.size(); ++k) {
+    INFO(cams[k].name);
+    auto u = plan_undistortion(cams[k]);  // the default
     REQUIRE(u);
-    double worst = 0;
-    int inside = 0;
-    const int W = u->pinhole.width, H = u->pinhole.height;
-    for (int i = 0; i < H; ++i)
-      for (int j = 0; j < W; ++j) {
-        const Eigen::Vector2d expect = source_position(*u, i, j);
-        const Eigen::Vector2d got(u->map_x[size_t(i) * W + j] + 0.5,
-                                  u->map_y[size_t(i) * W + j] + 0.5);
-        worst = std::max(worst, (got - expect).norm());
-        inside += got.x() >= 0 && got.x() <= c.width && got.y() >= 0 && got.y() <= c.height;
-      }
-    CHECK(worst < 2e-3);  // float maps of values < 400: ~3e-5 rounding, plus OpenCV's arithmetic
-    // alpha 0 keeps (nearly) only pixels that see the source image.
-    CHECK(inside >= int(0.995 * W * H));
+    const GsplatReference& r = kGsplatReference[k];
+    CHECK(u->centre_shift == 0.5);
+    CHECK(u->new_fx == Approx(r.fx).epsilon(1e-12));
+    CHECK(u->new_fy == Approx(r.fy).epsilon(1e-12));
+    CHECK(u->new_cx == Approx(r.cx).epsilon(1e-12));
+    CHECK(u->new_cy == Approx(r.cy).epsilon(1e-12));
+    CHECK(u->roi_x == r.roi[0]);
+    CHECK(u->roi_y == r.roi[1]);
+    REQUIRE(u->pinhole.width == r.roi[2]);
+    REQUIRE(u->pinhole.height == r.roi[3]);
+    CHECK(u->pinhole.cx == Approx(r.cx - r.roi[0]));
+    CHECK(u->pinhole.cy == Approx(r.cy - r.roi[1]));
+    const int w = r.roi[2], h = r.roi[3];
+    const int at[3][2] = {{0, 0}, {h / 2, w / 2}, {h - 1, w - 1}};
+    for (int s = 0; s < 3; ++s) {
+      const size_t o = size_t(at[s][0]) * w + at[s][1];
+      CHECK(u->map_x[o] == Approx(r.maps[2 * s]).margin(2e-4));
+      CHECK(u->map_y[o] == Approx(r.maps[2 * s + 1]).margin(2e-4));
+    }
+    // The two hand-overs differ where the lens bends (the test can tell them apart).
+    auto centred = plan_undistortion(cams[k], KHandover::kCentred);
+    REQUIRE(centred);
+    if (cams[k].model != CameraModel::kOpenCVFisheye)
+      CHECK(std::abs(centred->map_x[0] - u->map_x[0]) > 1e-3);
   }
+}
+
+TEST_CASE("undistort: every output pixel samples where the lens formulas put it", "[undistort]") {
+  for (const Camera& c : reference_cameras())
+    for (KHandover h : {KHandover::kGsplat, KHandover::kCentred}) {
+      INFO(c.name << " " << k_handover_name(h));
+      auto u = plan_undistortion(c, h);
+      REQUIRE(u);
+      double worst = 0;
+      int inside = 0;
+      const int W = u->pinhole.width, H = u->pinhole.height;
+      for (int i = 0; i < H; ++i)
+        for (int j = 0; j < W; ++j) {
+          const Eigen::Vector2d expect = source_position(*u, i, j);
+          const Eigen::Vector2d got(u->map_x[size_t(i) * W + j] + 0.5,
+                                    u->map_y[size_t(i) * W + j] + 0.5);
+          worst = std::max(worst, (got - expect).norm());
+          inside += got.x() >= 0 && got.x() <= c.width && got.y() >= 0 && got.y() <= c.height;
+        }
+      CHECK(worst < 2e-3);  // float maps of values < 400: ~3e-5 rounding, plus OpenCV's arithmetic
+      // alpha 0 keeps (nearly) only pixels that see the source image.
+      CHECK(inside >= int(0.995 * W * H));
+    }
   // A camera without distortion maps onto itself.
   Camera p = reference_cameras()[0];
   p.model = CameraModel::kPinhole;
@@ -208,31 +297,35 @@ TEST_CASE("undistort: a point imaged by the lens lands where the pinhole project
           src.at(i, j, 0) += float(std::exp(-(dx * dx + dy * dy) / (2 * sigma * sigma)));
         }
     }
-    auto u = plan_undistortion(c);
-    REQUIRE(u);
-    auto out = undistort_image(*u, src, "blobs");
-    REQUIRE(out);
-    for (const Eigen::Vector3d& X : points) {
-      const Eigen::Vector3d q = u->pinhole.project(X);  // where the pinhole puts the point
-      const int ci = int(q.y()), cj = int(q.x());
-      REQUIRE(ci > 8);
-      REQUIRE(cj > 8);
-      REQUIRE(ci < out->height - 8);
-      REQUIRE(cj < out->width - 8);
-      double sw = 0, su = 0, sv = 0;
-      for (int i = ci - 8; i <= ci + 8; ++i)
-        for (int j = cj - 8; j <= cj + 8; ++j) {
-          const double w = out->at(i, j, 0);
-          sw += w;
-          su += w * (j + 0.5);
-          sv += w * (i + 0.5);
-        }
-      const Eigen::Vector2d centroid(su / sw, sv / sw);
-      INFO("point " << X.transpose() << " pinhole " << q.head<2>().transpose() << " centroid "
-                    << centroid.transpose());
-      CHECK((centroid - q.head<2>()).norm() < 0.1);
-      // Without undistortion the blob is elsewhere: the check above can fail.
-      if (X.head<2>().norm() > 0.5) CHECK((project_distorted(c, X) - q).head<2>().norm() > 1.0);
+    for (KHandover h : {KHandover::kCentred, KHandover::kGsplat}) {
+      INFO(k_handover_name(h));
+      auto u = plan_undistortion(c, h);
+      REQUIRE(u);
+      auto out = undistort_image(*u, src, "blobs");
+      REQUIRE(out);
+      for (const Eigen::Vector3d& X : points) {
+        const Eigen::Vector3d q = u->pinhole.project(X);  // where the pinhole puts the point
+        const int ci = int(q.y()), cj = int(q.x());
+        REQUIRE(ci > 8);
+        REQUIRE(cj > 8);
+        REQUIRE(ci < out->height - 8);
+        REQUIRE(cj < out->width - 8);
+        double sw = 0, su = 0, sv = 0;
+        for (int i = ci - 8; i <= ci + 8; ++i)
+          for (int j = cj - 8; j <= cj + 8; ++j) {
+            const double w = out->at(i, j, 0);
+            sw += w;
+            su += w * (j + 0.5);
+            sv += w * (i + 0.5);
+          }
+        const Eigen::Vector2d centroid(su / sw, sv / sw);
+        INFO("point " << X.transpose() << " pinhole " << q.head<2>().transpose() << " centroid "
+                      << centroid.transpose());
+        // Centred is exact; gsplat's hand-over is off by up to half a pixel where the lens bends.
+        CHECK((centroid - q.head<2>()).norm() < (h == KHandover::kCentred ? 0.1 : 0.6));
+        // Without undistortion the blob is elsewhere: the check above can fail.
+        if (X.head<2>().norm() > 0.5) CHECK((project_distorted(c, X) - q).head<2>().norm() > 1.0);
+      }
     }
   }
 }
@@ -248,7 +341,7 @@ TEST_CASE("undistort: a checkerboard undistorts to straight lines", "[undistort]
     const Camera c = reference_cameras()[size_t(which)];
     INFO(c.name);
     const Image src = lens_image(c, checker, 2);
-    auto u = plan_undistortion(c);
+    auto u = plan_undistortion(c, KHandover::kCentred);  // exact in our convention
     REQUIRE(u);
     auto out = undistort_image(*u, src, "checker");
     REQUIRE(out);
@@ -326,12 +419,18 @@ TEST_CASE("undistort_scene_folder: images, PINHOLE COLMAP model, points3D, split
   // Two distorted images sharing one OPENCV camera and one pinhole image.
   std::vector<Camera> cams = {reference_cameras()[0], reference_cameras()[0]};
   cams[0].name = "a.png";
-  cams[1].name = "b.png";
+  cams[1].name = "b.jpg";  // a JPEG photo: undistorted to a JPEG of the same name
+  cams[1].t = Eigen::Vector3d(-0.4, 0.1, 2.5);  // its own pose, kept although the lens is shared
   Camera p = cams[0];
   p.name = "c.png";
   p.model = CameraModel::kPinhole;
   p.distortion.clear();
   cams.push_back(p);
+  // COLMAP image ids that are not 1..N in name order: the output keeps them, so the tracks of
+  // points3D (which name images by id) stay valid.
+  cams[0].colmap_image_id = 7;
+  cams[1].colmap_image_id = 3;
+  cams[2].colmap_image_id = 5;
   CameraSet set;
   set.cameras = cams;
   REQUIRE(save_colmap_text(set, in + "/sparse/0").is_ok());
@@ -344,8 +443,8 @@ TEST_CASE("undistort_scene_folder: images, PINHOLE COLMAP model, points3D, split
   Image img(320, 240, 3);
   for (size_t k = 0; k < img.data.size(); ++k) img.data[k] = float(k % 7) / 7.f;
   fs::create_directories(in + "/images");
-  for (const char* n : {"a.png", "b.png", "c.png"})
-    REQUIRE(write_png(in + "/images/" + n, img).is_ok());
+  for (const char* n : {"a.png", "c.png"}) REQUIRE(write_png(in + "/images/" + n, img).is_ok());
+  REQUIRE(write_jpeg(in + "/images/b.jpg", img, 95).is_ok());
   {
     std::ofstream f(in + "/split.json");
     f << R"({"scene": "s", "training_frames": ["a.png"], "intrinsics": {"w": 320, "h": 240,
@@ -363,13 +462,19 @@ TEST_CASE("undistort_scene_folder: images, PINHOLE COLMAP model, points3D, split
   CHECK(report->cameras == 3);
   CHECK(report->undistorted == 2);
   CHECK(report->copied == 1);
+  CHECK(report->jpeg_reencoded == 1);
   auto back = load_cameras(out);
   REQUIRE(back);
   REQUIRE(back->cameras.size() == 3);
-  const Reference& r = kReference[0];
+  CHECK(back->cameras[0].name == "a.png");
+  CHECK(back->cameras[1].name == "b.jpg");
+  CHECK(back->cameras[2].name == "c.png");
+  const GsplatReference& r = kGsplatReference[0];  // the default hand-over
   for (const Camera& c : back->cameras) {
     INFO(c.name);
     CHECK(c.model == CameraModel::kPinhole);
+    CHECK(c.colmap_image_id == (c.name == "a.png" ? 7 : c.name == "b.jpg" ? 3 : 5));
+    CHECK((c.t - (c.name == "b.jpg" ? cams[1].t : cams[0].t)).norm() < 1e-12);
     if (c.name == "c.png") {
       CHECK(c.width == 320);
       CHECK(c.fx == 250);
@@ -384,6 +489,9 @@ TEST_CASE("undistort_scene_folder: images, PINHOLE COLMAP model, points3D, split
     CHECK(im->width == c.width);
     CHECK(im->height == c.height);
   }
+  const std::vector<uint8_t> jpeg = *read_file(out + "/images/b.jpg");
+  REQUIRE(jpeg.size() > 2);
+  CHECK((jpeg[0] == 0xFF && jpeg[1] == 0xD8));  // a JPEG, not a PNG under a .jpg name
   // The pinhole image is the same file.
   CHECK(*read_file(out + "/images/c.png") == *read_file(in + "/images/c.png"));
   CHECK(*read_text_file(out + "/sparse/0/points3D.txt") == points);
@@ -397,6 +505,23 @@ TEST_CASE("undistort_scene_folder: images, PINHOLE COLMAP model, points3D, split
   CHECK(x.width == r.roi[2]);
   CHECK(x.fx == Approx(r.fx).epsilon(1e-12));
   CHECK_THAT(*read_text_file(out + "/split.json"), !Catch::Contains("k1"));
+  // --k-handover centred gives OpenCV's numbers for the shifted K.
+  const std::string out2 = tmp.file("out-centred");
+  REQUIRE(undistort_scene_folder(in, out2, {}, KHandover::kCentred));
+  auto centred = load_cameras(out2);
+  REQUIRE(centred);
+  CHECK(centred->cameras.at(0).cx == Approx(kReference[0].cx - kReference[0].roi[0]));
+  // An image format undistort cannot write is refused, naming the file.
+  const std::string in3 = tmp.file("in-bmp");
+  cams.resize(1);
+  cams[0].name = "a.bmp";
+  set.cameras = cams;
+  REQUIRE(save_colmap_text(set, in3 + "/sparse/0").is_ok());
+  fs::create_directories(in3 + "/images");
+  fs::copy_file(in + "/images/a.png", in3 + "/images/a.bmp");
+  auto bmp = undistort_scene_folder(in3, tmp.file("out-bmp"));
+  REQUIRE_FALSE(bmp);
+  CHECK_THAT(bmp.status().message(), Catch::Contains("a.bmp") && Catch::Contains("PNG or JPEG"));
 
   // The input folder is refused as the output.
   auto same = undistort_scene_folder(in, in);

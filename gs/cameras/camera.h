@@ -13,6 +13,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -47,6 +48,9 @@ struct Camera {
   // The image path exactly as the source stored it (nerfstudio file_path; COLMAP name and split
   // key, equal to `name` there). For nerfstudio `name` is its file name. find() accepts either.
   std::string file_path;
+  // The COLMAP IMAGE_ID when read from images.{txt,bin} (0 otherwise). save_colmap_text keeps
+  // these ids when every camera has a distinct one, so points3D tracks stay valid.
+  int64_t colmap_image_id = 0;
 
   Eigen::Vector3d center() const { return -R.transpose() * t; }
   // A lens model other than pinhole with at least one non-zero coefficient: images from this
@@ -182,7 +186,8 @@ Status refuse_distorted(const Camera& camera, const std::string& what, const std
 Status save_cameras_json(const CameraSet& set, const std::string& path);
 // COLMAP text model in `folder` (created if missing): cameras.txt (one camera per distinct
 // intrinsics), images.txt (empty 2D point lines), empty points3D.txt. Image names are the cameras'
-// names; the DL3DV layout uses <scene>/sparse/0 with images/ beside it.
+// names; image ids are the cameras' colmap_image_id when all are distinct and positive, else 1..N
+// in set order. The DL3DV layout uses <scene>/sparse/0 with images/ beside it.
 Status save_colmap_text(const CameraSet& set, const std::string& folder);
 
 }  // namespace macro::gs

@@ -127,6 +127,7 @@ Result<CameraSet> assemble_colmap(const std::vector<ColmapCameraRecord>& cameras
     Camera cam;
     cam.name = im.name;
     cam.file_path = im.name;
+    cam.colmap_image_id = im.id;
     cam.width = static_cast<int>(rec.width);
     cam.height = static_cast<int>(rec.height);
     const std::string model = rec.model->name;

@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <set>
 #include <tuple>
 
 #include "attention/runtime/file_io.h"
@@ -82,7 +83,13 @@ Status save_colmap_text(const CameraSet& set, const std::string& folder) {
       "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n"
       "#   POINTS2D[] as (X, Y, POINT3D_ID)\n";
   std::string camera_lines;
-  int image_id = 0;
+  // The cameras' own COLMAP image ids when each has a distinct positive one (so a points3D file
+  // written beside stays valid), else 1..N in set order.
+  std::set<int64_t> ids;
+  for (const Camera& c : set.cameras)
+    if (c.colmap_image_id > 0 && c.colmap_image_id <= INT32_MAX) ids.insert(c.colmap_image_id);
+  const bool keep_ids = ids.size() == set.cameras.size();
+  int64_t image_id = 0;
   for (const Camera& c : set.cameras) {
     MACRO_TRY(c.validate().with_context(dir + "images.txt"));
     if (c.name.empty() || c.name.find_first_of(" \t\r\n") != std::string::npos) {
@@ -99,7 +106,8 @@ Status save_colmap_text(const CameraSet& set, const std::string& folder) {
       camera_lines.push_back('\n');
     }
     const Eigen::Vector4d q = quaternion_wxyz_from_rotation(c.R);
-    images_txt.append(std::to_string(++image_id));
+    ++image_id;
+    images_txt.append(std::to_string(keep_ids ? c.colmap_image_id : image_id));
     for (int k = 0; k < 4; ++k) append_fields(&images_txt, {g17(q[k])});
     for (int k = 0; k < 3; ++k) append_fields(&images_txt, {g17(c.t[k])});
     append_fields(&images_txt, {std::to_string(it->second), c.name});

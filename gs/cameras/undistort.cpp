@@ -49,15 +49,32 @@ bool valid_rectangle(const cv::Mat& valid, cv::Rect* out) {
 
 }  // namespace
 
-Result<Undistortion> plan_undistortion(const Camera& camera) {
+const char* k_handover_name(KHandover h) {
+  return h == KHandover::kGsplat ? "gsplat" : "centred";
+}
+
+bool parse_k_handover(const std::string& text, KHandover* out) {
+  if (text == "gsplat")
+    *out = KHandover::kGsplat;
+  else if (text == "centred")
+    *out = KHandover::kCentred;
+  else
+    return false;
+  return true;
+}
+
+Result<Undistortion> plan_undistortion(const Camera& camera, KHandover handover) {
   MACRO_TRY(camera.validate());
   single_threaded_opencv();
   Undistortion u;
   u.source = camera;
   const int W = camera.width, H = camera.height;
   const cv::Size size(W, H);
-  // OpenCV's pixel centres are at integer coordinates: shift the principal point by half a pixel.
-  const cv::Matx33d K(camera.fx, 0, camera.cx - 0.5, 0, camera.fy, camera.cy - 0.5, 0, 0, 1);
+  // kCentred: OpenCV's pixel centres are at integer coordinates, so the principal point moves by
+  // half a pixel on the way in and back on the way out. kGsplat hands K over as it is.
+  const double shift = handover == KHandover::kCentred ? 0.5 : 0.0;
+  u.centre_shift = 0.5 - shift;
+  const cv::Matx33d K(camera.fx, 0, camera.cx - shift, 0, camera.fy, camera.cy - shift, 0, 0, 1);
   const std::vector<double> D = opencv_coefficients(camera);
   cv::Mat new_k, map_x, map_y;
   cv::Rect roi(0, 0, W, H);
@@ -83,7 +100,7 @@ Result<Undistortion> plan_undistortion(const Camera& camera) {
                          "): OpenCV could not undistort it: " + e.what());
   }
   const double nfx = new_k.at<double>(0, 0), nfy = new_k.at<double>(1, 1);
-  const double ncx = new_k.at<double>(0, 2) + 0.5, ncy = new_k.at<double>(1, 2) + 0.5;
+  const double ncx = new_k.at<double>(0, 2) + shift, ncy = new_k.at<double>(1, 2) + shift;
   roi &= cv::Rect(0, 0, W, H);
   if (roi.width <= 0 || roi.height <= 0 || !std::isfinite(nfx) || !(nfx > 0) ||
       !std::isfinite(nfy) || !(nfy > 0) || !std::isfinite(ncx) || !std::isfinite(ncy)) {
@@ -151,9 +168,11 @@ Result<Image> undistort_image(const Undistortion& u, const Image& image, const s
 
 Eigen::Vector2d source_position(const Undistortion& u, int i, int j) {
   const Camera& p = u.pinhole;
-  const Eigen::Vector2d ideal((j + 0.5 - p.cx) / p.fx, (i + 0.5 - p.cy) / p.fy);
-  const Eigen::Vector2d d = distort_normalized(u.source, ideal);
-  return {u.source.fx * d.x() + u.source.cx, u.source.fy * d.y() + u.source.cy};
+  const Camera& s = u.source;
+  const double c = u.centre_shift;
+  const Eigen::Vector2d ideal((j + 0.5 - (p.cx + c)) / p.fx, (i + 0.5 - (p.cy + c)) / p.fy);
+  const Eigen::Vector2d d = distort_normalized(s, ideal);
+  return {s.fx * d.x() + s.cx + c, s.fy * d.y() + s.cy + c};
 }
 
 }  // namespace macro::gs

@@ -13,10 +13,14 @@
 //   then the image is cv::remap'ed (bilinear, black outside), cropped to roi = (x, y, w, h), and
 //   the pinhole camera is K' with cx -= x, cy -= y at size w x h.
 //
-// Pixel centres: OpenCV puts pixel (i, j)'s centre at (j, i), our convention (camera.h) at
-// (j + 0.5, i + 0.5). K is handed to OpenCV with cx - 0.5, cy - 0.5 and K' comes back with + 0.5,
-// so the undistorted image is exact in our convention. (gsplat passes COLMAP's K unchanged, which
-// samples the source half a pixel off wherever the distortion bends; we do not copy that.)
+// Pixel centres: OpenCV puts pixel (i, j)'s centre at (j, i), our convention (camera.h) and
+// COLMAP's at (j + 0.5, i + 0.5). Two ways to hand K over (KHandover):
+//   kGsplat (the default): K goes to OpenCV as COLMAP stores it and K' comes back unchanged, as
+//     gsplat's parser does: the images are the ones gsplat trains on. Where the lens bends they
+//     sample the source up to half a pixel away from where the pinhole camera K' sees the point.
+//   kCentred: K goes with cx - 0.5, cy - 0.5 and K' comes back with + 0.5, so the undistorted
+//     image is exact in our convention (`macro undistort --k-handover centred`).
+// Without distortion both give the input camera and identity maps.
 // OpenCV runs single-threaded here (cv::setNumThreads(0)): the thread pool owns every worker.
 #pragma once
 
@@ -37,21 +41,32 @@ struct Undistortion {
   // source image, in OpenCV pixel indices (source pixel (r, c) has its centre at (c, r)); add 0.5
   // for our convention. [H', W'] each, H' = pinhole.height, W' = pinhole.width.
   std::vector<float> map_x, map_y;
-  // K' before the crop (cx, cy in our +0.5 convention): what OpenCV's new camera matrix says.
+  // K' before the crop, as the pinhole camera uses it (kCentred: OpenCV's + 0.5).
   double new_fx = 0, new_fy = 0, new_cx = 0, new_cy = 0;
+  // 0.5 for kGsplat, 0 for kCentred: the principal point the maps effectively use is the
+  // camera's plus this (source and pinhole alike); source_position accounts for it.
+  double centre_shift = 0;
 };
+
+enum class KHandover { kGsplat, kCentred };
+// "gsplat" / "centred"; parse_k_handover is false on anything else.
+const char* k_handover_name(KHandover h);
+bool parse_k_handover(const std::string& text, KHandover* out);
 
 // The pinhole camera and the sampling maps for `camera` (any model; a camera without distortion
 // gives itself, as PINHOLE, and identity maps). An error when the camera is invalid or the
 // distortion leaves no valid region (an empty roi), naming the camera.
-Result<Undistortion> plan_undistortion(const Camera& camera);
+Result<Undistortion> plan_undistortion(const Camera& camera,
+                                       KHandover handover = KHandover::kGsplat);
 
 // `image` (the distorted camera's image, source.width x source.height, 1..4 channels) sampled to
 // the pinhole camera. An error names `name` when the size does not match.
 Result<Image> undistort_image(const Undistortion& u, const Image& image, const std::string& name);
 
 // The source-image position (our convention) the distortion model itself puts the centre of
-// output pixel (i, j) at: the pinhole ray through it, distorted by lens.h's formulas. The tests
+// output pixel (i, j) at: the pinhole ray through it, distorted by lens.h's formulas, both
+// principal points moved by `centre_shift` (so under kGsplat this is where the maps sample, not
+// where the pinhole camera sees the point). The tests
 // compare this with `map_x/map_y`; exposed for them.
 Eigen::Vector2d source_position(const Undistortion& u, int i, int j);
 

@@ -18,11 +18,12 @@ namespace fs = std::filesystem;
 // One plan per distinct intrinsics (a COLMAP camera is usually shared by every image).
 class PlanCache {
  public:
+  explicit PlanCache(KHandover handover) : handover_(handover) {}
   Result<const Undistortion*> get(const Camera& c) {
     Key key{int(c.model), c.width, c.height, c.fx, c.fy, c.cx, c.cy, c.distortion};
     auto it = plans_.find(key);
     if (it == plans_.end()) {
-      MACRO_ASSIGN_OR_RETURN(Undistortion u, plan_undistortion(c));
+      MACRO_ASSIGN_OR_RETURN(Undistortion u, plan_undistortion(c, handover_));
       it = plans_.emplace(key, std::move(u)).first;
     }
     return &it->second;
@@ -31,6 +32,7 @@ class PlanCache {
 
  private:
   using Key = std::tuple<int, int, int, double, double, double, double, std::vector<double>>;
+  KHandover handover_;
   std::map<Key, Undistortion> plans_;
 };
 
@@ -47,23 +49,40 @@ Status copy_atomic(const std::string& from, const std::string& to) {
   return write_file_atomic(to, bytes.data(), bytes.size());
 }
 
-bool is_png_name(const std::string& name) {
-  if (name.size() < 4) return false;
-  std::string ext = name.substr(name.size() - 4);
+enum class OutputKind { kPng, kJpeg, kOther };
+
+OutputKind output_kind(const std::string& name) {
+  std::string ext = fs::path(name).extension().string();
   for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
-  return ext == ".png";
+  if (ext == ".png") return OutputKind::kPng;
+  if (ext == ".jpg" || ext == ".jpeg") return OutputKind::kJpeg;
+  return OutputKind::kOther;
 }
 
-// Undistorts `from` with `u` into `to` (PNG).
-Status undistort_file(const Undistortion& u, const std::string& from, const std::string& to) {
-  if (!is_png_name(to)) {
-    return Status::error(to + ": undistorted images are written as PNG, and this name (camera '" +
-                         u.source.name + "') does not end in .png");
+// Undistorts `from` with `u` into `to`, in the format its name says: PNG, or JPEG at quality
+// 100 (4:4:4; the image keeps its name, so cameras and splits stay valid). Other formats are
+// refused, naming the file.
+Status undistort_file(const Undistortion& u, const std::string& from, const std::string& to,
+                      UndistortSceneReport& report, const Image* already_read = nullptr) {
+  const OutputKind kind = output_kind(to);
+  if (kind == OutputKind::kOther) {
+    return Status::error(from + " (camera '" + u.source.name +
+                         "'): undistorted images are written as PNG or JPEG, and this name ends "
+                         "in neither .png, .jpg nor .jpeg");
   }
-  MACRO_ASSIGN_OR_RETURN(Image img, read_image(from));
+  Image img;
+  if (already_read) {
+    img = *already_read;
+  } else {
+    MACRO_ASSIGN_OR_RETURN(img, read_image(from));
+  }
   MACRO_ASSIGN_OR_RETURN(Image out, undistort_image(u, img, from));
   MACRO_TRY(make_parent(to));
-  return write_png(to, out);
+  if (kind == OutputKind::kPng) return write_png(to, out);
+  if (!report.jpeg_reencoded++) {
+    report.notes.push_back("JPEG images are re-encoded at quality 100 (4:4:4), e.g. " + to);
+  }
+  return write_jpeg(to, out, 100);
 }
 
 // split.json: the intrinsics replaced by `pinhole`'s, the rest kept in file order.
@@ -101,11 +120,7 @@ Status undistort_closeup_gt(const std::string& in_dir, const std::string& out_di
     c.name = f.filename().string();
     if (img.width != c.width || img.height != c.height) c = c.resized(img.width, img.height);
     MACRO_ASSIGN_OR_RETURN(const Undistortion* u, plans.get(c));
-    if (!is_png_name(to))
-      return Status::error(to + ": undistorted images are written as PNG; rename it to .png");
-    MACRO_ASSIGN_OR_RETURN(Image out, undistort_image(*u, img, f.string()));
-    MACRO_TRY(make_parent(to));
-    MACRO_TRY(write_png(to, out));
+    MACRO_TRY(undistort_file(*u, f.string(), to, report, &img));
     ++report.undistorted;
   }
   return Status::ok();
@@ -115,7 +130,8 @@ Status undistort_closeup_gt(const std::string& in_dir, const std::string& out_di
 
 Result<UndistortSceneReport> undistort_scene_folder(const std::string& in_dir,
                                                     const std::string& out_dir,
-                                                    const CameraLoadOptions& options) {
+                                                    const CameraLoadOptions& options,
+                                                    KHandover handover) {
   std::error_code ec;
   if (!is_directory(in_dir)) return Status::error("--scene-dir " + in_dir + ": not a folder");
   if (out_dir.empty()) return Status::error("--out: an output folder is required");
@@ -128,12 +144,23 @@ Result<UndistortSceneReport> undistort_scene_folder(const std::string& in_dir,
   MACRO_ASSIGN_OR_RETURN(CameraSet set, load_cameras(in_dir, options));
   UndistortSceneReport report;
   report.rejected = set.rejected;
-  PlanCache plans;
+  PlanCache plans(handover);
   CameraSet pinholes;
   pinholes.source = (out / "sparse" / "0").string();
   for (const Camera& c : set.cameras) {
     MACRO_ASSIGN_OR_RETURN(const Undistortion* u, plans.get(c));
-    pinholes.cameras.push_back(u->pinhole);
+    // The plan is shared by every camera with these intrinsics: only its intrinsics are taken;
+    // name, pose and image id stay this camera's.
+    Camera pinhole = c;
+    pinhole.model = u->pinhole.model;
+    pinhole.distortion = u->pinhole.distortion;
+    pinhole.width = u->pinhole.width;
+    pinhole.height = u->pinhole.height;
+    pinhole.fx = u->pinhole.fx;
+    pinhole.fy = u->pinhole.fy;
+    pinhole.cx = u->pinhole.cx;
+    pinhole.cy = u->pinhole.cy;
+    pinholes.cameras.push_back(pinhole);
     const std::string from = (in / "images" / c.name).string();
     const std::string to = (out / "images" / c.name).string();
     if (!file_exists(from)) {
@@ -141,7 +168,7 @@ Result<UndistortSceneReport> undistort_scene_folder(const std::string& in_dir,
       continue;
     }
     if (c.has_distortion()) {
-      MACRO_TRY(undistort_file(*u, from, to));
+      MACRO_TRY(undistort_file(*u, from, to, report));
       ++report.undistorted;
     } else {
       MACRO_TRY(copy_atomic(from, to));
