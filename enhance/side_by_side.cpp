@@ -1,6 +1,7 @@
 // The close-up's captioned side-by-side (side_by_side.h).
 #include "enhance/side_by_side.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -59,7 +60,10 @@ Status write_side_by_side(const std::string& path, const std::string& scene_dir,
     if (!have_gt || !o.metrics) return std::vector<std::string>{};
     MetricOptions mo;
     mo.feature_metrics = false;
-    MACRO_ASSIGN_OR_RETURN(std::vector<MetricValue> v, compute_metrics(img, gt, mo));
+    // On the 8-bit values the PNGs hold, so the caption matches `macro metrics` on the files.
+    gs::Image q = img;
+    for (float& x : q.data) x = std::round(std::clamp(x, 0.f, 1.f) * 255.f) / 255.f;
+    MACRO_ASSIGN_OR_RETURN(std::vector<MetricValue> v, compute_metrics(q, gt, mo));
     const std::string line = metrics_caption(v);
     return line.empty() ? std::vector<std::string>{} : std::vector<std::string>{line};
   };

@@ -1,6 +1,7 @@
 // The close-up's side-by-side figure: 3DGS render | enhanced | ground truth, each with a caption
 // (its name and, against the GT, the metrics that were computed: PSNR, SSIM, LPIPS where its
-// backbone is installed; a metric that was not computed is never printed), and optional zoom
+// backbone is installed; a metric that was not computed is never printed; computed on the 8-bit
+// values the PNGs hold, as `macro metrics` on the written files), and optional zoom
 // insets (enhance/figures/side_by_side.h composes it).
 #pragma once
 
