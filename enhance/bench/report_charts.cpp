@@ -47,10 +47,12 @@ std::optional<double> finite_metric(const ConfigResult& c, const std::string& na
   return it->second;
 }
 
-// Data range [lo, hi] -> ticks, padded by `pad` of the span on both sides first.
+// Data range [lo, hi] -> ticks, padded by `pad` of the span on both sides first (never below 0
+// for data that is not: ratios and scores do not get a negative axis).
 Ticks ticks_for(double lo, double hi, double pad = 0.04, int target = 6) {
   const double span = hi - lo;
-  return nice_ticks(lo - pad * span, hi + pad * span, target);
+  const double padded_lo = lo >= 0 ? std::max(0.0, lo - pad * span) : lo - pad * span;
+  return nice_ticks(padded_lo, hi + pad * span, target);
 }
 
 void error_bar(Chart& c, double x, double y_lo, double y_hi, uint32_t rgb, Points* occupied) {
