@@ -259,6 +259,12 @@ TEST_CASE("chart: report charts put points, bars and legends where the data says
   CHECK(filled == 2);                               // transfer's bar in each scene
   CHECK(has_text_starting(bars, "scene (scene_"));  // the common prefix goes to the label
   CHECK(has_text_starting(bars, "a"));
+  // Non-negative data never gets a negative axis (a ratio of 0.02 .. 0.7 starts at 0).
+  for (ConfigResult& c : configs)
+    for (auto& p : c.pairs) p.values["grad_ratio"] = p.zoom < 2 ? 0.7 : 0.02;
+  const Chart ratio = chart_metric_vs_zoom(configs, metric_columns()[5]);
+  CHECK(has_text_starting(ratio, "0.0"));
+  CHECK_FALSE(has_text_starting(ratio, "-"));
 }
 
 }  // namespace macro::enhance
