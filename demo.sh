@@ -5,7 +5,8 @@
 #   1. render the close-up on the CPU: colour PNG, EXR (R,G,B,A,depth,invdepth), inverse depth PNG;
 #   2. plan MACRO (reference selection, depth planes, scale-matched crops, attention masks);
 #   3. enhance it with the weight-free transfer enhancer (no downloaded weights needed), and write
-#      a side-by-side image: render | enhanced | ground truth, plus PSNR/SSIM against the GT.
+#      a captioned side-by-side figure: render | enhanced | ground truth, each with its PSNR/SSIM
+#      against the GT, and two framed regions magnified under each panel (--zoom-inset).
 # Usage: ./demo.sh [close-up]   (closeup.png 1.5x, closeup_01.png 4.5x (default), closeup_02.png 6x)
 # Environment: BUILD_DIR (default build), OUT_DIR (default out).
 set -euo pipefail
@@ -25,7 +26,8 @@ M="$BUILD/macro"
   --out-depth-png "$OUT/$NAME-invdepth.png"
 "$M" plan --scene-dir "$SCENE" --closeup "$FRAME" --out "$OUT/$NAME-plan.json"
 "$M" enhance --scene-dir "$SCENE" --closeup "$FRAME" --enhancer transfer \
-  --out "$OUT/$NAME-enhanced.png" --side-by-side "$OUT/$NAME-side-by-side.png"
+  --out "$OUT/$NAME-enhanced.png" --side-by-side "$OUT/$NAME-side-by-side.png" \
+  --zoom-inset 300,150,60,40 --zoom-inset 480,240,50,40
 echo
 echo "against the ground truth ($SCENE/closeup_gt/$FRAME):"
 for f in render enhanced; do
@@ -38,4 +40,4 @@ echo "scene:        $SCENE (synthetic SynthClose scene, see $SCENE/README.md)"
 echo "render:       $OUT/$NAME-render.png, $OUT/$NAME-render.exr, $OUT/$NAME-invdepth.png"
 echo "plan:         $OUT/$NAME-plan.json"
 echo "enhanced:     $OUT/$NAME-enhanced.png"
-echo "side by side: $OUT/$NAME-side-by-side.png  (render | enhanced | ground truth)"
+echo "side by side: $OUT/$NAME-side-by-side.png  (render | enhanced | ground truth, captioned, 2 insets)"

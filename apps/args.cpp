@@ -62,6 +62,21 @@ std::optional<std::string> Args::value(const std::string& name) {
   return out;
 }
 
+std::vector<std::string> Args::values(const std::string& name) {
+  std::vector<std::string> out;
+  for (size_t i = 0; i < argv_.size(); ++i) {
+    if (used_[i] || argv_[i] != name) continue;
+    used_[i] = true;
+    if (i + 1 >= argv_.size()) {
+      fail(name + ": expected a value, found the end of the command line");
+      break;
+    }
+    used_[i + 1] = true;
+    out.push_back(argv_[i + 1]);
+  }
+  return out;
+}
+
 std::string Args::value_or(const std::string& name, const std::string& fallback) {
   auto v = value(name);
   return v ? *v : fallback;

@@ -23,6 +23,8 @@ class Args {
   // Optional value.
   std::optional<std::string> value(const std::string& name);
   std::string value_or(const std::string& name, const std::string& fallback);
+  // Every value of a flag that may be repeated (--zoom-inset A --zoom-inset B), in order.
+  std::vector<std::string> values(const std::string& name);
   // Required value: records an error if missing.
   std::string required(const std::string& name);
   int int_or(const std::string& name, int fallback, int min_value, int max_value);

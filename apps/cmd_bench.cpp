@@ -43,7 +43,7 @@ constexpr const char* kUsage =
     "          against closeup_gt/<frame>, appending one JSON line per record; a rerun resumes.\n"
     "          Option lists form a grid; each method records only the options it uses.\n"
     "  merge   joins shard results (deduplicated, work-list order), written atomically.\n"
-    "  report  table.md, table.csv and SVG + PNG charts (mean over scenes of scene means).\n"
+    "  report  table.md, table.csv and PNG + SVG + PDF charts (mean over scenes of scene means).\n"
     "          --scene-failure released (default, paper-comparable): a scene with an empty\n"
     "          k-means bin in any pair drops out of that method's average, as in the release;\n"
     "          pair: those pairs count (the plane is dropped). table.md names the rule used.\n";

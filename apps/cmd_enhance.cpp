@@ -7,6 +7,7 @@
 #include "apps/geometry_flags.h"
 #include "attention/runtime/progress.h"
 #include "enhance/enhance.h"
+#include "enhance/side_by_side.h"
 
 namespace macro::cli {
 namespace {
@@ -17,7 +18,7 @@ constexpr const char* kUsage =
     "         [--precision fp32|bf16] [--ctx CTX.safetensors] [--refs K] [--planes P|auto]\n"
     "         [--max-planes P] [--mask released|paper|none] [--crop full|tight|composite]\n"
     "         [--occlusion] [--threads N] [--quiet]\n"
-    "         [--enhancer transfer|difix] [--side-by-side FILE.png]\n"
+    "         [--enhancer transfer|difix] [--side-by-side FILE.png [--zoom-inset x,y,w,h]...]\n"
     "         [--upsampler lanczos|pft-sr] [--upsampler-weights DIR]\n"
     "%s"
     "  DIR is a DL3DV-Closeup scene folder (see macro plan --help). DIFIX_DIR is the Difix-ref\n"
@@ -36,7 +37,9 @@ constexpr const char* kUsage =
     "  --enhancer: difix = the Difix-ref network (needs --weights); transfer = weight-free detail\n"
     "  transfer from the references by masked attention (docs/transfer.md). Default: transfer\n"
     "  without --weights, difix with it. --side-by-side writes render | enhanced | ground truth\n"
-    "  (DIR/closeup_gt/FRAME when present, else render | enhanced).\n"
+    "  (DIR/closeup_gt/FRAME when present, else render | enhanced), captioned with each panel's\n"
+    "  name and its metrics against the GT (those computed). --zoom-inset x,y,w,h (pixels of the\n"
+    "  close-up; repeatable) frames that region on every panel and adds a magnified copy.\n"
     "  --upsampler: how crops reach the model size: lanczos (Pillow-exact, the default) or pft-sr\n"
     "  (the released PFT-SR light network, x4/x2 passes then Lanczos; difix enhancer only). It\n"
     "  reads 103_PFT_light_SRx4_finetune.pth and 101_PFT_light_SRx2_scratch.pth (or .safetensors)\n"
@@ -149,6 +152,7 @@ int run_enhance(std::vector<std::string> argv) {
   const std::string enhancer =
       enhancer_flag ? *enhancer_flag : (o.weights.empty() ? "transfer" : "difix");
   const std::string side_by_side = args.value_or("--side-by-side", "");
+  const std::vector<std::string> inset_texts = args.values("--zoom-inset");
   o.upsampler = args.value_or("--upsampler", "lanczos");
   o.upsampler_weights = args.value_or("--upsampler-weights", "");
   const GeometryFlags geometry = read_geometry_flags(args);
@@ -190,6 +194,16 @@ int run_enhance(std::vector<std::string> argv) {
   if (!side_by_side.empty())
     if (Status s = check_output_name(side_by_side, "--side-by-side", {".png"}); !s)
       return fail("enhance", s);
+  enhance::CloseupFigureOptions figure;
+  figure.method = enhance::method_name(o.method);
+  for (const std::string& t : inset_texts) {
+    auto rect = enhance::parse_inset_rect(t, "--zoom-inset");
+    if (!rect) return fail("enhance", rect.status());
+    figure.insets.push_back(*rect);
+  }
+  if (!figure.insets.empty() && side_by_side.empty())
+    return fail("enhance", Status::error("--zoom-inset: only with --side-by-side FILE.png (the "
+                                         "insets are drawn on that figure)"));
   // Missing weights fail before the scene is even loaded.
   if (o.method != enhance::EnhanceMethod::k3dgs && o.enhancer == enhance::Enhancer::kDifix)
     if (Status s = enhance::check_difix_weights(o.weights); !s) return fail("enhance", s);
@@ -197,6 +211,10 @@ int run_enhance(std::vector<std::string> argv) {
   auto inputs = enhance::load_scene_inputs(in);
   if (!inputs) return fail("enhance", inputs.status());
   for (const std::string& n : inputs->notes) log_info("enhance", n);
+  if (Status s = enhance::check_insets(figure.insets, inputs->closeup.width, inputs->closeup.height,
+                                       "--zoom-inset");
+      !s)
+    return fail("enhance", s);
   if (Status s = prepare_output(out, "--out", {".png"}); !s) return fail("enhance", s);
   if (!side_by_side.empty())
     if (Status s = prepare_output(side_by_side, "--side-by-side", {".png"}); !s)
@@ -204,7 +222,8 @@ int run_enhance(std::vector<std::string> argv) {
   auto r = enhance::enhance_to_file(*inputs, o, out);
   if (!r) return fail("enhance", r.status());
   if (!side_by_side.empty())
-    if (Status s = enhance::write_side_by_side(side_by_side, in.scene_dir, in.closeup, *r); !s)
+    if (Status s = enhance::write_side_by_side(side_by_side, in.scene_dir, in.closeup, *r, figure);
+        !s)
       return fail("enhance", s);
   if (!quiet())
     std::printf("enhance: %s, method %s, enhancer %s, %s, model %dx%d, %.0f ms -> %s (%dx%d)\n",

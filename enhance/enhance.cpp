@@ -452,33 +452,6 @@ Result<EnhanceResult> enhance_closeup(const SceneInputs& in, const EnhanceOption
   return std::move(work.res);
 }
 
-Status write_side_by_side(const std::string& path, const std::string& scene_dir,
-                          const std::string& closeup, const EnhanceResult& r) {
-  namespace fs = std::filesystem;
-  const int W = r.image.width, H = r.image.height;
-  std::vector<const gs::Image*> panels = {&r.render, &r.image};
-  gs::Image gt;
-  std::error_code ec;
-  const fs::path gt_path = fs::path(scene_dir) / "closeup_gt" / fs::path(closeup).filename();
-  if (!scene_dir.empty() && fs::exists(gt_path, ec)) {
-    MACRO_ASSIGN_OR_RETURN(gt, gs::read_image(gt_path.string()));
-    if (gt.width != W || gt.height != H) gt = resize_lanczos(gt, W, H);
-    panels.push_back(&gt);
-  }
-  gs::Image out(W * int(panels.size()), H, 3);
-  for (size_t k = 0; k < panels.size(); ++k) {
-    const gs::Image& p = *panels[k];
-    if (p.width != W || p.height != H || p.channels != 3)
-      return Status::error("side-by-side: panel " + std::to_string(k) + " is " +
-                           std::to_string(p.width) + "x" + std::to_string(p.height) +
-                           ", expected " + std::to_string(W) + "x" + std::to_string(H));
-    for (int y = 0; y < H; ++y)
-      for (int x = 0; x < W; ++x)
-        for (int c = 0; c < 3; ++c) out.at(y, int(k) * W + x, c) = p.at(y, x, c);
-  }
-  return gs::write_png(path, out).with_context("--side-by-side");
-}
-
 Result<EnhanceResult> enhance_to_file(const SceneInputs& in, const EnhanceOptions& o,
                                       const std::string& out_png) {
   MACRO_ASSIGN_OR_RETURN(EnhanceResult r, enhance_closeup(in, o));

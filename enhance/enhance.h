@@ -98,12 +98,6 @@ Status check_difix_weights(const std::string& folder);
 // or the text context are missing.
 Result<EnhanceResult> enhance_closeup(const SceneInputs& inputs, const EnhanceOptions& options);
 
-// render | enhanced | ground truth side by side (atomic PNG), each panel at the render size; the
-// GT is SCENE_DIR/closeup_gt/<closeup file name> when it exists (Lanczos-resized if its size
-// differs), otherwise the image has two panels.
-Status write_side_by_side(const std::string& path, const std::string& scene_dir,
-                          const std::string& closeup, const EnhanceResult& result);
-
 // enhance_closeup + write_png (atomic).
 Result<EnhanceResult> enhance_to_file(const SceneInputs& inputs, const EnhanceOptions& options,
                                       const std::string& out_png);

@@ -52,6 +52,10 @@ const std::vector<IncludeRule>& include_rules() {
       {"enhance/transfer/",
        {"enhance/bench/", "enhance/datasets/", "enhance/metrics/", "enhance/enhance.h"},
        "an enhancer is below the entry point and the evaluation"},
+      {"enhance/figures/",
+       {"enhance/macro/", "enhance/transfer/", "enhance/bench/", "enhance/metrics/",
+        "enhance/datasets/", "enhance/enhance.h", "enhance/side_by_side.h"},
+       "a figure draws what it is given and knows nothing of what made it"},
       {"enhance/", {"apps/"}, "libraries never include the command-line mains"},
   };
   return rules;
@@ -184,6 +188,8 @@ std::string citation_problem(const Citation& c) {
 TEST_CASE("layout: the include rules catch a forbidden include", "[layout]") {
   CHECK(rule_violations("enhance/datasets/synth_close.cpp", "enhance/macro/plan.h").size() == 1);
   CHECK(rule_violations("enhance/metrics/metrics.cpp", "enhance/bench/bench_harness.h").size() == 1);
+  CHECK(rule_violations("enhance/figures/plot.cpp", "enhance/bench/bench_report.h").size() == 1);
+  CHECK(rule_violations("enhance/bench/report_charts.cpp", "enhance/figures/plot.h").empty());
   CHECK(rule_violations("gs/formats/scene_io.cpp", "gs/raster/rasterizer.h").size() == 1);
   CHECK(rule_violations("gs/cameras/camera.cpp", "gs/raster/rasterizer.h").size() == 1);
   CHECK(rule_violations("attention/nets/unet.cpp", "gs/image_io.h").size() == 1);

@@ -10,6 +10,7 @@
 #include <fstream>
 
 #include "enhance/metrics/metrics.h"
+#include "enhance/figures/side_by_side.h"
 #include "enhance/transfer/transfer.h"
 #include "enhance_fixture.h"
 #include "gs/image_io.h"
@@ -234,7 +235,7 @@ TEST_CASE("transfer: macro enhance --enhancer transfer writes a PNG and a side-b
   const std::string out = tmp.file("out.png"), sbs = tmp.file("sbs.png");
   const std::string cmd = test::macro_exe() + " enhance --quiet --scene-dir " + dir +
                           " --closeup closeup.png --enhancer transfer --out " + out +
-                          " --side-by-side " + sbs;
+                          " --side-by-side " + sbs + " --zoom-inset 40,20,24,16";
   REQUIRE(test::run_command(cmd) == 0);
   auto img = gs::read_image(out);
   REQUIRE(img.is_ok());
@@ -242,8 +243,9 @@ TEST_CASE("transfer: macro enhance --enhancer transfer writes a PNG and a side-b
   CHECK(img->height == 72);
   auto side = gs::read_image(sbs);
   REQUIRE(side.is_ok());
-  CHECK(side->width == 3 * 128);  // render | enhanced | GT (closeup_gt/ exists)
-  CHECK(side->height == 72);
+  // render | enhanced | GT (closeup_gt/ exists) with gaps; insets and captions below the panels.
+  CHECK(side->width == 2 * kFigureMargin + 3 * 128 + 2 * kFigureGap);
+  CHECK(side->height > kFigureMargin + 72 + 16 * 2);
   // Without weights, transfer is the default; difix without weights is a clear error.
   REQUIRE(test::run_command(test::macro_exe() + " enhance --quiet --scene-dir " + dir +
                             " --closeup closeup.png --out " + tmp.file("default.png")) == 0);

@@ -4,7 +4,7 @@
 //
 //   format_number(v)      "%.9g"  9 significant digits (round-trips a float): camera fields
 //   format_number(v, 6)   "%g"    printf's default 6 significant digits: pair-construction messages
-//   format_fixed(v, 2)    "%.2f"  fixed decimals: SVG coordinates of the benchmark charts
+//   format_fixed(v, 2)    "%.2f"  fixed decimals
 // The result is never truncated (any double, any precision up to 17 / 40 digits).
 //   count_noun(1, "plane")    "1 plane"; count_noun(3, "plane") "3 planes" (counts in messages)
 #pragma once

@@ -9,6 +9,7 @@
 #include <tuple>
 
 #include "attention/runtime/file_io.h"
+#include "enhance/bench/report_charts.h"
 
 namespace macro::enhance {
 namespace fs = std::filesystem;
@@ -17,8 +18,7 @@ const std::vector<MetricColumn>& metric_columns() {
   static const std::vector<MetricColumn> cols = {
       {"psnr", "PSNR", true, false},         {"ssim", "SSIM", true, false},
       {"lpips_alex", "LPIPS", false, false}, {"dinov2", "DINOv2", false, true},
-      {"dreamsim", "DreamSim", false, true},
-      {"grad_ratio", "GradE ratio", false, true, true},
+      {"dreamsim", "DreamSim", false, true}, {"grad_ratio", "GradE ratio", false, true, true},
   };
   return cols;
 }
@@ -77,12 +77,15 @@ std::vector<ConfigResult> aggregate_records(const std::vector<BenchRecord>& reco
     auto& scene = per_scene[key][r.scene];
     std::map<std::string, double> pair_values;
     for (const MetricValue& m : r.metrics) {
-      if (!m.computed) continue;  // n/c: never averaged
+      if (!m.computed) {  // n/c: never averaged
+        c.not_computed.emplace(m.name, m.reason.empty() ? "no reason recorded" : m.reason);
+        continue;
+      }
       scene[m.name].add(m.value);
       pair_values[m.name] = m.value;
     }
     scene[kSeconds].add(r.seconds_per_closeup);
-    c.pairs.push_back({r.depth_ratio, pair_values});
+    c.pairs.push_back({r.scene, r.depth_ratio, pair_values});
   }
   std::vector<ConfigResult> out;
   for (const auto& f : failed) {
@@ -119,7 +122,6 @@ std::string format_metric(const std::string& name, std::optional<double> value) 
   return buf;
 }
 
-namespace {
 std::vector<MetricColumn> shown_columns(const std::vector<ConfigResult>& configs) {
   std::vector<MetricColumn> cols;
   for (const MetricColumn& m : metric_columns()) {
@@ -129,6 +131,8 @@ std::vector<MetricColumn> shown_columns(const std::vector<ConfigResult>& configs
   }
   return cols;
 }
+
+namespace {
 std::optional<double> metric_of(const ConfigResult& c, const std::string& name) {
   auto it = c.metric.find(name);
   if (it == c.metric.end()) return std::nullopt;
@@ -209,146 +213,6 @@ std::string table_csv(const std::vector<ConfigResult>& configs) {
   return s;
 }
 
-// ---- Charts ------------------------------------------------------------------------------------
-namespace {
-
-std::string metric_axis_label(const MetricColumn& m) {
-  if (m.target_one) return std::string(m.title) + " (1 is best)";
-  return std::string(m.title) + (m.higher_better ? " (higher is better)" : " (lower is better)");
-}
-
-}  // namespace
-
-Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const MetricColumn& metric) {
-  PlotFrame f;
-  double xlo = 1e300, xhi = -1e300, ylo = 1e300, yhi = -1e300;
-  for (const ConfigResult& c : configs) {
-    auto v = metric_of(c, metric.name);
-    if (!v || !c.seconds_per_closeup || !std::isfinite(*v)) continue;
-    xlo = std::min(xlo, *c.seconds_per_closeup), xhi = std::max(xhi, *c.seconds_per_closeup);
-    ylo = std::min(ylo, *v), yhi = std::max(yhi, *v);
-  }
-  if (xlo > xhi) xlo = 0, xhi = 1, ylo = 0, yhi = 1;
-  pad_range(xlo, xhi);
-  pad_range(ylo, yhi);
-  f.x0 = 0, f.x1 = xhi, f.y0 = ylo, f.y1 = yhi;
-  Chart c;
-  draw_axes(c, f, std::string("Seconds per close-up vs ") + metric.title, "seconds per close-up",
-            metric_axis_label(metric), true);
-  for (size_t i = 0; i < configs.size(); ++i) {
-    auto v = metric_of(configs[i], metric.name);
-    if (!v || !configs[i].seconds_per_closeup || !std::isfinite(*v)) continue;
-    const double x = f.px(*configs[i].seconds_per_closeup), y = f.py(*v);
-    c.circles.push_back({x, y, 5, chart_palette(i)});
-    // Labels right of the point in the left half, left of it in the right half.
-    const bool right_half = x > f.w / 2.0;
-    c.texts.push_back({right_half ? x - 8 : x + 8, y - 6, configs[i].label, chart_palette(i),
-                       right_half ? 1 : -1});
-  }
-  return c;
-}
-
-// Right margin that fits the legend labels (8 px per character in both renderers' fonts).
-static double legend_margin(const std::vector<ConfigResult>& configs) {
-  size_t longest = 0;
-  for (const ConfigResult& c : configs) longest = std::max(longest, c.label.size());
-  return std::max(150.0, 40.0 + 8.0 * double(longest));
-}
-
-Chart chart_metric_vs_zoom(const std::vector<ConfigResult>& configs, const MetricColumn& metric) {
-  PlotFrame f;
-  f.right = legend_margin(configs);
-  f.w = int(640 + f.right - 150);
-  double xlo = 1e300, xhi = -1e300, ylo = 1e300, yhi = -1e300;
-  for (const ConfigResult& c : configs)
-    for (const auto& [zoom, values] : c.pairs) {
-      auto it = values.find(metric.name);
-      if (it == values.end() || !std::isfinite(it->second)) continue;
-      xlo = std::min(xlo, zoom), xhi = std::max(xhi, zoom);
-      ylo = std::min(ylo, it->second), yhi = std::max(yhi, it->second);
-    }
-  if (xlo > xhi) xlo = 0, xhi = 1, ylo = 0, yhi = 1;
-  pad_range(xlo, xhi);
-  pad_range(ylo, yhi);
-  f.x0 = xlo, f.x1 = xhi, f.y0 = ylo, f.y1 = yhi;
-  Chart c;
-  draw_axes(c, f, std::string(metric.title) + " vs zoom factor", "zoom factor (depth ratio)",
-            metric_axis_label(metric), true);
-  constexpr int kBins = 6;
-  for (size_t i = 0; i < configs.size(); ++i) {
-    Accum bins[kBins];
-    Accum zooms[kBins];
-    for (const auto& [zoom, values] : configs[i].pairs) {
-      auto it = values.find(metric.name);
-      if (it == values.end() || !std::isfinite(it->second)) continue;
-      c.circles.push_back({f.px(zoom), f.py(it->second), 2.5, chart_palette(i)});
-      const int b = std::clamp(int((zoom - f.x0) / (f.x1 - f.x0) * kBins), 0, kBins - 1);
-      bins[b].add(it->second);
-      zooms[b].add(zoom);
-    }
-    double px = -1, py = -1;
-    for (int b = 0; b < kBins; ++b) {
-      if (!bins[b].n) continue;
-      const double x = f.px(zooms[b].mean()), y = f.py(bins[b].mean());
-      if (px >= 0) c.lines.push_back({px, py, x, y, chart_palette(i), 2});
-      px = x, py = y;
-    }
-    const double ly = f.top + 14.0 + 18.0 * double(i);
-    c.lines.push_back(
-        {f.w - f.right + 10.0, ly - 3, f.w - f.right + 28.0, ly - 3, chart_palette(i), 2});
-    c.texts.push_back({f.w - f.right + 32.0, ly + 1, configs[i].label, chart_palette(i), -1});
-  }
-  return c;
-}
-
-Chart chart_scene_bars(const std::vector<ConfigResult>& configs, const MetricColumn& metric) {
-  std::set<std::string> scene_set;
-  double ylo = 0, yhi = -1e300;
-  for (const ConfigResult& c : configs)
-    for (const auto& [scene, means] : c.scene_means) {
-      scene_set.insert(scene);
-      auto it = means.find(metric.name);
-      if (it != means.end() && std::isfinite(it->second)) {
-        yhi = std::max(yhi, it->second);
-        ylo = std::min(ylo, it->second);
-      }
-    }
-  const std::vector<std::string> scenes(scene_set.begin(), scene_set.end());
-  PlotFrame f;
-  f.right = legend_margin(configs);
-  f.bottom = 70;
-  f.w = std::max(640, int(f.left + f.right) + int(scenes.size() * configs.size()) * 14 +
-                          int(scenes.size()) * 20);
-  if (yhi < ylo) yhi = 1;
-  f.y0 = ylo, f.y1 = yhi + 0.08 * (yhi - ylo + 1e-12);
-  f.x0 = 0, f.x1 = double(std::max<size_t>(scenes.size(), 1));
-  Chart c;
-  draw_axes(c, f, std::string(metric.title) + " per scene (mean over pairs)", "scene",
-            metric_axis_label(metric), false);
-  const double slot = f.px(1) - f.px(0);
-  const double bar = slot * 0.8 / double(std::max<size_t>(configs.size(), 1));
-  for (size_t s = 0; s < scenes.size(); ++s) {
-    std::string name = scenes[s].size() > 10 ? scenes[s].substr(0, 8) + ".." : scenes[s];
-    c.texts.push_back({f.px(double(s) + 0.5), f.h - f.bottom + 16, name, kChartInk, 0});
-    for (size_t i = 0; i < configs.size(); ++i) {
-      auto sc = configs[i].scene_means.find(scenes[s]);
-      if (sc == configs[i].scene_means.end()) continue;
-      auto it = sc->second.find(metric.name);
-      if (it == sc->second.end() || !std::isfinite(it->second)) continue;
-      const double x = f.px(double(s)) + slot * 0.1 + bar * double(i);
-      const double y_top = f.py(it->second), y_base = f.py(std::max(0.0, f.y0));
-      c.rects.push_back(
-          {x, std::min(y_top, y_base), bar * 0.9, std::fabs(y_base - y_top), chart_palette(i)});
-    }
-  }
-  for (size_t i = 0; i < configs.size(); ++i) {
-    const double ly = f.top + 14.0 + 18.0 * double(i);
-    c.rects.push_back({f.w - f.right + 10.0, ly - 8, 12, 10, chart_palette(i)});
-    c.texts.push_back({f.w - f.right + 28.0, ly + 1, configs[i].label, chart_palette(i), -1});
-  }
-  return c;
-}
-
 Status write_report(const std::vector<BenchRecord>& records, const std::string& dir,
                     std::vector<std::string>* written, SceneFailureRule rule) {
   std::error_code ec;
@@ -363,11 +227,7 @@ Status write_report(const std::vector<BenchRecord>& records, const std::string& 
     return Status::ok();
   };
   const auto put_chart = [&](const std::string& stem, const Chart& chart) -> Status {
-    MACRO_TRY(put(stem + ".svg", chart_to_svg(chart)));
-    const std::string png = (fs::path(dir) / (stem + ".png")).string();
-    MACRO_TRY(gs::write_png(png, rasterize_chart(chart)));
-    if (written) written->push_back(png);
-    return Status::ok();
+    return write_chart(chart, (fs::path(dir) / stem).string(), written);
   };
   MACRO_TRY(put("table.md", table_markdown(configs)));
   MACRO_TRY(put("table.csv", table_csv(configs)));
