@@ -11,13 +11,15 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: macro grad --scene S.ply --cameras C --camera NAME --target IMG --out G.safetensors\n"
-    "         [--mode classic] [--threads N] [--quiet]\n"
+    "         [--mode classic|antialiased|mip] [--threads N] [--quiet]\n"
     "  --scene    Inria-layout .ply, read as raw parameters (log scales, logit opacities,\n"
     "             raw quaternions)\n"
     "  --target   the photo to fit: PNG/JPEG (byte / 255) or EXR (R, G, B), the camera's size\n"
     "  --out      loss, l1, ssim [1], color [H,W,3], alpha [H,W], grad.means [N,3],\n"
     "             grad.scales [N,3], grad.quats [N,4], grad.opacities [N], grad.sh0 [N,1,3],\n"
     "             grad.shN [N,K-1,3], grad.means2d [N,2] (F32, gsplat names)\n"
+    "  --mode     classic (default), antialiased (gsplat's opacity compensation) or mip\n"
+    "             (Mip-Splatting: 3D filter from every camera of --cameras, 2D filter 0.1)\n"
     "  loss = 0.8 L1 + 0.2 (1 - SSIM), SSIM 11x11 valid (docs/training.md)\n";
 
 int run_grad(std::vector<std::string> argv) {

@@ -16,9 +16,11 @@ constexpr const char* kUsage =
     "usage: macro train --images DIR --cameras C --init FILE.ply --out OUT.ply [--steps N]\n"
     "       macro train --scene-dir DIR [--data-factor F] [--test-every 8]\n"
     "         [--init sfm|random|FILE.ply] --out OUT.ply [--steps N]\n"
-    "         [--strategy default|none] [--lr-schedule gsplat|constant]\n"
+    "         [--strategy default|mcmc|none] [--cap-max N] [--mode classic|antialiased|mip]\n"
+    "         [--lr-schedule gsplat|constant]\n"
     "         [--view-order shuffled|sequential] [--sh-degree-interval K] [--max-gaussians N]\n"
-    "         [--scene-scale S] [--seed S] [--log LOG.jsonl] [--threads N] [--quiet]\n"
+    "         [--scene-scale S] [--seed S] [--log LOG.jsonl] [--save-every N] [--resume CKPT]\n"
+    "         [--threads N] [--quiet]\n"
     "  --images    folder of photos: camera NAME is DIR/NAME, or DIR/NAME.png|.jpg|.jpeg|.exr\n"
     "  --cameras   our cameras.json, a COLMAP sparse folder, transforms.json; every camera is a\n"
     "              view\n"
@@ -33,7 +35,12 @@ constexpr const char* kUsage =
     "  --scene-scale  multiplies the means' learning rate 1.6e-4 (default: 1.1 x the cameras'\n"
     "              extent, as gsplat)\n"
     "  --strategy  default (gsplat DefaultStrategy: duplicate, split, prune, opacity reset;\n"
-    "              the default) or none (a fixed set of Gaussians)\n"
+    "              the default), mcmc (gsplat MCMCStrategy: relocate dead Gaussians, grow 5% per\n"
+    "              refinement up to --cap-max, position noise; opacity and scale regularisers\n"
+    "              0.01; --scene-dir inits at opacity 0.5 and 0.1 x the 3-NN scale) or none\n"
+    "  --cap-max   mcmc: the most Gaussians (default 1000000, at most --max-gaussians)\n"
+    "  --mode      classic (default), antialiased (gsplat: opacity x sqrt(det S / det(S+0.3I)))\n"
+    "              or mip (Mip-Splatting: 3D filter from the training cameras, 2D filter 0.1)\n"
     "  --lr-schedule  gsplat (means' rate decays to 0.01x over the run; default) or constant\n"
     "  --view-order   shuffled (a permutation per epoch from --seed; default) or sequential\n"
     "              (step s uses view s % views in file order)\n"
@@ -41,8 +48,11 @@ constexpr const char* kUsage =
     "  --max-gaussians  the most Gaussians loaded or grown by densification (default 50M)\n"
     "  --seed      view order and split samples (default 42; not torch's generator)\n"
     "  --log       JSONL, one line per step: step, loss, l1, ssim, num_gaussians, view,\n"
-    "              sh_degree, means_lr, [duplicated, split, pruned, opacity_reset], seconds\n"
-    "  Not implemented yet: --strategy mcmc, --mode other than classic (docs/training.md).\n";
+    "              sh_degree, means_lr, [duplicated, split, pruned, opacity_reset],\n"
+    "              [relocated, added], psnr, seconds\n"
+    "  --save-every  write the checkpoint OUT.ckpt (atomically) every N steps\n"
+    "  --resume    continue from a checkpoint, with the same inputs and flags; the result is\n"
+    "              bit-identical to an uninterrupted run (docs/training.md)\n";
 
 int run_train(std::vector<std::string> argv) {
   Args args(std::move(argv));
@@ -68,6 +78,9 @@ int run_train(std::vector<std::string> argv) {
   job.sh_degree_interval =
       args.int_or("--sh-degree-interval", job.sh_degree_interval, 0, 1000000000);
   job.mode = args.value_or("--mode", job.mode);
+  job.cap_max = size_t(args.int_or("--cap-max", int(job.cap_max), 1, 2000000000));
+  job.save_every = args.int_or("--save-every", 0, 0, 1000000000);
+  job.resume_path = args.value_or("--resume", "");
   const std::optional<std::string> scene_scale = args.value("--scene-scale");
   const std::optional<std::string> seed = args.value("--seed");
   if (Status s = args.finish(); !s)

@@ -550,8 +550,8 @@ TEST_CASE("train: what is not implemented is refused by flag, bad inputs by name
     std::string flags, expect;
   };
   const std::vector<Case> cases = {
-      {" --strategy mcmc" + ok_flags, "--strategy mcmc: not implemented yet"},
-      {" --strategy fancy" + ok_flags, "--strategy: expected default, none"},
+      {" --strategy mcmc --cap-max 0" + ok_flags, "--cap-max"},
+      {" --strategy fancy" + ok_flags, "--strategy: expected default, mcmc or none"},
       {" --strategy none --lr-schedule exponential --view-order sequential --sh-degree-interval 0",
        "--lr-schedule: expected gsplat or constant, found 'exponential'"},
       {" --strategy none --lr-schedule constant --view-order random --sh-degree-interval 0",
@@ -586,12 +586,13 @@ TEST_CASE("train: what is not implemented is refused by flag, bad inputs by name
   CHECK(rc2 == 1);
   CHECK(err2.find("8x8, expected the camera's 64x48") != std::string::npos);
   CHECK_FALSE(std::filesystem::exists(tmp.file("o.ply")));
-  // grad: other modes are not implemented; outputs only when everything succeeded.
+  // grad: an unknown mode is refused by name; outputs only when everything succeeded.
   auto [rc3, err3] = run(test::macro_exe() + " grad --scene " + g + "/init.ply --cameras " + g +
                          "/cameras.json --camera v0 --target " + g + "/images/v0.png --out " +
-                         tmp.file("g.safetensors") + " --mode antialiased");
+                         tmp.file("g.safetensors") + " --mode fancy");
   CHECK(rc3 == 1);
-  CHECK(err3.find("--mode antialiased: not implemented yet") != std::string::npos);
+  CHECK(err3.find("--mode: expected classic, antialiased or mip, found 'fancy'") !=
+        std::string::npos);
   auto [rc4, err4] = run(test::macro_exe() + " grad --scene " + g + "/init.ply --cameras " + g +
                          "/cameras.json --camera v9 --target " + g + "/images/v0.png --out " +
                          tmp.file("g.safetensors"));

@@ -1,9 +1,11 @@
 #include "attention/runtime/file_io.h"
+#include "attention/runtime/interrupt_note.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <csignal>
@@ -47,6 +49,11 @@ void unregister_temp(const std::string& p) {
   }
 }
 
+// The note printed after the interrupt line: written into the buffer not in use, then published.
+char g_note_buf[2][1024];
+std::atomic<int> g_note_len[2] = {0, 0};
+std::atomic<int> g_note_which{-1};
+
 // Signal handler: async-signal-safe calls only (unlink, write, signal, raise). Removes the live
 // temporaries, prints one line, then dies of the same signal.
 void on_signal(int sig) {
@@ -60,11 +67,18 @@ void on_signal(int sig) {
   const ssize_t ignored =
       ::write(2, some ? kSome : kNone, some ? sizeof kSome - 1 : sizeof kNone - 1);
   (void)ignored;
+  const int which = g_note_which.load();
+  if (which >= 0) {
+    const ssize_t ignored2 = ::write(2, g_note_buf[which], size_t(g_note_len[which].load()));
+    (void)ignored2;
+  }
   std::signal(sig, SIG_DFL);
   std::raise(sig);
 }
 
-std::string errno_text() { return std::strerror(errno); }
+std::string errno_text() {
+  return std::strerror(errno);
+}
 
 }  // namespace
 
@@ -103,8 +117,9 @@ Result<std::vector<uint8_t>> read_file(const std::string& path, uint64_t max_byt
   std::vector<uint8_t> data(size);
   size_t got = size ? std::fread(data.data(), 1, size, f) : 0;
   std::fclose(f);
-  if (got != size) return Status::error(path + ": short read (" + std::to_string(got) + " of " +
-                                        std::to_string(size) + " bytes)");
+  if (got != size)
+    return Status::error(path + ": short read (" + std::to_string(got) + " of " +
+                         std::to_string(size) + " bytes)");
   return data;
 }
 
@@ -230,7 +245,9 @@ void remove_temp_file(const std::string& temp) {
   unregister_temp(temp);
 }
 
-AtomicFile::~AtomicFile() { discard(); }
+AtomicFile::~AtomicFile() {
+  discard();
+}
 
 void AtomicFile::discard() {
   if (file_) {
@@ -298,6 +315,18 @@ Status write_file_atomic(const std::string& path, const void* data, size_t bytes
   MACRO_TRY(f.open(path));
   MACRO_TRY(f.write(data, bytes));
   return f.commit();
+}
+
+void set_interrupt_note(const std::string& note) {
+  if (note.empty()) {
+    g_note_which.store(-1);
+    return;
+  }
+  const int next = g_note_which.load() == 0 ? 1 : 0;
+  const size_t n = std::min(note.size(), sizeof g_note_buf[0] - 1);
+  std::memcpy(g_note_buf[next], note.data(), n);
+  g_note_len[next].store(int(n));
+  g_note_which.store(next);
 }
 
 void install_interrupt_cleanup() {

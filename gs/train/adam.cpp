@@ -80,6 +80,21 @@ void SplatAdam::remap_rows(const std::vector<int64_t>& src) {
     remap_group(g->m, g->v, src, n_old, g->width);
 }
 
+void SplatAdam::zero_rows(const std::vector<size_t>& rows) {
+  for (Group* g : {&means_, &scales_, &quats_, &opacities_, &sh0_, &shN_})
+    for (size_t r : rows)
+      for (size_t k = 0; k < g->width; ++k) g->m[r * g->width + k] = g->v[r * g->width + k] = 0.0;
+}
+
+std::vector<SplatAdam::GroupState> SplatAdam::state() {
+  std::vector<GroupState> out;
+  const char* names[6] = {"means", "scales", "quats", "opacities", "sh0", "shN"};
+  Group* groups[6] = {&means_, &scales_, &quats_, &opacities_, &sh0_, &shN_};
+  for (int i = 0; i < 6; ++i)
+    out.push_back({names[i], &groups[i]->m, &groups[i]->v, &groups[i]->lr, groups[i]->width});
+  return out;
+}
+
 void SplatAdam::zero_opacity_state() {
   std::fill(opacities_.m.begin(), opacities_.m.end(), 0.0);
   std::fill(opacities_.v.begin(), opacities_.v.end(), 0.0);

@@ -52,6 +52,19 @@ class SplatAdam {
   // "shN"), for tests and checks; nullptr for another name.
   const std::vector<double>* exp_avg(const std::string& name) const;
   const std::vector<double>* exp_avg_sq(const std::string& name) const;
+  // Zeros both moments of the given rows in every group (gsplat relocate's optimizer_fn).
+  void zero_rows(const std::vector<size_t>& rows);
+
+  // Every group's state by gsplat name, for checkpoints (gs/train/checkpoint.h).
+  struct GroupState {
+    std::string name;
+    std::vector<double>* m;
+    std::vector<double>* v;
+    double* lr;
+    size_t width;  // values per Gaussian
+  };
+  std::vector<GroupState> state();
+  void set_steps(int t) { t_ = t; }
 
  private:
   struct Group {

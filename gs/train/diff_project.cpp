@@ -3,7 +3,10 @@
 //
 // Legend (one Gaussian): p mean [3]; t = W p + t_cam [3]; q raw quaternion [4], qn = q/|q|;
 // Rq rotation of qn [3,3]; s = exp(log s) [3]; M = Rq diag(s) [3,3]; J clamped Jacobian [2,3];
-// T = J W [2,3]; A = T M [2,3]; Sigma = A A^T [2,2]; Sigma' = Sigma + eps2d I; conic = Sigma'^-1.
+// T = J W [2,3]; A = T M [2,3]; Sigma = A A^T [2,2]; Sigma' = Sigma + eps I; conic = Sigma'^-1.
+// Modes (diff_project.h): mip replaces s by s' = sqrt(s^2 + f^2) (f the 3D filter) and eps 0.3 by
+// 0.1; antialiased and mip multiply the opacity by a compensation c2 of det Sigma / det Sigma',
+// mip also by o3 = prod s / s'.
 #include "gs/train/diff_project.h"
 
 #include <algorithm>
@@ -77,15 +80,19 @@ int sh_basis(int degree, double x, double y, double z, double* b, double (*d)[3]
 struct Forward {
   double p[3], t[3];
   double qn[4], q_norm;
-  double Rq[9], s[3], M[9];
-  double rx, ry;          // t.x / t.z, t.y / t.z before the clamp
-  bool clamp_x, clamp_y;  // the Jacobian clamp is active
-  double txc, tyc;        // clamped t.x, t.y (tz * clamp(rx))
-  double J[4];            // j00, j02, j11, j12
-  double T[6], A[6];      // [2,3]
-  double sxx, sxy, syy;   // Sigma' (dilated)
+  double Rq[9], s_raw[3], s[3], M[9];  // s_raw = exp(log s); s = s_raw, or s' in mip mode
+  double f2;                           // squared 3D filter (mip), else 0
+  double rx, ry;                       // t.x / t.z, t.y / t.z before the clamp
+  bool clamp_x, clamp_y;               // the Jacobian clamp is active
+  double txc, tyc;                     // clamped t.x, t.y (tz * clamp(rx))
+  double J[4];                         // j00, j02, j11, j12
+  double T[6], A[6];                   // [2,3]
+  double sxx, sxy, syy;                // Sigma' (dilated)
+  double det0;                         // det Sigma (undilated)
   double det, conic[3];
-  double opacity;
+  double sig, o3, c2;       // sigmoid(logit), 3D-filter factor, 2D compensation
+  bool c2_active;           // c2 depends on Sigma (not floored / clamped to a constant)
+  double opacity;           // sig o3 c2
   double dir[3], dir_norm;  // unit direction mean - centre, |mean - centre|
   double basis[16];
   int K;
@@ -101,8 +108,9 @@ bool all_finite(const double (&v)[N]) {
 
 // Fills f; false when the Gaussian is culled for depth or is invalid (non-finite, zero
 // quaternion, det <= 0).
-bool forward_one(const SplatParams& prm, size_t g, const CameraD& cam, int sh_degree,
+bool forward_one(const SplatParams& prm, size_t g, const CameraD& cam, const ProjectSettings& ps,
                  double near_plane, double far_plane, Forward* f) {
+  const int sh_degree = ps.sh_degree;
   const double* R = cam.R;
   for (int a = 0; a < 3; ++a) f->p[a] = prm.means[g * 3 + a];
   for (int r = 0; r < 3; ++r)
@@ -120,7 +128,15 @@ bool forward_one(const SplatParams& prm, size_t g, const CameraD& cam, int sh_de
   const double Rq[9] = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
                         2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
                         2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
-  for (int a = 0; a < 3; ++a) f->s[a] = std::exp(double(prm.scales[g * 3 + a]));
+  const bool mip = ps.mode == RasterMode::kMip;
+  f->f2 = 0;
+  if (mip && ps.filter_3d) f->f2 = double(ps.filter_3d[g]) * double(ps.filter_3d[g]);
+  f->o3 = 1;
+  for (int a = 0; a < 3; ++a) {
+    f->s_raw[a] = std::exp(double(prm.scales[g * 3 + a]));
+    f->s[a] = f->f2 > 0 ? std::sqrt(f->s_raw[a] * f->s_raw[a] + f->f2) : f->s_raw[a];
+    f->o3 *= f->f2 > 0 ? f->s_raw[a] / f->s[a] : 1.0;
+  }
   for (int i = 0; i < 9; ++i) {
     f->Rq[i] = Rq[i];
     f->M[i] = Rq[i] * f->s[i % 3];
@@ -147,15 +163,32 @@ bool forward_one(const SplatParams& prm, size_t g, const CameraD& cam, int sh_de
       f->A[3 * r + k] =
           f->T[3 * r] * f->M[k] + f->T[3 * r + 1] * f->M[3 + k] + f->T[3 * r + 2] * f->M[6 + k];
   const double* A = f->A;
-  f->sxx = A[0] * A[0] + A[1] * A[1] + A[2] * A[2] + double(raster::kEps2d);
+  const double eps = mip ? double(raster::kMipKernelSize) : double(raster::kEps2d);
+  const double sxx0 = A[0] * A[0] + A[1] * A[1] + A[2] * A[2];
   f->sxy = A[0] * A[3] + A[1] * A[4] + A[2] * A[5];
-  f->syy = A[3] * A[3] + A[4] * A[4] + A[5] * A[5] + double(raster::kEps2d);
+  const double syy0 = A[3] * A[3] + A[4] * A[4] + A[5] * A[5];
+  f->det0 = sxx0 * syy0 - f->sxy * f->sxy;
+  f->sxx = sxx0 + eps;
+  f->syy = syy0 + eps;
   f->det = f->sxx * f->syy - f->sxy * f->sxy;
   if (!(f->det > 0) || !std::isfinite(f->det)) return false;
   f->conic[0] = f->syy / f->det;
   f->conic[1] = -f->sxy / f->det;
   f->conic[2] = f->sxx / f->det;
-  f->opacity = 1 / (1 + std::exp(-double(prm.opacities[g])));
+  f->sig = 1 / (1 + std::exp(-double(prm.opacities[g])));
+  f->c2 = 1;
+  f->c2_active = false;
+  if (ps.mode == RasterMode::kAntialiased) {
+    const double r = f->det0 / f->det, floor = double(raster::kAaCompFloor);
+    f->c2_active = r > floor;
+    f->c2 = std::sqrt(std::max(floor, r));
+  } else if (mip) {
+    const double e = double(raster::kMipDetEps);
+    const double d0 = std::max(e, f->det0), d1 = std::max(e, f->det);
+    f->c2_active = d0 > e && d1 > e;
+    f->c2 = f->c2_active ? std::sqrt(d0 / (d1 + e) + e) : 0.0;
+  }
+  f->opacity = f->sig * f->o3 * f->c2;
 
   // Colour of the direction from the camera centre to the mean.
   double dir[3];
@@ -200,10 +233,10 @@ CameraD make_camera_d(const Camera& camera) {
   return c;
 }
 
-bool project_forward(const SplatParams& prm, size_t g, const CameraD& cam, int sh_degree,
-                     double near_plane, double far_plane, ProjectedD* out) {
+bool project_forward(const SplatParams& prm, size_t g, const CameraD& cam,
+                     const ProjectSettings& ps, ProjectedD* out) {
   Forward f;
-  if (!forward_one(prm, g, cam, sh_degree, near_plane, far_plane, &f)) return false;
+  if (!forward_one(prm, g, cam, ps, ps.near_plane, ps.far_plane, &f)) return false;
   if (!(f.opacity >= double(raster::kMinAlpha))) return false;
   out->x = cam.fx * f.t[0] / f.t[2] + cam.cx;
   out->y = cam.fy * f.t[1] / f.t[2] + cam.cy;
@@ -243,18 +276,20 @@ bool project_forward(const SplatParams& prm, size_t g, const CameraD& cam, int s
   return true;
 }
 
-void project_backward(const SplatParams& prm, size_t g, const CameraD& cam, int sh_degree,
-                      const ProjectedGrad& up, const GradRows& out) {
+void project_backward(const SplatParams& prm, size_t g, const CameraD& cam,
+                      const ProjectSettings& ps, const ProjectedGrad& up, const GradRows& out) {
+  const int sh_degree = ps.sh_degree;
   Forward f;
-  const bool ok = forward_one(prm, g, cam, sh_degree, -1e300, 1e300, &f);
+  const bool ok = forward_one(prm, g, cam, ps, -1e300, 1e300, &f);
   if (!ok) return;
   const double* R = cam.R;
   const double tx = f.t[0], ty = f.t[1], tz = f.t[2];
   const double rz = 1 / tz, rz2 = rz * rz;
   double v_t[3] = {0, 0, 0}, v_p[3] = {0, 0, 0};
 
-  // Opacity: o = sigmoid(logit).
-  *out.opacity = float(up.opacity * f.opacity * (1 - f.opacity));
+  // Opacity: o = sig o3 c2, sig = sigmoid(logit).
+  *out.opacity = float(up.opacity * f.o3 * f.c2 * f.sig * (1 - f.sig));
+  const double v_c2 = up.opacity * f.sig * f.o3, v_o3 = up.opacity * f.sig * f.c2;
 
   // Colour: rgb = max(0, SH(dir) + 0.5); the clamp passes the gradient where rgb_raw >= 0.
   double v_raw[3];
@@ -290,9 +325,24 @@ void project_backward(const SplatParams& prm, size_t g, const CameraD& cam, int 
   const double cg00 = ca * ga + cb * gb, cg01 = ca * gb + cb * gc;
   const double cg10 = cb * ga + cc * gb, cg11 = cb * gb + cc * gc;
   // -(C G) C
-  const double V00 = -(cg00 * ca + cg01 * cb);
-  const double V01 = -(cg00 * cb + cg01 * cc);
-  const double V11 = -(cg10 * cb + cg11 * cc);
+  double V00 = -(cg00 * ca + cg01 * cb);
+  double V01 = -(cg00 * cb + cg01 * cc);
+  double V11 = -(cg10 * cb + cg11 * cc);
+  // The compensation c2 = sqrt(r) (antialiased r = det0 / det; mip r = det0 / (det + 1e-6) +
+  // 1e-6) through det0 = sxx0 syy0 - sxy^2 and det = sxx syy - sxy^2 (sxx = sxx0 + eps, alike):
+  // d det0 = (syy0, -2 sxy, sxx0), d det = (syy, -2 sxy, sxx) w.r.t. (sxx0, sxy, syy0). The
+  // symmetric V holds half of d/dsxy on each off-diagonal entry.
+  if (f.c2_active && v_c2 != 0) {
+    const bool mip = ps.mode == RasterMode::kMip;
+    const double eps = mip ? double(raster::kMipKernelSize) : double(raster::kEps2d);
+    const double a0 = f.sxx - eps, c0 = f.syy - eps;
+    const double den = mip ? f.det + double(raster::kMipDetEps) : f.det;
+    const double v_r = v_c2 * 0.5 / f.c2;
+    const double v_det0 = v_r / den, v_det = -v_r * f.det0 / (den * den);
+    V00 += v_det0 * c0 + v_det * f.syy;
+    V11 += v_det0 * a0 + v_det * f.sxx;
+    V01 += 0.5 * (v_det0 + v_det) * (-2 * f.sxy);
+  }
   // Sigma = A A^T: dL/dA = (V + V^T) A = 2 V A.
   double vA[6];
   for (int k = 0; k < 3; ++k) {
@@ -310,9 +360,15 @@ void project_backward(const SplatParams& prm, size_t g, const CameraD& cam, int 
   // M = Rq diag(s): dL/dRq = vM diag(s), dL/ds_k = sum_i Rq_ik vM_ik; log scale: times s.
   double vR[9];
   for (int i = 0; i < 9; ++i) vR[i] = vM[i] * f.s[i % 3];
+  // Mip 3D filter: s' = sqrt(s^2 + f^2): ds'/dlog s = s^2 / s'; o3 = prod s / s':
+  // d o3 / d log s_k = o3 f^2 / s'_k^2.
   for (int k = 0; k < 3; ++k) {
     const double vs = f.Rq[k] * vM[k] + f.Rq[3 + k] * vM[3 + k] + f.Rq[6 + k] * vM[6 + k];
-    out.scales[k] = float(vs * f.s[k]);
+    if (f.f2 > 0)
+      out.scales[k] =
+          float(vs * f.s_raw[k] * f.s_raw[k] / f.s[k] + v_o3 * f.o3 * f.f2 / (f.s[k] * f.s[k]));
+    else
+      out.scales[k] = float(vs * f.s[k]);
   }
   // T = J W (W = camera rotation): dL/dJ = vT W^T; only j00, j02, j11, j12 are variables.
   double vJ[6];
@@ -354,6 +410,44 @@ void project_backward(const SplatParams& prm, size_t g, const CameraD& cam, int 
   }
   const double qdot = vq[0] * w + vq[1] * x + vq[2] * y + vq[3] * z;
   for (int a = 0; a < 4; ++a) out.quats[a] = float((vq[a] - qdot * f.qn[a]) / f.q_norm);
+}
+
+}  // namespace macro::gs::train
+
+namespace macro::gs::train {
+
+std::vector<float> compute_filter_3d(const SplatParams& p, const std::vector<Camera>& cameras) {
+  const size_t n = p.size();
+  constexpr double kInitialDistance = 100000.0, kMinDepth = 0.2, kMargin = 0.15;
+  std::vector<double> distance(n, kInitialDistance);
+  std::vector<uint8_t> seen(n, 0);
+  double focal = 0;
+  for (const Camera& camera : cameras) {
+    const CameraD cam = make_camera_d(camera);
+    for (size_t g = 0; g < n; ++g) {
+      double t[3];
+      for (int r = 0; r < 3; ++r)
+        t[r] = cam.R[3 * r] * p.means[g * 3] + cam.R[3 * r + 1] * p.means[g * 3 + 1] +
+               cam.R[3 * r + 2] * p.means[g * 3 + 2] + cam.t[r];
+      if (!(t[2] > kMinDepth)) continue;
+      const double x = t[0] / t[2] * cam.fx + cam.cx, y = t[1] / t[2] * cam.fy + cam.cy;
+      if (!(x >= -kMargin * cam.width && x <= (1 + kMargin) * cam.width &&
+            y >= -kMargin * cam.height && y <= (1 + kMargin) * cam.height))
+        continue;
+      distance[g] = std::min(distance[g], t[2]);
+      seen[g] = 1;
+    }
+    focal = std::max(focal, cam.fx);
+  }
+  double far = -1;
+  for (size_t g = 0; g < n; ++g)
+    if (seen[g]) far = std::max(far, distance[g]);
+  std::vector<float> out(n);
+  for (size_t g = 0; g < n; ++g) {
+    const double d = seen[g] ? distance[g] : (far >= 0 ? far : kInitialDistance);
+    out[g] = focal > 0 ? float(d / focal * std::sqrt(0.2)) : 0.f;
+  }
+  return out;
 }
 
 }  // namespace macro::gs::train

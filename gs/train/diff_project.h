@@ -3,10 +3,12 @@
 #pragma once
 
 #include <cstddef>
+#include <vector>
 
 #include "gs/cameras/camera.h"
 #include "gs/formats/splat_params.h"
 #include "gs/raster/raster_kernels.h"
+#include "gs/raster/rasterizer.h"
 
 namespace macro::gs::train {
 
@@ -39,9 +41,24 @@ struct ProjectedD {
   raster::TileSplat cover;
 };
 
+// What the projection of every Gaussian of a frame shares (docs/training.md §2.2):
+//   classic      Sigma' = Sigma + 0.3 I, o = sigmoid(logit)
+//   antialiased  the same Sigma', o = sigmoid(logit) sqrt(max(0.005^2, det Sigma / det Sigma'))
+//   mip          3D filter f (per Gaussian, filter_3d[g]; none when null): s' = sqrt(s^2 + f^2)
+//                per axis, o3 = prod s / prod s'; Sigma' = Sigma(s') + 0.1 I;
+//                o = sigmoid(logit) o3 sqrt(d0 / (d1 + 1e-6) + 1e-6), d0 = max(1e-6, det Sigma),
+//                d1 = max(1e-6, det Sigma'), 0 when either max is active
+// The 3D filter is a constant of the frame (Mip-Splatting computes it without gradient).
+struct ProjectSettings {
+  int sh_degree = 0;
+  double near_plane = 0.01, far_plane = 1e10;
+  RasterMode mode = RasterMode::kClassic;
+  const float* filter_3d = nullptr;  // [N] (mip only); must outlive the backward
+};
+
 // Forward of Gaussian g; false when culled (depth, invalid, det <= 0, faint, off the image).
-bool project_forward(const SplatParams& p, size_t g, const CameraD& cam, int sh_degree,
-                     double near_plane, double far_plane, ProjectedD* out);
+bool project_forward(const SplatParams& p, size_t g, const CameraD& cam, const ProjectSettings& ps,
+                     ProjectedD* out);
 
 // Upstream gradients of one Gaussian from the blend.
 struct ProjectedGrad {
@@ -61,7 +78,15 @@ struct GradRows {
   float* sh0;
   float* shN;
 };
-void project_backward(const SplatParams& p, size_t g, const CameraD& cam, int sh_degree,
+void project_backward(const SplatParams& p, size_t g, const CameraD& cam, const ProjectSettings& ps,
                       const ProjectedGrad& up, const GradRows& out);
+
+// Mip-Splatting's 3D smoothing filter (`compute_3D_filter`) for the training cameras: per
+// Gaussian the smallest camera depth z over the cameras that see its mean (z > 0.2 and the
+// projection inside the image enlarged by 15% on every side), f = z / focal * sqrt(0.2) with focal
+// the largest fx of all cameras; a mean no camera sees takes the largest z of those seen (every
+// mean unseen: z = 1e5, Mip-Splatting's initial distance). Mip-Splatting projects with cx = W/2,
+// cy = H/2; here each camera's own principal point is used. [N] floats.
+std::vector<float> compute_filter_3d(const SplatParams& p, const std::vector<Camera>& cameras);
 
 }  // namespace macro::gs::train

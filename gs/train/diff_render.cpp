@@ -39,7 +39,7 @@ void SplatGrads::resize(size_t n, int degree) {
 
 struct DiffRenderer::State {
   CameraD cam{};
-  int sh_degree = 0;
+  ProjectSettings ps;
   std::array<double, 3> background{};
   size_t n = 0;
   std::vector<ProjectedD> proj;
@@ -95,7 +95,17 @@ Status DiffRenderer::forward(const SplatParams& params, const Camera& camera,
   if (params.size() >= (size_t(1) << 32))
     return Status::error("render: more than 2^32-1 Gaussians");
   s.cam = make_camera_d(camera);
-  s.sh_degree = std::clamp(options.sh_degree, 0, params.sh_degree);
+  if (options.mode == RasterMode::kMip && options.filter_3d &&
+      options.filter_3d->size() != params.size())
+    return Status::error("render: the 3D filter holds " +
+                         std::to_string(options.filter_3d->size()) + " values for " +
+                         std::to_string(params.size()) + " Gaussians");
+  s.ps.sh_degree = std::clamp(options.sh_degree, 0, params.sh_degree);
+  s.ps.near_plane = options.near_plane;
+  s.ps.far_plane = options.far_plane;
+  s.ps.mode = options.mode;
+  s.ps.filter_3d =
+      options.mode == RasterMode::kMip && options.filter_3d ? options.filter_3d->data() : nullptr;
   s.background = options.background;
   const CameraD& cam = s.cam;
   const size_t n = s.n = params.size();
@@ -107,8 +117,7 @@ Status DiffRenderer::forward(const SplatParams& params, const Camera& camera,
       n,
       [&](size_t b, size_t e, int) {
         for (size_t g = b; g < e; ++g)
-          s.visible[g] = project_forward(params, g, cam, s.sh_degree, options.near_plane,
-                                         options.far_plane, &s.proj[g]);
+          s.visible[g] = project_forward(params, g, cam, s.ps, &s.proj[g]);
       },
       256);
 
@@ -299,7 +308,7 @@ void DiffRenderer::backward(const SplatParams& params, const double* v_color, co
           const GradRows rows{&grads->means[3 * g], &grads->scales[3 * g],
                               &grads->quats[4 * g], &grads->opacities[g],
                               &grads->sh0[3 * g],   grads->shN.data() + g * R * 3};
-          project_backward(params, g, cam, s.sh_degree, up, rows);
+          project_backward(params, g, cam, s.ps, up, rows);
         }
       },
       256);

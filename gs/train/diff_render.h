@@ -34,6 +34,7 @@
 #include "attention/runtime/thread_pool.h"
 #include "gs/cameras/camera.h"
 #include "gs/formats/splat_params.h"
+#include "gs/raster/rasterizer.h"
 
 namespace macro::gs::train {
 
@@ -41,6 +42,10 @@ struct DiffRenderOptions {
   int sh_degree = 3;  // evaluate at most this degree (clamped to the parameters' degree)
   std::array<double, 3> background = {0.0, 0.0, 0.0};
   double near_plane = 0.01, far_plane = 1e10;
+  // classic, antialiased or mip (the projection side, diff_project.h; docs/training.md §2.2).
+  RasterMode mode = RasterMode::kClassic;
+  // Mip only: the 3D filter [N] (compute_filter_3d), kept alive until the backward; null: none.
+  const std::vector<float>* filter_3d = nullptr;
 };
 
 // Gradients of a scalar loss, laid out as SplatParams (gsplat names and shapes):

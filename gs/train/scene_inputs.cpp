@@ -51,17 +51,18 @@ float logit(double p) {
   return float(std::log(p / (1 - p)));
 }
 
-void fill_common(SplatParams* p, const std::vector<double>& dist, synth_random::Rng& rng) {
+void fill_common(SplatParams* p, const std::vector<double>& dist, synth_random::Rng& rng,
+                 double init_opacity, double init_scale) {
   const size_t n = p->size();
   for (size_t i = 0; i < n; ++i) {
     // A lone point (or duplicates at distance 0) gets the smallest positive scale, not log(0).
-    const double d = dist[i] > 0 ? dist[i] : 1e-7;
+    const double d = (dist[i] > 0 ? dist[i] : 1e-7) * init_scale;
     for (int a = 0; a < 3; ++a) p->scales[3 * i + a] = float(std::log(d));
     for (int a = 0; a < 4; ++a) p->quats[4 * i + a] = float(rng.uniform());
     if (p->quats[4 * i] == 0 && p->quats[4 * i + 1] == 0 && p->quats[4 * i + 2] == 0 &&
         p->quats[4 * i + 3] == 0)
       p->quats[4 * i] = 1;  // probability 2^-212; a zero quaternion is not a rotation
-    p->opacities[i] = logit(0.1);
+    p->opacities[i] = logit(init_opacity);
   }
 }
 
@@ -113,7 +114,8 @@ std::vector<double> knn_mean_distance(const std::vector<Eigen::Vector3d>& pts, i
   return out;
 }
 
-SplatParams init_from_points(const ColmapPoints& points, int sh_degree, uint64_t seed) {
+SplatParams init_from_points(const ColmapPoints& points, int sh_degree, uint64_t seed,
+                             double init_opacity, double init_scale) {
   SplatParams p;
   p.resize(points.size(), sh_degree);
   for (size_t i = 0; i < points.size(); ++i) {
@@ -122,11 +124,12 @@ SplatParams init_from_points(const ColmapPoints& points, int sh_degree, uint64_t
       p.sh0[3 * i + c] = float((double(points.rgb[3 * i + c]) / 255.0 - 0.5) / kC0);
   }
   synth_random::Rng rng{seed};
-  fill_common(&p, knn_mean_distance(points.xyz, 3), rng);
+  fill_common(&p, knn_mean_distance(points.xyz, 3), rng, init_opacity, init_scale);
   return p;
 }
 
-SplatParams init_random(size_t n, double half_extent, int sh_degree, uint64_t seed) {
+SplatParams init_random(size_t n, double half_extent, int sh_degree, uint64_t seed,
+                        double init_opacity, double init_scale) {
   SplatParams p;
   p.resize(n, sh_degree);
   synth_random::Rng rng{seed};
@@ -138,7 +141,7 @@ SplatParams init_random(size_t n, double half_extent, int sh_degree, uint64_t se
     }
     for (int c = 0; c < 3; ++c) p.sh0[3 * i + c] = float((rng.uniform() - 0.5) / kC0);
   }
-  fill_common(&p, knn_mean_distance(xyz, 3), rng);
+  fill_common(&p, knn_mean_distance(xyz, 3), rng, init_opacity, init_scale);
   return p;
 }
 
@@ -236,9 +239,10 @@ Result<SceneDirInputs> load_scene_dir(const std::string& dir, const SceneDirOpti
     if (!pts) return pts.status().with_context("--init sfm");
     if (pts->size() == 0)
       return Status::error("--init sfm: " + pts->source + " holds no points (use --init random)");
-    in.init = init_from_points(*pts, o.sh_degree, o.seed);
+    in.init = init_from_points(*pts, o.sh_degree, o.seed, o.init_opacity, o.init_scale);
   } else {
-    in.init = init_random(o.init_points, o.init_extent * in.scene_scale, o.sh_degree, o.seed);
+    in.init = init_random(o.init_points, o.init_extent * in.scene_scale, o.sh_degree, o.seed,
+                          o.init_opacity, o.init_scale);
   }
   return in;
 }

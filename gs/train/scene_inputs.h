@@ -39,6 +39,9 @@ struct SceneDirOptions {
   double init_extent = 3.0;     // random init, times the scene scale
   int sh_degree = 3;
   uint64_t seed = 42;
+  // gsplat init_opa / init_scale (its mcmc config: 0.5 and 0.1): opacities logit(init_opacity),
+  // scales log(init_scale x the 3-NN distance).
+  double init_opacity = 0.1, init_scale = 1.0;
 };
 
 struct SceneDirInputs {
@@ -57,8 +60,10 @@ Result<SceneDirInputs> load_scene_dir(const std::string& dir, const SceneDirOpti
 std::vector<bool> test_every_holdout(size_t count, int test_every);
 
 // The initialisations above (exposed for tests).
-SplatParams init_from_points(const ColmapPoints& points, int sh_degree, uint64_t seed);
-SplatParams init_random(size_t n, double half_extent, int sh_degree, uint64_t seed);
+SplatParams init_from_points(const ColmapPoints& points, int sh_degree, uint64_t seed,
+                             double init_opacity = 0.1, double init_scale = 1.0);
+SplatParams init_random(size_t n, double half_extent, int sh_degree, uint64_t seed,
+                        double init_opacity = 0.1, double init_scale = 1.0);
 // sqrt(mean squared distance to the k nearest other points) per point (0 when alone).
 std::vector<double> knn_mean_distance(const std::vector<Eigen::Vector3d>& points, int k);
 

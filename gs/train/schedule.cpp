@@ -25,6 +25,16 @@ ViewOrder::ViewOrder(size_t views, bool shuffled, uint64_t seed)
   std::iota(perm_.begin(), perm_.end(), size_t(0));
 }
 
+bool ViewOrder::restore(const Snapshot& s) {
+  if (s.perm.size() != perm_.size() || s.pos > perm_.size()) return false;
+  for (size_t v : s.perm)
+    if (v >= perm_.size()) return false;
+  perm_ = s.perm;
+  pos_ = s.pos;
+  state_ = s.state;
+  return true;
+}
+
 size_t ViewOrder::next() {
   if (perm_.empty()) return 0;
   if (pos_ == perm_.size()) {

@@ -23,6 +23,16 @@ class ViewOrder {
  public:
   ViewOrder(size_t views, bool shuffled, uint64_t seed);
   size_t next();  // the view of the next step
+  // The position in the order (checkpoints): the current permutation, the place in it and the
+  // generator's state.
+  struct Snapshot {
+    std::vector<size_t> perm;
+    size_t pos = 0;
+    uint64_t state = 0;
+  };
+  Snapshot snapshot() const { return {perm_, pos_, state_}; }
+  // false when the snapshot is not one of this order (another view count).
+  bool restore(const Snapshot& s);
 
  private:
   std::vector<size_t> perm_;

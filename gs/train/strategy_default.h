@@ -65,6 +65,18 @@ class NormalRng {
  public:
   explicit NormalRng(uint64_t seed) : state_(seed) {}
   double next();
+  // The whole generator state (checkpoints).
+  struct Snapshot {
+    uint64_t state = 0;
+    bool have_spare = false;
+    double spare = 0;
+  };
+  Snapshot snapshot() const { return {state_, have_spare_, spare_}; }
+  void restore(const Snapshot& s) {
+    state_ = s.state;
+    have_spare_ = s.have_spare;
+    spare_ = s.spare;
+  }
 
  private:
   uint64_t state_;

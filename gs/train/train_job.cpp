@@ -10,10 +10,13 @@
 #include <filesystem>
 
 #include "attention/runtime/file_io.h"
+#include "attention/runtime/interrupt_note.h"
 #include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/progress.h"
 #include "gs/formats/splat_params.h"
 #include "gs/image_io.h"
+#include "gs/train/checkpoint.h"
+#include "gs/train/diff_project.h"
 
 namespace macro::gs::train {
 namespace {
@@ -33,12 +36,6 @@ Status check_output(const char* flag, const std::string& path) {
     return Status::error(std::string(flag) + ": " + path + ": folder '" + parent +
                          "' is not writable");
   return Status::ok();
-}
-
-Status not_implemented(const std::string& flag, const std::string& value,
-                       const std::string& implemented) {
-  return Status::error(flag + " " + value + ": not implemented yet (this version implements " +
-                       implemented + "; docs/training.md)");
 }
 
 std::string lower(std::string s) {
@@ -165,9 +162,16 @@ Result<std::vector<float>> read_target(const std::string& path, int width, int h
   return std::move(img.data);
 }
 
+Result<RasterMode> parse_raster_mode(const std::string& flag, const std::string& value) {
+  if (value == "classic") return RasterMode::kClassic;
+  if (value == "antialiased") return RasterMode::kAntialiased;
+  if (value == "mip") return RasterMode::kMip;
+  return Status::error(flag + ": expected classic, antialiased or mip, found '" + value + "'");
+}
+
 Result<GradJobResult> run_grad_job(const GradJob& job, ThreadPool& pool) {
   const auto t0 = std::chrono::steady_clock::now();
-  if (job.mode != "classic") return not_implemented("--mode", job.mode, "classic");
+  MACRO_ASSIGN_OR_RETURN(RasterMode mode, parse_raster_mode("--mode", job.mode));
   if (job.scene_path.empty()) return Status::error("--scene: required");
   if (job.cameras_path.empty()) return Status::error("--cameras: required");
   if (job.target_path.empty()) return Status::error("--target: required");
@@ -184,7 +188,15 @@ Result<GradJobResult> run_grad_job(const GradJob& job, ThreadPool& pool) {
   auto target = read_target(job.target_path, camera->width, camera->height);
   if (!target) return target.status().with_context("--target");
   view.target = std::move(*target);
-  MACRO_ASSIGN_OR_RETURN(ViewGradient vg, view_gradient(*params, view, {}, pool));
+  DiffRenderOptions ro;
+  ro.mode = mode;
+  // Mip: the 3D filter of every camera of --cameras (the training cameras).
+  std::vector<float> filter;
+  if (mode == RasterMode::kMip) {
+    filter = compute_filter_3d(*params, cameras->cameras);
+    ro.filter_3d = &filter;
+  }
+  MACRO_ASSIGN_OR_RETURN(ViewGradient vg, view_gradient(*params, view, ro, pool));
 
   const int64_t N = int64_t(params->size()), H = camera->height, W = camera->width;
   const int64_t R = params->sh_rest();
@@ -221,12 +233,12 @@ Result<GradJobResult> run_grad_job(const GradJob& job, ThreadPool& pool) {
 }
 
 Status check_train_settings(const TrainJob& job) {
-  if (job.strategy == "mcmc") return not_implemented("--strategy", job.strategy, "default, none");
-  if (job.strategy != "none" && job.strategy != "default")
-    return Status::error(
-        "--strategy: expected default, none (or mcmc, not implemented yet), "
-        "found '" +
-        job.strategy + "'");
+  if (job.strategy != "none" && job.strategy != "default" && job.strategy != "mcmc")
+    return Status::error("--strategy: expected default, mcmc or none, found '" + job.strategy +
+                         "'");
+  if (job.cap_max < 1) return Status::error("--cap-max: expected >= 1, found 0");
+  if (job.save_every < 0)
+    return Status::error("--save-every: expected >= 0, found " + std::to_string(job.save_every));
   if (job.lr_schedule != "constant" && job.lr_schedule != "gsplat")
     return Status::error("--lr-schedule: expected gsplat or constant, found '" + job.lr_schedule +
                          "'");
@@ -236,7 +248,7 @@ Status check_train_settings(const TrainJob& job) {
   if (job.sh_degree_interval < 0)
     return Status::error("--sh-degree-interval: expected >= 0, found " +
                          std::to_string(job.sh_degree_interval));
-  if (job.mode != "classic") return not_implemented("--mode", job.mode, "classic");
+  MACRO_TRY(parse_raster_mode("--mode", job.mode).status());
   if (job.data_factor < 1)
     return Status::error("--data-factor: expected >= 1, found " + std::to_string(job.data_factor));
   if (job.test_every < 0)
@@ -277,6 +289,7 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
     so.init = ply ? "random" : (job.init_path.empty() ? "sfm" : job.init_path);
     if (ply) so.init_points = 0;
     so.seed = job.seed;
+    if (job.strategy == "mcmc") so.init_opacity = 0.5, so.init_scale = 0.1;  // gsplat mcmc config
     MACRO_ASSIGN_OR_RETURN(SceneDirInputs in, load_scene_dir(job.scene_dir, so));
     if (ply) {
       auto p = read_splat_params(job.init_path, job.limits);
@@ -335,9 +348,66 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
   options.exponential_lr = job.lr_schedule == "gsplat";
   options.shuffled_views = job.view_order == "shuffled";
   options.sh_degree_interval = job.sh_degree_interval;
-  options.strategy = job.strategy == "default" ? Strategy::kDefault : Strategy::kNone;
+  options.strategy = job.strategy == "default" ? Strategy::kDefault
+                     : job.strategy == "mcmc"  ? Strategy::kMcmc
+                                               : Strategy::kNone;
   options.default_strategy.max_gaussians = job.limits.max_gaussians;
+  options.mcmc.cap_max = std::min(
+      job.cap_max, job.limits.max_gaussians > 0 ? size_t(job.limits.max_gaussians) : job.cap_max);
+  if (job.strategy == "mcmc") options.opacity_reg = options.scale_reg = 0.01;  // gsplat mcmc
+  MACRO_ASSIGN_OR_RETURN(options.render.mode, parse_raster_mode("--mode", job.mode));
   options.seed = job.seed;
+
+  // Checkpoints: the settings a resume must repeat, the state to continue from.
+  std::string settings;
+  {
+    char scale[40];
+    std::snprintf(scale, sizeof scale, "%.17g", result.scene_scale);
+    settings = "scene_dir=" + job.scene_dir + "\nimages=" + job.images_dir +
+               "\ncameras=" + job.cameras_path + "\ninit=" + job.init_path +
+               "\ndata_factor=" + std::to_string(job.data_factor) +
+               "\ntest_every=" + std::to_string(job.test_every) +
+               "\nsteps=" + std::to_string(job.steps) + "\nstrategy=" + job.strategy +
+               "\nmode=" + job.mode + "\nlr_schedule=" + job.lr_schedule +
+               "\nview_order=" + job.view_order +
+               "\nsh_degree_interval=" + std::to_string(job.sh_degree_interval) +
+               "\nseed=" + std::to_string(job.seed) + "\nscene_scale=" + scale +
+               "\ncap_max=" + std::to_string(options.mcmc.cap_max) + "\nviews=";
+    for (const TrainView& v : views)
+      settings += v.camera.name + ":" + std::to_string(v.camera.width) + "x" +
+                  std::to_string(v.camera.height) + ",";
+    settings += "\n";
+  }
+  std::optional<Checkpoint> resume;
+  TrainHooks hooks;
+  if (!job.resume_path.empty()) {
+    MACRO_ASSIGN_OR_RETURN(Checkpoint ck, read_checkpoint(job.resume_path, settings));
+    if (ck.state.next_step > job.steps)
+      return Status::error("--resume: " + job.resume_path + ": the checkpoint is at step " +
+                           std::to_string(ck.state.next_step) + ", beyond --steps " +
+                           std::to_string(job.steps));
+    if (job.limits.max_gaussians > 0 && ck.params.size() > job.limits.max_gaussians)
+      return Status::error(
+          "--resume: " + job.resume_path + ": " + std::to_string(ck.params.size()) +
+          " Gaussians, more than --max-gaussians " + std::to_string(job.limits.max_gaussians));
+    resume = std::move(ck);
+    params = std::move(resume->params);
+    hooks.resume = &resume->state;
+  }
+  const int first_step = resume ? resume->state.next_step : 0;
+  const std::string ckpt_path = checkpoint_path_for(job.out_path);
+  if (job.save_every > 0) {
+    MACRO_TRY(check_output("--save-every", ckpt_path));
+    hooks.checkpoint_every = job.save_every;
+    hooks.checkpoint = [&](const SplatParams& p, const TrainState& st) -> Status {
+      MACRO_TRY(write_checkpoint(ckpt_path, settings, p, st).with_context("--save-every"));
+      set_interrupt_note("the checkpoint " + ckpt_path + " (step " + std::to_string(st.next_step) +
+                         " of " + std::to_string(job.steps) +
+                         ") was kept: continue with the same flags and --resume " + ckpt_path +
+                         "\n");
+      return Status::ok();
+    };
+  }
   AtomicFile log;
   if (!job.log_path.empty()) MACRO_TRY(log.open(job.log_path).with_context("--log"));
   if (!job.log_path.empty() && !views_line.empty())
@@ -359,22 +429,28 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
                                   ", \"pruned\": " + std::to_string(r.refine.pruned)
                             : std::string()) +
           (r.refine.reset ? ", \"opacity_reset\": true" : "") +
-          ", \"seconds\": " + json_number(r.seconds) + "}\n";
+          (r.mcmc.refined ? ", \"relocated\": " + std::to_string(r.mcmc.relocated) +
+                                ", \"added\": " + std::to_string(r.mcmc.added)
+                          : std::string()) +
+          ", \"psnr\": " + json_number(r.psnr) + ", \"seconds\": " + json_number(r.seconds) + "}\n";
       MACRO_TRY(log.write(line).with_context("--log"));
     }
     const auto now = std::chrono::steady_clock::now();
     const bool final_step = r.step + 1 == job.steps;
     if (show && (final_step || now - last_draw >= std::chrono::milliseconds(250))) {
       last_draw = now;
-      const double rate = r.seconds > 0 ? double(r.step + 1) / r.seconds : 0;
+      const double rate = r.seconds > 0 ? double(r.step + 1 - first_step) / r.seconds : 0;
       const double eta = rate > 0 ? double(job.steps - r.step - 1) / rate : -1;
-      std::fprintf(stderr, "\r[train] step %d/%d  loss %.5f  %.2f it/s  eta %s%s", r.step + 1,
-                   job.steps, r.loss, rate, format_seconds(eta).c_str(), final_step ? "\n" : "   ");
+      std::fprintf(stderr,
+                   "\r[train] step %d/%d  loss %.5f  psnr %.2f dB  %zu gaussians  %.2f it/s  "
+                   "eta %s%s",
+                   r.step + 1, job.steps, r.loss, r.psnr, r.num_gaussians, rate,
+                   format_seconds(eta).c_str(), final_step ? "\n" : "   ");
       std::fflush(stderr);
     }
     return Status::ok();
   };
-  MACRO_TRY(train(&*params, views, options, on_step, pool));
+  MACRO_TRY(train(&*params, views, options, on_step, pool, hooks));
   result.gaussians = params->size();
   if (!test_views.empty()) {
     MACRO_ASSIGN_OR_RETURN(EvalResult ev, evaluate_views(*params, test_views, pool));

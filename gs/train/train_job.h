@@ -7,7 +7,8 @@
 //   grad.opacities [N] (logits), grad.sh0 [N,1,3], grad.shN [N,K-1,3], grad.means2d [N,2]
 // train: Adam steps over the views in camera-file order, the result as an Inria .ply (raw
 // parameters), a JSONL log (one line per step: step, loss, l1, ssim, num_gaussians, seconds) and
-// progress on stderr (step, loss, it/s, ETA).
+// progress on stderr (step, loss, PSNR of the step's view, Gaussians, it/s, ETA); with
+// --save-every a checkpoint OUT.ckpt (checkpoint.h), and --resume continues from one.
 // The photo of camera NAME is DIR/NAME when NAME has an extension, else the one of
 // DIR/NAME.png, .jpg, .jpeg, .exr that exists (two of them is an error); it must have the
 // camera's size. Settings this milestone does not implement are refused by flag name.
@@ -30,9 +31,9 @@ struct GradJob {
   std::string scene_path;    // Inria .ply (read as raw parameters)
   std::string cameras_path;  // any camera file load_cameras reads
   std::string camera_name;
-  std::string target_path;  // PNG/JPEG (byte / 255) or EXR (R, G, B)
-  std::string out_path;     // .safetensors
-  std::string mode = "classic";
+  std::string target_path;       // PNG/JPEG (byte / 255) or EXR (R, G, B)
+  std::string out_path;          // .safetensors
+  std::string mode = "classic";  // classic | antialiased | mip (the 3D filter from every camera)
   LoadLimits limits;
 };
 
@@ -57,11 +58,14 @@ struct TrainJob {
   std::string log_path;   // JSONL, optional
   int steps = 30000;
   // gsplat's defaults where a flag is absent; only the values named in docs/training.md run.
-  std::string strategy = "default";     // --strategy: default | none
+  std::string strategy = "default";     // --strategy: default | mcmc | none
   std::string lr_schedule = "gsplat";   // --lr-schedule: gsplat | constant
   std::string view_order = "shuffled";  // --view-order: shuffled | sequential
   int sh_degree_interval = 1000;        // --sh-degree-interval: 0 = every band from the start
-  std::string mode = "classic";         // --mode: classic
+  std::string mode = "classic";         // --mode: classic | antialiased | mip
+  size_t cap_max = 1000000;             // --cap-max (mcmc)
+  int save_every = 0;                   // --save-every: a checkpoint every N steps (0: none)
+  std::string resume_path;              // --resume CKPT
   std::optional<double> scene_scale;    // --scene-scale; absent: gsplat's camera extent
   uint64_t seed = 42;                   // --seed: view order and split samples
   bool progress = true;                 // stderr progress (also off when quiet())
@@ -81,6 +85,8 @@ struct TrainJobResult {
 
 // The flags' values this milestone implements; anything else is "not implemented yet".
 Status check_train_settings(const TrainJob& job);
+// "classic", "antialiased", "mip".
+Result<RasterMode> parse_raster_mode(const std::string& flag, const std::string& value);
 Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool = ThreadPool::global());
 
 // gsplat's scene scale when none is given: 1.1 x the largest distance of a camera centre from

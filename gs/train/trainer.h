@@ -22,7 +22,9 @@
 #include "gs/train/adam.h"
 #include "gs/train/diff_render.h"
 #include "gs/train/loss.h"
+#include "gs/train/schedule.h"
 #include "gs/train/strategy_default.h"
+#include "gs/train/strategy_mcmc.h"
 
 namespace macro::gs::train {
 
@@ -31,7 +33,7 @@ struct TrainView {
   std::vector<float> target;  // [H,W,3] in the camera's size, linear values (8-bit: byte / 255)
 };
 
-enum class Strategy { kNone, kDefault };
+enum class Strategy { kNone, kDefault, kMcmc };
 
 struct TrainOptions {
   int steps = 30000;
@@ -42,19 +44,56 @@ struct TrainOptions {
   int sh_degree_interval = 0;   // 0: every band from the first step
   Strategy strategy = Strategy::kNone;
   DefaultStrategyOptions default_strategy;
-  uint64_t seed = 42;  // view order and split samples
+  McmcStrategyOptions mcmc;
+  // gsplat simple_trainer's regularisers (its mcmc config sets both to 0.01):
+  // loss += opacity_reg mean(sigmoid(opacity)) + scale_reg mean(exp(scales)).
+  double opacity_reg = 0, scale_reg = 0;
+  // Mip mode (render.mode): the 3D filter is computed from every view's camera before the first
+  // step and after the strategy of every step s with s % 100 == 0 or a change of the rows
+  // (render.filter_3d is ignored).
+  uint64_t seed = 42;  // view order, split samples, MCMC draws
+};
+
+// Everything the loop carries from one step to the next besides the parameters (a checkpoint,
+// gs/train/checkpoint.h). Adam's moments are by group in gsplat's order (SplatAdam::state()).
+struct TrainState {
+  int next_step = 0;
+  int adam_steps = 0;
+  struct AdamGroup {
+    std::string name;
+    double lr = 0;
+    std::vector<double> m, v;
+  };
+  std::vector<AdamGroup> adam;
+  ViewOrder::Snapshot view_order;
+  NormalRng::Snapshot split_rng;
+  DefaultStrategyState default_state;
+  uint64_t mcmc_sample_state = 0;
+  NormalRng::Snapshot mcmc_noise;
+  std::vector<float> filter_3d;  // mip mode, else empty
+};
+
+struct TrainHooks {
+  // Continue from this state (the parameters passed to train() are the checkpoint's).
+  const TrainState* resume = nullptr;
+  // Called after the step callback of every step s with (s + 1) % checkpoint_every == 0 and
+  // s + 1 < steps, with the state that continues at s + 1.
+  int checkpoint_every = 0;
+  std::function<Status(const SplatParams&, const TrainState&)> checkpoint;
 };
 
 // One step's record (the JSONL log's fields).
 struct StepRecord {
   int step = 0;  // 0-based; the loss is that of the parameters before this step's update
-  double loss = 0, l1 = 0, ssim = 0;
-  size_t num_gaussians = 0;  // after this step's strategy
-  int sh_degree = 0;         // the active degree of this step
-  size_t view = 0;           // index into the views
-  double means_lr = 0;       // the means' rate this step used
-  RefineReport refine;       // what the strategy did after this step
-  double seconds = 0;        // wall time since training started, after this step
+  double loss = 0, l1 = 0, ssim = 0;  // loss includes the regularisers
+  double psnr = 0;                    // of this step's render ([0,1]-clamped) against its photo
+  size_t num_gaussians = 0;           // after this step's strategy
+  int sh_degree = 0;                  // the active degree of this step
+  size_t view = 0;                    // index into the views
+  double means_lr = 0;                // the means' rate this step used
+  RefineReport refine;                // what the strategy did after this step
+  McmcReport mcmc;                    // the same for --strategy mcmc
+  double seconds = 0;                 // wall time since training started, after this step
 };
 
 // One forward and backward of the loss on one view: the render, the loss and every gradient.
@@ -71,6 +110,7 @@ Result<ViewGradient> view_gradient(const SplatParams& params, const TrainView& v
 // may stop training by returning an error, which train() returns.
 using StepCallback = std::function<Status(const StepRecord&)>;
 Status train(SplatParams* params, const std::vector<TrainView>& views, const TrainOptions& options,
-             const StepCallback& on_step = {}, ThreadPool& pool = ThreadPool::global());
+             const StepCallback& on_step = {}, ThreadPool& pool = ThreadPool::global(),
+             const TrainHooks& hooks = {});
 
 }  // namespace macro::gs::train

@@ -1,0 +1,287 @@
+// The trainer's antialiased and mip modes (docs/training.md §2.2, §2.3): the forward against
+// gs::render in the same mode (mip: the 3D filter folded into scale and opacity as the scene
+// loader folds a filter_3D property), central differences of the loss for every parameter kind,
+// the 2D-mean gradient through the principal point, and Mip-Splatting's 3D filter on hand-placed
+// means.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <random>
+
+#include "gs/cameras/camera.h"
+#include "gs/formats/splat_params.h"
+#include "gs/raster/rasterizer.h"
+#include "gs/train/diff_project.h"
+#include "gs/train/diff_render.h"
+#include "gs/train/loss.h"
+#include "gs/train/trainer.h"
+#include "test_support.h"
+
+using namespace macro;
+using namespace macro::gs;
+using namespace macro::gs::train;
+
+namespace {
+
+struct ModeCase {
+  SplatParams params;
+  TrainView view;
+  std::vector<float> filter;  // mip: the 3D filter of the view's camera
+};
+
+// Random Gaussians in front of a rotated camera (off-centre principal point), all inside the
+// Jacobian clamp limits, some peaking above the 0.99 clamp; raw quaternions of norm != 1.
+ModeCase mode_case(uint32_t seed, size_t n, int degree, int width, int height) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::normal_distribution<double> nd(0, 1);
+  ModeCase mc;
+  Camera& cam = mc.view.camera;
+  cam.name = "modes";
+  cam.width = width;
+  cam.height = height;
+  cam.fx = 0.9 * width;
+  cam.fy = 0.95 * width;
+  cam.cx = 0.47 * width;
+  cam.cy = 0.53 * height;
+  const double qn = std::sqrt(1 + 0.05 * 0.05 + 0.08 * 0.08 + 0.03 * 0.03);
+  cam.R = rotation_from_quaternion_wxyz(1 / qn, 0.05 / qn, -0.08 / qn, 0.03 / qn);
+  cam.t = Eigen::Vector3d(0.1, -0.05, 0.2);
+  SplatParams& p = mc.params;
+  p.resize(n, degree);
+  const size_t R = size_t(p.sh_rest());
+  for (size_t i = 0; i < n; ++i) {
+    const double z = 2 + 3 * u(rng);
+    const Eigen::Vector3d xc((u(rng) - 0.5) * 0.9 * z, (u(rng) - 0.5) * 0.8 * z, z);
+    const Eigen::Vector3d xw = cam.R.transpose() * (xc - cam.t);
+    const double log_s = -3.4 + 1.3 * u(rng);
+    for (int a = 0; a < 3; ++a) p.means[i * 3 + a] = float(xw(a));
+    for (int a = 0; a < 3; ++a) p.scales[i * 3 + a] = float(log_s + 0.4 * nd(rng));
+    for (int a = 0; a < 4; ++a) p.quats[i * 4 + a] = float(nd(rng) + (a == 0 ? 1.0 : 0.0));
+    p.opacities[i] = float(i % 5 == 0 ? 7.0 : -1 + 4 * u(rng));
+    for (int c = 0; c < 3; ++c) p.sh0[i * 3 + c] = float(0.8 * nd(rng));
+    for (size_t j = 0; j < R * 3; ++j) p.shN[i * R * 3 + j] = float(0.3 * nd(rng));
+  }
+  mc.view.target.resize(size_t(width) * size_t(height) * 3);
+  for (float& v : mc.view.target) v = float(0.05 + 0.9 * u(rng));
+  mc.filter = compute_filter_3d(p, {cam});
+  return mc;
+}
+
+DiffRenderOptions options_for(RasterMode mode, const ModeCase& mc) {
+  DiffRenderOptions o;
+  o.mode = mode;
+  if (mode == RasterMode::kMip) o.filter_3d = &mc.filter;
+  return o;
+}
+
+double loss_at(const SplatParams& p, const Camera& cam, const ModeCase& mc, RasterMode mode,
+               ThreadPool& pool) {
+  DiffRenderer r;
+  DiffImage img;
+  REQUIRE(r.forward(p, cam, options_for(mode, mc), &img, pool).is_ok());
+  auto l = photometric_loss(img.color.data(), mc.view.target.data(), img.width, img.height, nullptr,
+                            pool);
+  REQUIRE(l.is_ok());
+  return l->loss;
+}
+
+// Central differences (as tests/test_train.cpp): two step sizes; entries where they disagree (a
+// step across the 1/255 or T-stop discontinuity) are skipped, at most 10%. Returns the worst
+// relative error.
+double check_fd(SplatParams p, std::vector<float> SplatParams::*field,
+                const std::vector<float>& analytic, const ModeCase& mc, RasterMode mode,
+                const char* name, ThreadPool& pool) {
+  std::vector<float>& x = p.*field;
+  REQUIRE(x.size() == analytic.size());
+  size_t checked = 0, skipped = 0, nonzero = 0;
+  double worst = 0;
+  for (size_t i = 0; i < x.size(); ++i) {
+    const float x0 = x[i];
+    double est[2];
+    for (int k = 0; k < 2; ++k) {
+      const double h = (k == 0 ? 1e-4 : 2.5e-5) * std::max(1.0, std::abs(double(x0)));
+      const float xp = float(x0 + h), xm = float(x0 - h);
+      x[i] = xp;
+      const double lp = loss_at(p, mc.view.camera, mc, mode, pool);
+      x[i] = xm;
+      const double lm = loss_at(p, mc.view.camera, mc, mode, pool);
+      x[i] = x0;
+      est[k] = (lp - lm) / (double(xp) - double(xm));
+    }
+    const double scale = std::max({std::abs(est[0]), std::abs(est[1]), 1e-6});
+    if (std::abs(est[0] - est[1]) > 2e-3 * scale) {
+      ++skipped;
+      continue;
+    }
+    ++checked;
+    nonzero += analytic[i] != 0.f;
+    const double err = std::abs(double(analytic[i]) - est[1]) /
+                       std::max({std::abs(est[1]), std::abs(double(analytic[i])), 1e-6});
+    worst = std::max(worst, err);
+    INFO(name << "[" << i << "]: analytic " << analytic[i] << ", central difference " << est[1]
+              << " (" << est[0] << " at 4x the step)");
+    CHECK(err <= 5e-3);
+  }
+  INFO(name << ": " << checked << " checked, " << skipped << " skipped, worst " << worst);
+  CHECK(skipped * 10 <= x.size());
+  CHECK(nonzero * 2 >= checked);
+  return worst;
+}
+
+const char* mode_name(RasterMode m) {
+  return m == RasterMode::kAntialiased ? "antialiased" : m == RasterMode::kMip ? "mip" : "classic";
+}
+
+// The rasterizer's input for the same scene: the 3D filter folded into scale and opacity as
+// gs/formats/format_ply.cpp folds a filter_3D property.
+GaussianCloud cloud_for(const ModeCase& mc, RasterMode mode) {
+  GaussianCloud c = to_cloud(mc.params);
+  if (mode != RasterMode::kMip) return c;
+  for (size_t g = 0; g < c.size(); ++g) {
+    const double f2 = double(mc.filter[g]) * mc.filter[g];
+    double ratio = 1;
+    for (int a = 0; a < 3; ++a) {
+      const double s2 = double(c.scale[g * 3 + a]) * c.scale[g * 3 + a];
+      ratio *= s2 / (s2 + f2);
+      c.scale[g * 3 + a] = float(std::sqrt(s2 + f2));
+    }
+    c.opacity[g] = float(c.opacity[g] * std::sqrt(ratio));
+  }
+  return c;
+}
+
+}  // namespace
+
+TEST_CASE("train modes: the forward is gs::render's in the same mode", "[train]") {
+  ThreadPool pool(2);
+  for (RasterMode mode : {RasterMode::kAntialiased, RasterMode::kMip}) {
+    INFO(mode_name(mode));
+    ModeCase mc = mode_case(21, 3000, 2, 96, 72);
+    RenderOptions ro;
+    ro.mode = mode;
+    auto ref = render(cloud_for(mc, mode), mc.view.camera, ro);
+    REQUIRE(ref.is_ok());
+    DiffRenderer r;
+    DiffImage img;
+    REQUIRE(r.forward(mc.params, mc.view.camera, options_for(mode, mc), &img, pool).is_ok());
+    CHECK(r.stats().visible > 1500);
+    const std::vector<float> color(img.color.begin(), img.color.end());
+    const std::vector<float> alpha(img.alpha.begin(), img.alpha.end());
+    const auto dc = test::compare(color, ref->color), da = test::compare(alpha, ref->alpha);
+    INFO("color max abs " << dc.max_abs << ", alpha max abs " << da.max_abs);
+    CHECK(dc.max_abs <= 1e-4);
+    CHECK(da.max_abs <= 1e-4);
+    // The mode matters: classic differs by far more.
+    DiffImage classic;
+    REQUIRE(r.forward(mc.params, mc.view.camera, {}, &classic, pool).is_ok());
+    const std::vector<float> cc(classic.color.begin(), classic.color.end());
+    CHECK(test::compare(cc, ref->color).max_abs > 1e-2);
+  }
+}
+
+TEST_CASE("train modes: gradients agree with central differences for every parameter kind",
+          "[train]") {
+  ThreadPool pool(1);
+  // One entry per blend path; the scalar double reference is the only one so far.
+  const std::vector<const char*> paths = {"scalar"};
+  int means2d_skipped = 0;
+  for (const char* path : paths) {
+    for (RasterMode mode : {RasterMode::kAntialiased, RasterMode::kMip}) {
+      for (int degree : {3, 0}) {
+        INFO(path << ", " << mode_name(mode) << ", SH degree " << degree);
+        ModeCase mc = mode_case(31 + uint32_t(degree), 14, degree, 32, 24);
+        DiffRenderer r;
+        DiffImage img;
+        REQUIRE(r.forward(mc.params, mc.view.camera, options_for(mode, mc), &img, pool).is_ok());
+        std::vector<double> v_color;
+        REQUIRE(photometric_loss(img.color.data(), mc.view.target.data(), img.width, img.height,
+                                 &v_color, pool)
+                    .is_ok());
+        SplatGrads g;
+        r.backward(mc.params, v_color.data(), nullptr, &g, pool);
+        double worst = 0;
+        worst = std::max(
+            worst, check_fd(mc.params, &SplatParams::means, g.means, mc, mode, "means", pool));
+        worst = std::max(
+            worst, check_fd(mc.params, &SplatParams::scales, g.scales, mc, mode, "scales", pool));
+        worst = std::max(
+            worst, check_fd(mc.params, &SplatParams::quats, g.quats, mc, mode, "quats", pool));
+        worst = std::max(worst, check_fd(mc.params, &SplatParams::opacities, g.opacities, mc, mode,
+                                         "opacities", pool));
+        worst =
+            std::max(worst, check_fd(mc.params, &SplatParams::sh0, g.sh0, mc, mode, "sh0", pool));
+        if (degree > 0)
+          worst =
+              std::max(worst, check_fd(mc.params, &SplatParams::shN, g.shN, mc, mode, "shN", pool));
+
+        // means2d: moving the principal point by h moves every projected mean by h (no
+        // Gaussian here is beyond the clamp limits, which also move with cx, cy), so dL/dcx =
+        // sum of the u components and dL/dcy of the v components.
+        double su = 0, sv = 0;
+        for (size_t i = 0; i < g.size(); ++i) su += g.means2d[2 * i], sv += g.means2d[2 * i + 1];
+        for (int axis = 0; axis < 2; ++axis) {
+          double est[2];
+          for (int k = 0; k < 2; ++k) {
+            const double h = k == 0 ? 1e-4 : 2.5e-5;
+            Camera cp = mc.view.camera, cm = mc.view.camera;
+            (axis == 0 ? cp.cx : cp.cy) += h;
+            (axis == 0 ? cm.cx : cm.cy) -= h;
+            est[k] =
+                (loss_at(mc.params, cp, mc, mode, pool) - loss_at(mc.params, cm, mc, mode, pool)) /
+                (2 * h);
+          }
+          const double an = axis == 0 ? su : sv, fd = est[1];
+          INFO("means2d axis " << axis << ": sum " << an << ", central difference " << fd << " ("
+                               << est[0] << " at 4x the step)");
+          // Moving every Gaussian at once can cross a pixel's 1/255 or T-stop discontinuity:
+          // then the two step sizes disagree and the axis is skipped (at most 2 of the 8).
+          if (std::abs(est[0] - est[1]) > 2e-3 * std::max(std::abs(fd), 1e-6)) {
+            ++means2d_skipped;
+            continue;
+          }
+          const double err = std::abs(fd - an) / std::max({std::abs(fd), std::abs(an), 1e-6});
+          CHECK(err <= 5e-3);
+          worst = std::max(worst, err);
+        }
+        WARN(path << " " << mode_name(mode) << " degree " << degree << ": worst relative error "
+                  << worst);
+      }
+    }
+  }
+  CHECK(means2d_skipped <= 2);
+}
+
+TEST_CASE("train modes: the 3D filter is Mip-Splatting's compute_3D_filter", "[train]") {
+  // Two cameras at the origin looking down +z (fx 100 and 50), 64 x 48, cx = 32, cy = 24.
+  std::vector<Camera> cams(2);
+  for (int k = 0; k < 2; ++k) {
+    cams[k].name = "c" + std::to_string(k);
+    cams[k].width = 64;
+    cams[k].height = 48;
+    cams[k].fx = cams[k].fy = k == 0 ? 100 : 50;
+    cams[k].cx = 32;
+    cams[k].cy = 24;
+    cams[k].R = Eigen::Matrix3d::Identity();
+    cams[k].t = Eigen::Vector3d(0, 0, k == 0 ? 0 : 1);  // camera 1 one unit further back
+  }
+  SplatParams p;
+  p.resize(5, 0);
+  const float means[5][3] = {
+      {0, 0, 2},      // seen by both: depth 2 (camera 0) and 3 -> 2
+      {0.3f, 0, 1},   // camera 0: x = 62 inside; camera 1: depth 2, x = 39.5 -> 1
+      {0.45f, 0, 1},  // camera 0: x = 77 > 1.15 W = 73.6, out; camera 1: x = 43.25 -> 2
+      {0, 0, 0.1f},   // camera 0: depth 0.1 <= 0.2; camera 1: depth 1.1 -> 1.1
+      {0, 0, -5},     // behind both: the largest depth of those seen, 2
+  };
+  for (int i = 0; i < 5; ++i)
+    for (int a = 0; a < 3; ++a) p.means[i * 3 + a] = means[i][a];
+  for (int i = 0; i < 5; ++i) p.quats[i * 4] = 1;
+  const std::vector<float> f = compute_filter_3d(p, cams);
+  const double k = std::sqrt(0.2) / 100;  // the largest focal
+  const double depth[5] = {2, 1, 2, 1.1, 2};
+  for (int i = 0; i < 5; ++i) {
+    INFO("Gaussian " << i);
+    CHECK(f[size_t(i)] == Approx(depth[i] * k).epsilon(1e-6));
+  }
+}
