@@ -3,7 +3,8 @@
 # present. Needs root (or sudo) only when something is missing.
 set -euo pipefail
 packages=(cmake g++ make libeigen3-dev libglm-dev libstb-dev libopenexr-dev catch2 zlib1g-dev
-          nlohmann-json3-dev ccache libopencv-dev libzstd-dev libwebp-dev pkg-config)
+          nlohmann-json3-dev ccache libopencv-dev libzstd-dev libwebp-dev pkg-config
+          libcpp-httplib-dev chromium)  # chromium: the viewer's browser test (tests/test_view_browser.cpp)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
