@@ -4,7 +4,8 @@
 set -euo pipefail
 packages=(cmake g++ make libeigen3-dev libglm-dev libstb-dev libopenexr-dev catch2 zlib1g-dev
           nlohmann-json3-dev ccache libopencv-dev libzstd-dev libwebp-dev pkg-config
-          libcairo2-dev fonts-dejavu-core)
+          libcairo2-dev fonts-dejavu-core libcpp-httplib-dev
+          chromium)  # chromium: the viewer's browser test (tests/test_view_browser.cpp)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -154,8 +154,11 @@ Result<SceneInputs> load_scene_inputs(const SceneInputOptions& o) {
     }
   }
   // Resolve the close-up: COLMAP (reference model) first, then the split, then a camera file.
-  const int registered = cams.index_of(o.closeup);
-  if (registered >= 0) {
+  const int registered = o.closeup_camera ? -1 : cams.index_of(o.closeup);
+  if (o.closeup_camera) {
+    in.closeup = *o.closeup_camera;
+    in.closeup_pose_source = "given";
+  } else if (registered >= 0) {
     in.closeup = cams.cameras[size_t(registered)];
     in.closeup_pose_source = "colmap";
   } else if (have_split) {
@@ -175,7 +178,7 @@ Result<SceneInputs> load_scene_inputs(const SceneInputOptions& o) {
   }
   in.closeup.name = o.closeup;
   // GT size, when present, sets the close-up render size.
-  if (!o.scene_dir.empty()) {
+  if (!o.scene_dir.empty() && !o.closeup_camera) {
     const fs::path gt = root / "closeup_gt" / fs::path(o.closeup).filename();
     if (file_exists(gt.string())) {
       auto img = gs::read_image(gt.string());

@@ -20,14 +20,15 @@
 // docs/cameras.md §9). Invalid camera entries are left out (gs::CameraLoadOptions::strict off).
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "attention/runtime/status.h"
 #include "gs/cameras/camera.h"
+#include "gs/formats/scene_io.h"
 #include "gs/gaussians.h"
 #include "gs/image_io.h"
-#include "gs/formats/scene_io.h"
 
 namespace macro::enhance {
 
@@ -39,6 +40,9 @@ struct SceneInputOptions {
   std::string cameras;   // reference cameras (any load_cameras format)
   std::string closeups;  // close-up poses: split.json or any camera file holding the frame
   std::string images;    // folder with the reference images
+  // Given: the close-up camera as it is (pose and intrinsics, named `closeup`), instead of one
+  // resolved from the files; no ground-truth resize (a viewer's camera placed by hand).
+  std::optional<gs::Camera> closeup_camera;
   gs::LoadLimits limits;
 };
 
@@ -46,7 +50,7 @@ struct SceneInputs {
   std::string scene_path, cameras_path, closeup_source, images_dir;
   gs::GaussianCloud cloud;
   gs::Camera closeup;                         // resolved pose, intrinsics at the close-up size
-  std::string closeup_pose_source;            // "colmap" or "split" or "cameras"
+  std::string closeup_pose_source;            // "colmap", "split", "cameras" or "given"
   std::vector<gs::Camera> candidates;         // in name order, intrinsics at their image size
   std::vector<std::string> candidate_images;  // image paths, same order
   std::vector<std::string> notes;             // what was skipped and why

@@ -57,6 +57,13 @@ const std::vector<IncludeRule>& include_rules() {
         "enhance/datasets/", "enhance/enhance.h", "enhance/side_by_side.h"},
        "a figure draws what it is given and knows nothing of what made it"},
       {"enhance/", {"apps/"}, "libraries never include the command-line mains"},
+      // The viewer sits on top of enhance/ and gs/: only apps/ and tests/ use it.
+      {"enhance/*", {"enhance/view/"}, "the viewer is used by apps/ and tests/ only"},
+      {"enhance/macro/", {"enhance/view/"}, "the viewer is used by apps/ and tests/ only"},
+      {"enhance/transfer/", {"enhance/view/"}, "the viewer is used by apps/ and tests/ only"},
+      {"enhance/metrics/", {"enhance/view/"}, "the viewer is used by apps/ and tests/ only"},
+      {"enhance/bench/", {"enhance/view/"}, "the viewer is used by apps/ and tests/ only"},
+      {"enhance/datasets/", {"enhance/view/"}, "the viewer is used by apps/ and tests/ only"},
   };
   return rules;
 }

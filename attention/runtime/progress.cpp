@@ -87,7 +87,21 @@ void Progress::draw(bool final_line) {
   std::fflush(stderr);
 }
 
+namespace {
+std::mutex g_observer_mutex;
+LogObserver g_observer;
+}  // namespace
+
+void set_log_observer(LogObserver observer) {
+  std::lock_guard<std::mutex> lock(g_observer_mutex);
+  g_observer = std::move(observer);
+}
+
 void log_info(const std::string& stage, const std::string& message) {
+  {
+    std::lock_guard<std::mutex> lock(g_observer_mutex);
+    if (g_observer) g_observer(stage, message);
+  }
   if (quiet()) return;
   std::fprintf(stderr, "[%s] %s\n", stage.c_str(), message.c_str());
 }

@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <cstddef>
+#include <functional>
 #include <mutex>
 #include <string>
 
@@ -38,6 +39,11 @@ class Progress {
 
 // A one-line note on stderr unless quiet ("stage: message").
 void log_info(const std::string& stage, const std::string& message);
+
+// Every log_info line, quiet or not, is also handed to the observer set here (one at a time; an
+// empty function removes it). It runs on the logging thread; a viewer shows a job's stages by it.
+using LogObserver = std::function<void(const std::string& stage, const std::string& message)>;
+void set_log_observer(LogObserver observer);
 
 // Wall-clock milliseconds since t0 (steady clock): the per-stage timings of long jobs.
 inline double ms_since(std::chrono::steady_clock::time_point t0) {
