@@ -8,6 +8,7 @@
 #include "attention/runtime/progress.h"
 #include "enhance/enhance.h"
 #include "enhance/macro/plan.h"
+#include "enhance/side_by_side.h"
 #include "enhance/view/view_session.h"
 #include "gs/image_io.h"
 
