@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <optional>
 #include <random>
 
 #include "attention/runtime/gemm.h"
@@ -64,57 +65,189 @@ size_t nearest_entry(const std::vector<float>& cb, float v) {
   return (v - cb[hi - 1] <= cb[hi] - v) ? lo : hi;
 }
 
+namespace {
+
+constexpr size_t kPointBlock = 256, kCentroidBlock = 1024;
+
+// Centroids packed for the GEMM in blocks of kCentroidBlock, with their squared norms.
+// ||x - c||^2 = ||x||^2 - 2 x.c + ||c||^2: ||x||^2 is the same for every c, so a point's nearest c
+// minimises ||c||^2 - 2 x.c, which the GEMM gives with alpha = -2 and a column bias.
+struct PackedSet {
+  size_t k = 0;
+  std::vector<PackedWeights> blocks;
+  std::vector<float> norms;
+};
+
+PackedSet pack_set(const float* c, size_t k, size_t dim, Isa isa) {
+  PackedSet s;
+  s.k = k;
+  s.norms.resize(k);
+  for (size_t j = 0; j < k; ++j) {
+    double t = 0;
+    for (size_t d = 0; d < dim; ++d) t += double(c[j * dim + d]) * c[j * dim + d];
+    s.norms[j] = float(t);
+  }
+  for (size_t c0 = 0; c0 < k; c0 += kCentroidBlock) {
+    const size_t cn = std::min(kCentroidBlock, k - c0);
+    s.blocks.push_back(PackedWeights::pack(c + c0 * dim, int64_t(cn), int64_t(dim), int64_t(dim),
+                                           WeightType::kF32, isa));
+  }
+  return s;
+}
+
+// For rows <= kPointBlock rows of x: the `p` smallest ||c||^2 - 2 x.c of the set, ascending (the
+// lower index first on a tie), in best[r * p ..], their indices in index[r * p ..]. `d` holds
+// kPointBlock * kCentroidBlock floats.
+void nearest_in_set(const float* x, size_t rows, size_t ld, const PackedSet& s, size_t p, float* d,
+                    float* best, uint32_t* index) {
+  std::fill(best, best + rows * p, std::numeric_limits<float>::infinity());
+  std::fill(index, index + rows * p, 0u);
+  for (size_t b = 0; b < s.blocks.size(); ++b) {
+    const size_t c0 = b * kCentroidBlock, cn = std::min(kCentroidBlock, s.k - c0);
+    GemmParams gp;
+    gp.alpha = -2.f;
+    gp.bias_n = s.norms.data() + c0;
+    gemm_packed(int64_t(rows), x, int64_t(ld), s.blocks[b], d, int64_t(cn), gp, nullptr);
+    for (size_t i = 0; i < rows; ++i) {
+      const float* row = d + i * cn;
+      float* bi = best + i * p;
+      uint32_t* ii = index + i * p;
+      if (p == 1) {
+        float m = row[0];
+        for (size_t j = 1; j < cn; ++j) m = row[j] < m ? row[j] : m;
+        if (!(m < bi[0])) continue;  // a tie keeps the earlier block's lower index
+        size_t j = 0;
+        while (row[j] != m) ++j;
+        bi[0] = m;
+        ii[0] = uint32_t(c0 + j);
+        continue;
+      }
+      for (size_t j = 0; j < cn; ++j) {
+        if (!(row[j] < bi[p - 1])) continue;
+        size_t q = p - 1;
+        for (; q > 0 && row[j] < bi[q - 1]; --q) bi[q] = bi[q - 1], ii[q] = ii[q - 1];
+        bi[q] = row[j];
+        ii[q] = uint32_t(c0 + j);
+      }
+    }
+  }
+}
+
+}  // namespace
+
 void assign_nearest(const float* x, size_t n, size_t dim, size_t ld, const float* centroids,
                     size_t k, uint32_t* labels, ThreadPool& pool, Isa isa) {
-  constexpr size_t kPointBlock = 256, kCentroidBlock = 1024;
-  // ||x - c||^2 = ||x||^2 - 2 x.c + ||c||^2: ||x||^2 is the same for every c, so each point takes
-  // the c minimising ||c||^2 - 2 x.c, which the GEMM gives with alpha = -2 and a column bias.
-  const size_t blocks = (k + kCentroidBlock - 1) / kCentroidBlock;
-  std::vector<PackedWeights> packed(blocks);
-  std::vector<float> norms(k);
-  for (size_t j = 0; j < k; ++j) {
-    double s = 0;
-    for (size_t d = 0; d < dim; ++d) s += double(centroids[j * dim + d]) * centroids[j * dim + d];
-    norms[j] = float(s);
-  }
-  for (size_t b = 0; b < blocks; ++b) {
-    const size_t c0 = b * kCentroidBlock, cn = std::min(kCentroidBlock, k - c0);
-    packed[b] = PackedWeights::pack(centroids + c0 * dim, int64_t(cn), int64_t(dim), int64_t(dim),
-                                    WeightType::kF32, isa);
-  }
+  const PackedSet set = pack_set(centroids, k, dim, isa);
   const size_t point_blocks = (n + kPointBlock - 1) / kPointBlock;
-  std::vector<std::vector<float>> scratch(size_t(pool.size()));
   pool.parallel_for(
       point_blocks,
-      [&](size_t pb0, size_t pb1, int worker) {
-        std::vector<float>& d = scratch[size_t(worker)];
-        d.resize(kPointBlock * kCentroidBlock);
-        std::vector<float> best(kPointBlock);
+      [&](size_t pb0, size_t pb1, int) {
+        std::vector<float> d(kPointBlock * kCentroidBlock), best(kPointBlock);
         for (size_t pb = pb0; pb < pb1; ++pb) {
           const size_t p0 = pb * kPointBlock, pn = std::min(kPointBlock, n - p0);
-          std::fill(best.begin(), best.end(), std::numeric_limits<float>::infinity());
-          for (size_t i = 0; i < pn; ++i) labels[p0 + i] = 0;
-          for (size_t b = 0; b < blocks; ++b) {
-            const size_t c0 = b * kCentroidBlock, cn = std::min(kCentroidBlock, k - c0);
-            GemmParams p;
-            p.alpha = -2.f;
-            p.bias_n = norms.data() + c0;
-            gemm_packed(int64_t(pn), x + p0 * ld, int64_t(ld), packed[b], d.data(), int64_t(cn), p,
-                        nullptr);
-            for (size_t i = 0; i < pn; ++i) {
-              const float* row = d.data() + i * cn;
-              float m = row[0];
-              for (size_t j = 1; j < cn; ++j) m = row[j] < m ? row[j] : m;
-              if (!(m < best[i])) continue;  // a tie keeps the earlier block's lower index
-              size_t j = 0;
-              while (row[j] != m) ++j;
-              best[i] = m;
-              labels[p0 + i] = uint32_t(c0 + j);
+          nearest_in_set(x + p0 * ld, pn, ld, set, 1, d.data(), best.data(), labels + p0);
+        }
+      },
+      1);
+}
+
+void assign_grouped(const float* x, size_t n, size_t dim, size_t ld, const float* centroids,
+                    size_t k, uint32_t* labels, size_t groups, size_t probes, ThreadPool& pool,
+                    Isa isa) {
+  groups = std::max<size_t>(1, std::min(groups, k));
+  probes = std::max<size_t>(1, std::min(probes, groups));
+  // The centroids' own clusters, and the centroids reordered group by group.
+  const KMeansResult coarse = kmeans(centroids, k, dim, dim, groups, 4, 0x9e3779b9u, "", pool, isa);
+  std::vector<size_t> offset(groups + 1, 0);
+  for (uint32_t g : coarse.labels) ++offset[g + 1];
+  for (size_t g = 0; g < groups; ++g) offset[g + 1] += offset[g];
+  std::vector<uint32_t> original(k);
+  std::vector<float> sorted(k * dim);
+  {
+    std::vector<size_t> fill(offset.begin(), offset.end() - 1);
+    for (size_t j = 0; j < k; ++j) {
+      const size_t at = fill[coarse.labels[j]]++;
+      original[at] = uint32_t(j);
+      std::copy_n(centroids + j * dim, dim, sorted.begin() + ptrdiff_t(at * dim));
+    }
+  }
+  std::vector<PackedSet> sets(groups);
+  pool.parallel_for(groups, [&](size_t g0, size_t g1, int) {
+    for (size_t g = g0; g < g1; ++g)
+      if (offset[g + 1] > offset[g])
+        sets[g] = pack_set(sorted.data() + offset[g] * dim, offset[g + 1] - offset[g], dim, isa);
+  });
+  // Each point's `probes` nearest group centres.
+  const PackedSet centres = pack_set(coarse.centroids.data(), groups, dim, isa);
+  std::vector<uint32_t> probe(n * probes);
+  const size_t point_blocks = (n + kPointBlock - 1) / kPointBlock;
+  pool.parallel_for(
+      point_blocks,
+      [&](size_t pb0, size_t pb1, int) {
+        std::vector<float> d(kPointBlock * kCentroidBlock), best(kPointBlock * probes);
+        for (size_t pb = pb0; pb < pb1; ++pb) {
+          const size_t p0 = pb * kPointBlock, pn = std::min(kPointBlock, n - p0);
+          nearest_in_set(x + p0 * ld, pn, ld, centres, probes, d.data(), best.data(),
+                         probe.data() + p0 * probes);
+        }
+      },
+      1);
+  // Per group, the (point, probe slot) pairs that search it, in point order.
+  std::vector<size_t> first(groups + 1, 0);
+  for (uint32_t g : probe) ++first[g + 1];
+  for (size_t g = 0; g < groups; ++g) first[g + 1] += first[g];
+  std::vector<uint32_t> pair(n * probes);  // point * probes + slot
+  {
+    std::vector<size_t> fill(first.begin(), first.end() - 1);
+    for (size_t i = 0; i < n * probes; ++i) pair[fill[probe[i]]++] = uint32_t(i);
+  }
+  std::vector<float> dist(n * probes, std::numeric_limits<float>::infinity());
+  std::vector<uint32_t> found(n * probes, 0);
+  pool.parallel_for(
+      groups,
+      [&](size_t g0, size_t g1, int) {
+        std::vector<float> d(kPointBlock * kCentroidBlock), rows(kPointBlock * dim),
+            best(kPointBlock);
+        std::vector<uint32_t> local(kPointBlock);
+        for (size_t g = g0; g < g1; ++g) {
+          if (offset[g + 1] == offset[g]) continue;
+          for (size_t a = first[g]; a < first[g + 1]; a += kPointBlock) {
+            const size_t m = std::min(kPointBlock, first[g + 1] - a);
+            for (size_t r = 0; r < m; ++r)
+              std::copy_n(x + size_t(pair[a + r] / probes) * ld, dim,
+                          rows.begin() + ptrdiff_t(r * dim));
+            nearest_in_set(rows.data(), m, dim, sets[g], 1, d.data(), best.data(), local.data());
+            for (size_t r = 0; r < m; ++r) {
+              dist[pair[a + r]] = best[r];
+              found[pair[a + r]] = original[offset[g] + local[r]];
             }
           }
         }
       },
       1);
+  // The best of each point's probes (the lower index on a tie); a point whose probed groups were
+  // all empty searches every centroid.
+  pool.parallel_for(n, [&](size_t i0, size_t i1, int) {
+    for (size_t i = i0; i < i1; ++i) {
+      float b = std::numeric_limits<float>::infinity();
+      uint32_t l = 0;
+      for (size_t s = 0; s < probes; ++s) {
+        const float v = dist[i * probes + s];
+        const uint32_t c = found[i * probes + s];
+        if (v < b || (v == b && c < l)) b = v, l = c;
+      }
+      if (!(b < std::numeric_limits<float>::infinity())) {
+        double bd = std::numeric_limits<double>::infinity();
+        for (size_t c = 0; c < k; ++c) {
+          double t = 0;
+          for (size_t e = 0; e < dim; ++e)
+            t += std::pow(double(x[i * ld + e]) - centroids[c * dim + e], 2);
+          if (t < bd) bd = t, l = uint32_t(c);
+        }
+      }
+      labels[i] = l;
+    }
+  });
 }
 
 KMeansResult kmeans(const float* x, size_t n, size_t dim, size_t ld, size_t k, int iterations,
@@ -141,11 +274,22 @@ KMeansResult kmeans(const float* x, size_t n, size_t dim, size_t ld, size_t k, i
     std::swap(pick[i], pick[j]);
     copy_row(i, pick[i]);
   }
-  Progress progress(stage, size_t(iterations) + 1, 0.5);
+  std::optional<Progress> progress;
+  if (!stage.empty()) progress.emplace(stage, size_t(iterations) + 1, 0.5);
+  // Large palettes search each point's nearest groups of centroids only (sog_quantize.h).
+  const bool grouped = k > kExactMaxCentroids;
+  const size_t groups = size_t(std::lround(std::sqrt(double(k))));
+  auto assign = [&] {
+    if (grouped)
+      assign_grouped(x, n, dim, ld, r.centroids.data(), k, r.labels.data(), groups, kGroupProbes,
+                     pool, isa);
+    else
+      assign_nearest(x, n, dim, ld, r.centroids.data(), k, r.labels.data(), pool, isa);
+  };
   std::vector<double> sums(k * dim);
   std::vector<uint32_t> counts(k);
   for (int it = 0; it < iterations; ++it) {
-    assign_nearest(x, n, dim, ld, r.centroids.data(), k, r.labels.data(), pool, isa);
+    assign();
     std::fill(sums.begin(), sums.end(), 0.0);
     std::fill(counts.begin(), counts.end(), 0u);
     for (size_t i = 0; i < n; ++i) {
@@ -161,12 +305,11 @@ KMeansResult kmeans(const float* x, size_t n, size_t dim, size_t ld, size_t k, i
       for (size_t d = 0; d < dim; ++d)
         r.centroids[c * dim + d] = float(sums[c * dim + d] / double(counts[c]));
     }
-    progress.advance();
+    if (progress) progress->advance();
   }
   // The labels of the final centroids.
-  assign_nearest(x, n, dim, ld, r.centroids.data(), k, r.labels.data(), pool, isa);
-  progress.advance();
-  progress.finish();
+  assign();
+  if (progress) progress->advance(), progress->finish();
   return r;
 }
 
