@@ -1,6 +1,6 @@
 // macro convert IN OUT: read any splat scene format (.ply, compressed .ply, .splat, .spz, SOG,
-// gsplat checkpoint) and write .ply, .splat or .spz (chosen by OUT's extension). Prints one summary
-// line on stdout.
+// gsplat checkpoint) and write .ply, .splat, .spz or SOG (chosen by OUT's name: a .sog zip, or a
+// file named meta.json for the folder form). Prints one summary line on stdout.
 #include <climits>
 #include <cstdio>
 
@@ -14,12 +14,16 @@ int run_convert(std::vector<std::string> argv) {
   Args args(std::move(argv));
   if (args.flag("--help")) {
     std::printf(
-        "usage: macro convert IN OUT [--spz-version 2|3|4] [--max-gaussians N] [--quiet]\n"
+        "usage: macro convert IN OUT [--spz-version 2|3|4] [--sog-iterations N]\n"
+        "                    [--max-gaussians N] [--quiet]\n"
         "  IN   .ply (Inria/gsplat, binary or ascii), SuperSplat .compressed.ply, .splat, .spz\n"
         "       (v2-v4), SOG (.sog zip, a folder with meta.json, or that meta.json), gsplat\n"
         "       checkpoint (.pt)\n"
-        "  OUT  .ply (Inria layout), .splat (SH degree 0) or .spz, by extension\n"
-        "  --spz-version  .spz version to write (default 4, the reference library's current)\n");
+        "  OUT  by name: .ply (Inria layout), .splat (SH degree 0), .spz, .sog (SOG version 2 in\n"
+        "       one zip) or DIR/meta.json (SOG version 2 as a folder: the WebP images are written\n"
+        "       next to meta.json)\n"
+        "  --spz-version     .spz version to write (default 4, the reference library's current)\n"
+        "  --sog-iterations  k-means iterations of the SOG SH palette (default 10; 1-100)\n");
     return 0;
   }
   if (Status s = apply_common_flags(args); !s) return fail("convert", s);
@@ -28,6 +32,7 @@ int run_convert(std::vector<std::string> argv) {
       args.int_or("--max-gaussians", static_cast<int>(limits.max_gaussians), 1, INT_MAX));
   gs::SaveOptions save;
   save.spz_version = args.int_or("--spz-version", save.spz_version, 2, 4);
+  save.sog_iterations = args.int_or("--sog-iterations", save.sog_iterations, 1, 100);
   std::vector<std::string> files = args.positionals();
   if (Status s = args.finish(); !s) return fail("convert", s);
   if (files.size() != 2) {
@@ -35,9 +40,15 @@ int run_convert(std::vector<std::string> argv) {
                  files.size());
     return 2;
   }
-  // The extension decides the format; checked (and the folder made) before IN is read.
-  if (Status s = prepare_output(files[1], "OUT", {".ply", ".splat", ".spz"}); !s)
-    return fail("convert", s);
+  // The name decides the format; checked (and the folder made) before IN is read. A file named
+  // meta.json is the folder form of SOG.
+  const bool sog_folder = gs::is_sog_folder_output(files[1]);
+  if (Status s = sog_folder ? prepare_output(files[1], "OUT", {})
+                            : prepare_output(files[1], "OUT", {".ply", ".splat", ".spz", ".sog"});
+      !s)
+    return fail(
+        "convert",
+        sog_folder ? s : Status::error(s.message() + " (or DIR/meta.json for a SOG folder)"));
   gs::LoadReport report;
   Result<gs::GaussianCloud> cloud = gs::load_scene(files[0], limits, &report);
   if (!cloud) return fail("convert", cloud.status());
@@ -56,8 +67,8 @@ int run_convert(std::vector<std::string> argv) {
   return 0;
 }
 
-const bool registered =
-    register_command({"convert", "convert a splat scene between .ply/.splat/.spz", run_convert});
+const bool registered = register_command(
+    {"convert", "convert a splat scene between .ply/.splat/.spz/SOG", run_convert});
 
 }  // namespace
 }  // namespace macro::cli

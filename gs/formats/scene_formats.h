@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "attention/runtime/io/zip_writer.h"
 #include "attention/runtime/status.h"
 #include "gs/formats/ply_reader.h"
 #include "gs/formats/scene_io.h"
@@ -59,6 +60,11 @@ Result<GaussianCloud> decode_sog_zip(const uint8_t* data, size_t size, const std
                                      const LoadLimits& limits);
 // A SOG folder (holding meta.json).
 Result<GaussianCloud> decode_sog_folder(const std::string& folder, const LoadLimits& limits);
+// SOG version 2 (format_sog_write.cpp): the WebP images, then meta.json last. `iterations`: the SH
+// palette's k-means iterations. A Gaussian with a non-finite value or a scale <= 0 is an error
+// naming it and the field.
+Result<std::vector<ZipMember>> encode_sog_members(const GaussianCloud& cloud,
+                                                  const std::string& file, int iterations);
 
 // gsplat training checkpoint (torch zip with splats.means, .scales, .quats, .opacities, .sh0,
 // .shN).

@@ -13,6 +13,7 @@
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/io/zip_reader.h"
+#include "attention/runtime/io/zip_writer.h"
 #include "attention/runtime/progress.h"
 #include "gs/formats/ply_reader.h"
 #include "gs/formats/scene_formats.h"
@@ -233,15 +234,23 @@ Result<GaussianCloud> load_scene(const std::string& path, const LoadLimits& limi
   return load_scene_from_memory(bytes.data(), bytes.size(), path, limits, report);
 }
 
-Result<std::vector<uint8_t>> encode_scene(const GaussianCloud& cloud, SceneFormat format,
-                                          const std::string& name, const SaveOptions& options) {
+namespace {
+Status check_consistent(const GaussianCloud& cloud, const std::string& name) {
   const size_t N = cloud.size();
-  const size_t K = static_cast<size_t>(cloud.sh_coeffs());
-  if (cloud.sh_degree < 0 || cloud.sh_degree > 3 || cloud.position.size() != N * 3 ||
-      cloud.scale.size() != N * 3 || cloud.rotation.size() != N * 4 || cloud.sh.size() != N * K * 3)
+  const size_t K =
+      cloud.sh_degree < 0 || cloud.sh_degree > 3 ? 0 : static_cast<size_t>(cloud.sh_coeffs());
+  if (K == 0 || cloud.position.size() != N * 3 || cloud.scale.size() != N * 3 ||
+      cloud.rotation.size() != N * 4 || cloud.sh.size() != N * K * 3)
     return Status::error(name + ": inconsistent GaussianCloud (array sizes do not match " +
                          std::to_string(N) + " Gaussians of SH degree " +
                          std::to_string(cloud.sh_degree) + ")");
+  return Status::ok();
+}
+}  // namespace
+
+Result<std::vector<uint8_t>> encode_scene(const GaussianCloud& cloud, SceneFormat format,
+                                          const std::string& name, const SaveOptions& options) {
+  MACRO_TRY(check_consistent(cloud, name));
   switch (format) {
     case SceneFormat::kPly:
       return formats::encode_ply(cloud, name);
@@ -249,14 +258,40 @@ Result<std::vector<uint8_t>> encode_scene(const GaussianCloud& cloud, SceneForma
       return formats::encode_splat(cloud, name);
     case SceneFormat::kSpz:
       return formats::encode_spz(cloud, name, options.spz_version);
+    case SceneFormat::kSog: {
+      MACRO_ASSIGN_OR_RETURN(std::vector<ZipMember> members,
+                             formats::encode_sog_members(cloud, name, options.sog_iterations));
+      return write_zip_stored(members, name);
+    }
     case SceneFormat::kCompressedPly:
-    case SceneFormat::kSog:
     case SceneFormat::kGsplatCheckpoint:
       break;
   }
   return Status::error(name + ": writing " + scene_format_name(format) +
-                       " is not supported (use .ply, .splat or .spz)");
+                       " is not supported (use .ply, .splat, .spz, .sog or meta.json)");
 }
+
+bool is_sog_folder_output(const std::string& path) {
+  return path == "meta.json" || ends_with(path, "/meta.json");
+}
+
+namespace {
+// A SOG folder: each image written atomically next to meta.json, meta.json last, so a reader never
+// finds a meta.json naming images that are not there yet.
+Status save_sog_folder(const GaussianCloud& cloud, const std::string& path,
+                       const SaveOptions& options) {
+  const size_t slash = path.find_last_of('/');
+  const std::string folder = slash == std::string::npos ? "." : path.substr(0, slash);
+  MACRO_TRY(check_consistent(cloud, path));
+  if (!is_directory(folder))
+    return Status::error(path + ": the SOG folder '" + folder + "' does not exist");
+  MACRO_ASSIGN_OR_RETURN(std::vector<ZipMember> members,
+                         formats::encode_sog_members(cloud, path, options.sog_iterations));
+  for (const ZipMember& m : members)
+    MACRO_TRY(write_file_atomic(folder + "/" + m.name, m.bytes.data(), m.bytes.size()));
+  return Status::ok();
+}
+}  // namespace
 
 Status save_scene(const GaussianCloud& cloud, const std::string& path, const SaveOptions& options) {
   const std::string ext = lower_extension(path);
@@ -269,11 +304,16 @@ Status save_scene(const GaussianCloud& cloud, const std::string& path, const Sav
     format = SceneFormat::kSplat;
   else if (ext == ".spz")
     format = SceneFormat::kSpz;
-  else if (ext == ".sog" || ext == ".pt" || ext == ".pth" || ext == ".ckpt")
-    format = ext == ".sog" ? SceneFormat::kSog : SceneFormat::kGsplatCheckpoint;
+  else if (ext == ".sog")
+    format = SceneFormat::kSog;
+  else if (is_sog_folder_output(path))
+    return save_sog_folder(cloud, path, options);
+  else if (ext == ".pt" || ext == ".pth" || ext == ".ckpt")
+    format = SceneFormat::kGsplatCheckpoint;
   else
     return Status::error(path + ": unknown output extension '" + ext +
-                         "' (expected .ply, .splat or .spz)");
+                         "' (expected .ply, .splat, .spz, .sog, or a file named meta.json for a "
+                         "SOG folder)");
   MACRO_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, encode_scene(cloud, format, path, options));
   return write_file_atomic(path, bytes.data(), bytes.size());
 }

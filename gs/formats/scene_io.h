@@ -58,15 +58,20 @@ Result<GaussianCloud> load_scene_from_memory(const uint8_t* data, size_t size,
 Result<SceneFormat> detect_scene_format(const uint8_t* data, size_t size, const std::string& name);
 
 struct SaveOptions {
-  int spz_version = 4;  // .spz: 2, 3 or 4 (the reference library's current version)
+  int spz_version = 4;      // .spz: 2, 3 or 4 (the reference library's current version)
+  int sog_iterations = 10;  // SOG: k-means iterations of the SH palette (splat-transform's default)
 };
 
-// By extension: .ply (Inria binary little-endian layout), .splat (SH degree 0: higher bands are
-// dropped, with a note naming how many coefficients), .spz (options.spz_version). Atomic write.
-// Compressed .ply, SOG and checkpoints are read-only.
+// By name: .ply (Inria binary little-endian layout), .splat (SH degree 0: higher bands are
+// dropped, with a note naming how many coefficients), .spz (options.spz_version), .sog (SOG
+// version 2 in one zip), a file named meta.json (SOG version 2 as a folder: the images are written
+// next to it, each atomically, meta.json last). Atomic write. Compressed .ply and checkpoints are
+// read-only.
 Status save_scene(const GaussianCloud& cloud, const std::string& path,
                   const SaveOptions& options = {});
-// The bytes save_scene would write.
+// True for a path save_scene writes as a SOG folder (its file name is meta.json).
+bool is_sog_folder_output(const std::string& path);
+// The bytes save_scene would write (SceneFormat::kSog: the .sog zip).
 Result<std::vector<uint8_t>> encode_scene(const GaussianCloud& cloud, SceneFormat format,
                                           const std::string& name, const SaveOptions& options = {});
 

@@ -1,6 +1,9 @@
 // bench formats [--n N] [--reps R]: decode time of a synthetic N-Gaussian scene (default 1M, SH 3)
 // in each format, from memory and (for .ply) from a file, against a same-run baseline: one memcpy
 // of the .ply's bytes (the least any loader must do to touch them).
+// bench formats --sog-scene PATH [--sog-reps R]: encode time of that scene as SOG (k-means SH
+// palette, WebP images; multithreaded, wall and CPU time) against a same-run baseline: encoding it
+// as .ply. R defaults to 1 (a 500k-Gaussian scene takes minutes), without a warm-up.
 #include <unistd.h>
 #include <algorithm>
 #include <cmath>
@@ -14,6 +17,7 @@
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/progress.h"
+#include "attention/runtime/thread_pool.h"
 #include "bench_registry.h"
 #include "gs/formats/scene_io.h"
 
@@ -53,16 +57,51 @@ gs::GaussianCloud synthetic(size_t n) {
   return c;
 }
 
+int run_sog(const std::string& path, int reps) {
+  auto cloud = gs::load_scene(path);
+  if (!cloud) {
+    std::fprintf(stderr, "%s\n", cloud.status().message().c_str());
+    return 1;
+  }
+  std::printf("scene: %s, %zu Gaussians, SH degree %d; %d threads; medians of %d run(s)\n",
+              path.c_str(), cloud->size(), cloud->sh_degree, ThreadPool::global().size(), reps);
+  size_t bytes = 0;
+  const Timing base = median_timing(reps, [&] {
+    auto b = gs::encode_scene(*cloud, gs::SceneFormat::kPly, "bench.ply");
+    if (!b) std::abort();
+  });
+  const Timing sog = median_timing(
+      reps,
+      [&] {
+        auto b = gs::encode_scene(*cloud, gs::SceneFormat::kSog, "bench.sog");
+        if (!b) std::abort();
+        bytes = b->size();
+      },
+      false);
+  std::printf("%-34s %9.1f ms wall %9.1f ms CPU\n", "baseline: encode .ply", base.wall * 1e3,
+              base.cpu * 1e3);
+  std::printf("%-34s %9.1f ms wall %9.1f ms CPU  %6.1fx baseline (CPU)  (%.1f MB)\n",
+              "encode .sog (SOG v2 zip)", sog.wall * 1e3, sog.cpu * 1e3, sog.cpu / base.cpu,
+              bytes / 1e6);
+  return 0;
+}
+
 int run(int argc, char** argv) {
   size_t n = 1'000'000;
-  int reps = 5;
+  int reps = 5, sog_reps = 1;
+  std::string sog_scene;
   for (int i = 1; i + 1 < argc; i += 2) {
     if (!std::strcmp(argv[i], "--n"))
       n = std::strtoull(argv[i + 1], nullptr, 10);
     else if (!std::strcmp(argv[i], "--reps"))
       reps = std::atoi(argv[i + 1]);
+    else if (!std::strcmp(argv[i], "--sog-scene"))
+      sog_scene = argv[i + 1];
+    else if (!std::strcmp(argv[i], "--sog-reps"))
+      sog_reps = std::max(1, std::atoi(argv[i + 1]));
   }
   set_quiet(true);
+  if (!sog_scene.empty()) return run_sog(sog_scene, sog_reps);
   const gs::GaussianCloud cloud = synthetic(n);
   std::printf(
       "scene: %zu Gaussians, SH degree 3; medians of process CPU time (single-threaded "
