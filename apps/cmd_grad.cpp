@@ -11,13 +11,14 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: macro grad --scene S.ply --cameras C --camera NAME --target IMG --out G.safetensors\n"
-    "         [--mode classic] [--threads N] [--quiet]\n"
+    "         [--mode classic] [--precision float|double] [--threads N] [--quiet]\n"
     "  --scene    Inria-layout .ply, read as raw parameters (log scales, logit opacities,\n"
     "             raw quaternions)\n"
     "  --target   the photo to fit: PNG/JPEG (byte / 255) or EXR (R, G, B), the camera's size\n"
     "  --out      loss, l1, ssim [1], color [H,W,3], alpha [H,W], grad.means [N,3],\n"
     "             grad.scales [N,3], grad.quats [N,4], grad.opacities [N], grad.sh0 [N,1,3],\n"
     "             grad.shN [N,K-1,3], grad.means2d [N,2] (F32, gsplat names)\n"
+    "  --precision float (the SIMD float path; default) or double (the scalar reference)\n"
     "  loss = 0.8 L1 + 0.2 (1 - SSIM), SSIM 11x11 valid (docs/training.md)\n";
 
 int run_grad(std::vector<std::string> argv) {
@@ -34,6 +35,7 @@ int run_grad(std::vector<std::string> argv) {
   job.target_path = args.required("--target");
   job.out_path = args.required("--out");
   job.mode = args.value_or("--mode", "classic");
+  job.precision = args.value_or("--precision", job.precision);
   if (Status s = args.finish(); !s)
     return fail("grad", Status::error(s.message() + " (macro grad --help for usage)"));
   auto result = gs::train::run_grad_job(job);

@@ -18,7 +18,8 @@ constexpr const char* kUsage =
     "         [--init sfm|random|FILE.ply] --out OUT.ply [--steps N]\n"
     "         [--strategy default|none] [--lr-schedule gsplat|constant]\n"
     "         [--view-order shuffled|sequential] [--sh-degree-interval K] [--max-gaussians N]\n"
-    "         [--scene-scale S] [--seed S] [--log LOG.jsonl] [--threads N] [--quiet]\n"
+    "         [--scene-scale S] [--seed S] [--log LOG.jsonl] [--precision float|double]\n"
+    "         [--threads N] [--quiet]\n"
     "  --images    folder of photos: camera NAME is DIR/NAME, or DIR/NAME.png|.jpg|.jpeg|.exr\n"
     "  --cameras   our cameras.json, a COLMAP sparse folder, transforms.json; every camera is a\n"
     "              view\n"
@@ -42,6 +43,8 @@ constexpr const char* kUsage =
     "  --seed      view order and split samples (default 42; not torch's generator)\n"
     "  --log       JSONL, one line per step: step, loss, l1, ssim, num_gaussians, view,\n"
     "              sh_degree, means_lr, [duplicated, split, pruned, opacity_reset], seconds\n"
+    "  --precision float (the SIMD float path of the machine's ISA; default) or double (the\n"
+    "              scalar double-precision reference, docs/training.md)\n"
     "  Not implemented yet: --strategy mcmc, --mode other than classic (docs/training.md).\n";
 
 int run_train(std::vector<std::string> argv) {
@@ -68,6 +71,7 @@ int run_train(std::vector<std::string> argv) {
   job.sh_degree_interval =
       args.int_or("--sh-degree-interval", job.sh_degree_interval, 0, 1000000000);
   job.mode = args.value_or("--mode", job.mode);
+  job.precision = args.value_or("--precision", job.precision);
   const std::optional<std::string> scene_scale = args.value("--scene-scale");
   const std::optional<std::string> seed = args.value("--seed");
   if (Status s = args.finish(); !s)

@@ -184,7 +184,8 @@ Result<GradJobResult> run_grad_job(const GradJob& job, ThreadPool& pool) {
   auto target = read_target(job.target_path, camera->width, camera->height);
   if (!target) return target.status().with_context("--target");
   view.target = std::move(*target);
-  MACRO_ASSIGN_OR_RETURN(ViewGradient vg, view_gradient(*params, view, {}, pool));
+  MACRO_ASSIGN_OR_RETURN(Precision precision, parse_precision(job.precision));
+  MACRO_ASSIGN_OR_RETURN(ViewGradient vg, view_gradient(*params, view, {}, pool, precision));
 
   const int64_t N = int64_t(params->size()), H = camera->height, W = camera->width;
   const int64_t R = params->sh_rest();
@@ -221,6 +222,7 @@ Result<GradJobResult> run_grad_job(const GradJob& job, ThreadPool& pool) {
 }
 
 Status check_train_settings(const TrainJob& job) {
+  if (auto p = parse_precision(job.precision); !p) return p.status();
   if (job.strategy == "mcmc") return not_implemented("--strategy", job.strategy, "default, none");
   if (job.strategy != "none" && job.strategy != "default")
     return Status::error(
@@ -338,6 +340,7 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
   options.strategy = job.strategy == "default" ? Strategy::kDefault : Strategy::kNone;
   options.default_strategy.max_gaussians = job.limits.max_gaussians;
   options.seed = job.seed;
+  MACRO_ASSIGN_OR_RETURN(options.precision, parse_precision(job.precision));
   AtomicFile log;
   if (!job.log_path.empty()) MACRO_TRY(log.open(job.log_path).with_context("--log"));
   if (!job.log_path.empty() && !views_line.empty())

@@ -33,6 +33,7 @@ struct GradJob {
   std::string target_path;  // PNG/JPEG (byte / 255) or EXR (R, G, B)
   std::string out_path;     // .safetensors
   std::string mode = "classic";
+  std::string precision = "float";  // --precision: float (SIMD path) | double (the reference)
   LoadLimits limits;
 };
 
@@ -62,6 +63,7 @@ struct TrainJob {
   std::string view_order = "shuffled";  // --view-order: shuffled | sequential
   int sh_degree_interval = 1000;        // --sh-degree-interval: 0 = every band from the start
   std::string mode = "classic";         // --mode: classic
+  std::string precision = "float";      // --precision: float (SIMD path) | double (reference)
   std::optional<double> scene_scale;    // --scene-scale; absent: gsplat's camera extent
   uint64_t seed = 42;                   // --seed: view order and split samples
   bool progress = true;                 // stderr progress (also off when quiet())

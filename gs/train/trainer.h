@@ -22,6 +22,7 @@
 #include "gs/train/adam.h"
 #include "gs/train/diff_render.h"
 #include "gs/train/loss.h"
+#include "gs/train/step_gradient.h"
 #include "gs/train/strategy_default.h"
 
 namespace macro::gs::train {
@@ -43,6 +44,9 @@ struct TrainOptions {
   Strategy strategy = Strategy::kNone;
   DefaultStrategyOptions default_strategy;
   uint64_t seed = 42;  // view order and split samples
+  // kFloat: the float SIMD path where active_isa() has one, else the double reference
+  // (step_gradient.h); kDouble: always the reference.
+  Precision precision = Precision::kFloat;
 };
 
 // One step's record (the JSONL log's fields).
@@ -65,7 +69,8 @@ struct ViewGradient {
 };
 Result<ViewGradient> view_gradient(const SplatParams& params, const TrainView& view,
                                    const DiffRenderOptions& options,
-                                   ThreadPool& pool = ThreadPool::global());
+                                   ThreadPool& pool = ThreadPool::global(),
+                                   Precision precision = Precision::kFloat);
 
 // Runs options.steps Adam steps on *params; on_step (optional) is called after every step and
 // may stop training by returning an error, which train() returns.

@@ -1,0 +1,197 @@
+// The trainer's float path (gs/train/fast_render.h, train_kernels.h) against its double twin
+// (diff_render.h, loss.h) on every ISA path the machine runs: forward max abs, loss value and
+// gradients relative L2; the goldens (../shared/golden/train) through the float path; the same
+// bits for 1, 2, 4 and 8 threads.
+// Tolerances: forward and loss max abs 2e-3 against the goldens (README "train/"), 1e-4 against
+// the twin (float rounding only); gradients relative L2 1e-3; Adam after 10 steps max abs 1e-4
+// for >= 99% of each tensor.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <random>
+
+#include "attention/runtime/io/safetensors.h"
+#include "gs/formats/splat_params.h"
+#include "gs/image_io.h"
+#include "gs/train/fast_render.h"
+#include "gs/train/step_gradient.h"
+#include "gs/train/trainer.h"
+#include "test_support.h"
+
+using namespace macro;
+using namespace macro::gs;
+using namespace macro::gs::train;
+
+namespace {
+
+// The ISA paths with a float table; set_isa() back to the best path on exit.
+struct IsaRestore {
+  ~IsaRestore() { (void)set_isa(best_isa()); }
+};
+std::vector<Isa> float_isas() {
+  std::vector<Isa> v;
+  for (Isa isa : test::supported_isas())
+    if (train_kernels_for(isa) != nullptr) v.push_back(isa);
+  return v;
+}
+
+std::vector<std::pair<std::string, const std::vector<float>*>> grad_tensors(const SplatGrads& g) {
+  return {{"means", &g.means},         {"scales", &g.scales}, {"quats", &g.quats},
+          {"opacities", &g.opacities}, {"sh0", &g.sh0},       {"shN", &g.shN},
+          {"means2d", &g.means2d}};
+}
+std::vector<float> to_float(const std::vector<double>& v) {
+  return std::vector<float>(v.begin(), v.end());
+}
+
+// n Gaussians in front of a camera of w x h: many per tile (more than one 128-batch), some alpha
+// clamped at 0.99, some large, raw quaternions of norm != 1.
+struct Scene {
+  SplatParams params;
+  TrainView view;
+};
+Scene random_scene(uint32_t seed, size_t n, int degree, int w, int h) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::normal_distribution<double> nd(0, 1);
+  Scene s;
+  Camera& cam = s.view.camera;
+  cam.name = "random";
+  cam.width = w;
+  cam.height = h;
+  cam.fx = cam.fy = 0.9 * w;
+  cam.cx = 0.5 * w;
+  cam.cy = 0.48 * h;
+  cam.R = Eigen::Matrix3d::Identity();
+  cam.t = Eigen::Vector3d(0, 0, 0);
+  SplatParams& p = s.params;
+  p.resize(n, degree);
+  const size_t R = size_t(p.sh_rest());
+  for (size_t i = 0; i < n; ++i) {
+    const double z = 2 + 4 * u(rng);
+    p.means[3 * i + 0] = float((u(rng) - 0.5) * 1.2 * z);
+    p.means[3 * i + 1] = float((u(rng) - 0.5) * 0.8 * z);
+    p.means[3 * i + 2] = float(z);
+    const double log_s = (i % 11 == 0 ? -1.6 : -3.4) + 0.8 * u(rng);
+    for (int a = 0; a < 3; ++a) p.scales[3 * i + a] = float(log_s + 0.4 * nd(rng));
+    for (int a = 0; a < 4; ++a) p.quats[4 * i + a] = float(nd(rng) + (a == 0 ? 1.0 : 0.0));
+    p.opacities[i] = float(i % 5 == 0 ? 6.0 : -1.5 + 3 * u(rng));
+    for (int c = 0; c < 3; ++c) p.sh0[3 * i + c] = float(0.8 * nd(rng));
+    for (size_t j = 0; j < R * 3; ++j) p.shN[i * R * 3 + j] = float(0.3 * nd(rng));
+  }
+  s.view.target.resize(size_t(w) * size_t(h) * 3);
+  for (float& v : s.view.target) v = float(0.05 + 0.9 * u(rng));
+  return s;
+}
+
+void check_against_twin(const SplatParams& params, const TrainView& view) {
+  auto ref = view_gradient(params, view, {}, ThreadPool::global(), Precision::kDouble);
+  REQUIRE(ref.is_ok());
+  for (Isa isa : float_isas()) {
+    IsaRestore restore;
+    REQUIRE(set_isa(isa).is_ok());
+    INFO("path " << isa_name(isa));
+    auto got = view_gradient(params, view, {}, ThreadPool::global(), Precision::kFloat);
+    REQUIRE(got.is_ok());
+    const auto color = test::compare(to_float(got->image.color), to_float(ref->image.color));
+    const auto alpha = test::compare(to_float(got->image.alpha), to_float(ref->image.alpha));
+    INFO("color max abs " << color.max_abs << ", alpha max abs " << alpha.max_abs);
+    CHECK(color.max_abs <= 1e-4);
+    CHECK(alpha.max_abs <= 1e-4);
+    INFO("loss " << got->loss.loss << " vs " << ref->loss.loss);
+    CHECK(std::abs(got->loss.loss - ref->loss.loss) <= 1e-5);
+    CHECK(std::abs(got->loss.ssim - ref->loss.ssim) <= 1e-5);
+    CHECK(std::abs(got->loss.l1 - ref->loss.l1) <= 1e-5);
+    const auto want = grad_tensors(ref->grads);
+    const auto have = grad_tensors(got->grads);
+    for (size_t k = 0; k < want.size(); ++k) {
+      const auto d = test::compare(*have[k].second, *want[k].second);
+      INFO("grad." << want[k].first << ": rel L2 " << d.rel_l2 << ", max abs " << d.max_abs);
+      CHECK(d.rel_l2 <= 1e-3);
+    }
+  }
+}
+
+}  // namespace
+
+TEST_CASE("train fast: every float path matches the double twin on random scenes",
+          "[train][train_fast]") {
+  if (float_isas().empty()) WARN("no float path on this machine: only the double reference runs");
+  for (int degree : {0, 3}) {
+    INFO("SH degree " << degree);
+    Scene s = random_scene(7 + uint32_t(degree), 2500, degree, 83, 61);
+    check_against_twin(s.params, s.view);
+  }
+}
+
+TEST_CASE("train fast: the float path matches the goldens and the twin on the golden views",
+          "[train][train_fast]") {
+  const std::string dir = test::golden_dir() + "/train";
+  auto params = read_splat_params(dir + "/init.ply");
+  if (!params) {
+    WARN("skipped: no golden train data at " << dir);
+    return;
+  }
+  auto cams = load_cameras(dir + "/cameras.json");
+  REQUIRE(cams.is_ok());
+  auto exp = SafeTensors::open(dir + "/expected.safetensors");
+  REQUIRE(exp.is_ok());
+  auto golden = [&](const std::string& name) {
+    INFO("golden tensor " << name);
+    auto t = exp->read_f32(name);
+    REQUIRE(t.is_ok());
+    return *t;
+  };
+  for (const char* name : {"v0", "v1"}) {
+    INFO("view " << name);
+    auto cam = cams->find(name);
+    REQUIRE(cam.is_ok());
+    auto target = read_image(dir + "/images/" + name + ".png");
+    REQUIRE(target.is_ok());
+    const TrainView view{*cam, target->data};
+    check_against_twin(*params, view);
+    for (Isa isa : float_isas()) {
+      IsaRestore restore;
+      REQUIRE(set_isa(isa).is_ok());
+      INFO("path " << isa_name(isa));
+      auto got = view_gradient(*params, view, {}, ThreadPool::global(), Precision::kFloat);
+      REQUIRE(got.is_ok());
+      CHECK(
+          test::compare(to_float(got->image.color), golden(std::string(name) + ".color")).max_abs <=
+          2e-3);
+      CHECK(std::abs(got->loss.loss - golden(std::string(name) + ".loss")[0]) <= 2e-3);
+      for (const auto& [g, data] : grad_tensors(got->grads)) {
+        const auto d = test::compare(*data, golden(std::string(name) + ".grad." + g));
+        INFO("grad." << g << ": rel L2 " << d.rel_l2);
+        CHECK(d.rel_l2 <= 1e-3);
+      }
+    }
+  }
+}
+
+TEST_CASE("train fast: 1, 2, 4 and 8 threads give identical bits on every float path",
+          "[train][train_fast]") {
+  Scene s = random_scene(3, 4000, 3, 96, 72);
+  for (Isa isa : float_isas()) {
+    IsaRestore restore;
+    REQUIRE(set_isa(isa).is_ok());
+    INFO("path " << isa_name(isa));
+    ThreadPool one(1);
+    auto ref = view_gradient(s.params, s.view, {}, one, Precision::kFloat);
+    REQUIRE(ref.is_ok());
+    for (int threads : {2, 4, 8}) {
+      INFO(threads << " threads");
+      ThreadPool pool(threads);
+      auto got = view_gradient(s.params, s.view, {}, pool, Precision::kFloat);
+      REQUIRE(got.is_ok());
+      CHECK(got->image.color == ref->image.color);
+      CHECK(got->loss.loss == ref->loss.loss);
+      const auto want = grad_tensors(ref->grads);
+      const auto have = grad_tensors(got->grads);
+      for (size_t k = 0; k < want.size(); ++k) {
+        INFO("grad." << want[k].first);
+        CHECK(*have[k].second == *want[k].second);
+      }
+    }
+  }
+}
