@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <ctime>
 
 #include "attention/runtime/limits.h"
 #include "gs/raster/raster_stages.h"
@@ -65,10 +66,24 @@ const FastRenderTimes& FastRenderer::times() const {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
+// Wall and process CPU time since construction (or the last lap), in ms.
+struct Stopwatch {
+  std::chrono::steady_clock::time_point wall0 = std::chrono::steady_clock::now();
+  double cpu0 = cpu_ms();
+  static double cpu_ms() {
+    timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return double(ts.tv_sec) * 1e3 + double(ts.tv_nsec) * 1e-6;
+  }
+  StageTime lap() {
+    StageTime t;
+    t.wall = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - wall0)
+                 .count();
+    t.cpu = cpu_ms() - cpu0;
+    *this = Stopwatch();
+    return t;
+  }
+};
 
 // The Gaussian index carried in a record's inv_z slot (the blend reads no depth).
 inline void set_id(TileSplat* s, uint32_t g) {
@@ -140,7 +155,7 @@ Status FastRenderer::forward(const SplatParams& params, const Camera& camera,
   const size_t n = s.n = params.size();
 
   // Project.
-  auto t0 = Clock::now();
+  Stopwatch t0;
   s.splats.resize(n);
   s.tiles.assign(n, 0);
   s.depth_key.assign(n, 0);
@@ -183,10 +198,9 @@ Status FastRenderer::forward(const SplatParams& params, const Camera& camera,
     return Status::error("render: the scene needs " + std::to_string(pairs) +
                          " (Gaussian, tile) pairs for camera '" + camera.name +
                          "', more than the limit " + std::to_string(limit) + " (--max-tile-pairs)");
-  s.times.project = ms_since(t0);
+  s.times.project = t0.lap();
 
   // Bin (gs/raster).
-  t0 = Clock::now();
   raster::Projected proj;
   proj.n = n;
   proj.splats = s.splats.data();
@@ -197,10 +211,9 @@ Status FastRenderer::forward(const SplatParams& params, const Camera& camera,
   s.num_visible = binned;
   s.stats.visible = visible;
   s.stats.pairs = pairs;
-  s.times.bin = ms_since(t0);
+  s.times.bin = t0.lap();
 
   // Blend, threads over tiles.
-  t0 = Clock::now();
   const raster::CameraF& cam = s.camf;
   const int W = cam.width, H = cam.height;
   const size_t pixels = size_t(W) * size_t(H);
@@ -261,7 +274,7 @@ Status FastRenderer::forward(const SplatParams& params, const Camera& camera,
         }
       },
       1);
-  s.times.blend = ms_since(t0);
+  s.times.blend = t0.lap();
   s.ready = true;
   return Status::ok();
 }
@@ -277,7 +290,7 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
   const size_t P = s.pairs;
 
   // Blend backward per tile.
-  auto t0 = Clock::now();
+  Stopwatch t0;
   s.pair_grad.assign(P * kPairGrad, 0.f);
   const raster::RasterKernels& rk = raster::raster_kernels();
   std::vector<std::unique_ptr<TileScratch>> scratch(size_t(pool.size()));
@@ -331,10 +344,9 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
         }
       },
       1);
-  s.times.blend_backward = ms_since(t0);
+  s.times.blend_backward = t0.lap();
 
   // The pairs of each sorted record in pair order (a stable counting pass).
-  t0 = Clock::now();
   const size_t V = s.num_visible;
   s.pairs_start.assign(V + 1, 0);
   for (size_t k = 0; k < P; ++k) ++s.pairs_start[s.bins.pair[k] + 1];
@@ -344,10 +356,9 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
     std::vector<uint32_t> fill(s.pairs_start.begin(), s.pairs_start.end() - 1);
     for (size_t k = 0; k < P; ++k) s.pairs_of[fill[s.bins.pair[k]]++] = uint32_t(k);
   }
-  s.times.reduce = ms_since(t0);
+  s.times.reduce = t0.lap();
 
   // Per Gaussian: its pairs summed in tile order (double), then the projection backward.
-  t0 = Clock::now();
   grads->resize(s.n, params.sh_degree);
   const size_t R = size_t(params.sh_rest());
   pool.parallel_for(
@@ -376,7 +387,7 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
         }
       },
       256);
-  s.times.project_backward = ms_since(t0);
+  s.times.project_backward = t0.lap();
 }
 
 }  // namespace macro::gs::train

@@ -31,10 +31,14 @@ struct FastImage {
   std::vector<float> alpha;  // [H,W]
 };
 
-// Wall milliseconds of the last forward / backward per stage.
+// Milliseconds of one stage: wall, and CPU time of the whole process (all threads).
+struct StageTime {
+  double wall = 0, cpu = 0;
+};
+// The last forward / backward per stage.
 struct FastRenderTimes {
-  double project = 0, bin = 0, blend = 0;                       // forward
-  double blend_backward = 0, reduce = 0, project_backward = 0;  // backward (reduce: pair sums)
+  StageTime project, bin, blend;                      // forward
+  StageTime blend_backward, reduce, project_backward;  // backward (reduce: grouping the pairs)
 };
 
 class FastRenderer {
