@@ -44,6 +44,8 @@ struct FastRenderer::State {
   std::vector<uint32_t> last;
   std::vector<float> pair_grad;
   std::vector<uint32_t> pairs_start, pairs_of;
+  std::vector<double> record_grad;  // [V][kPairGrad] the pair sums of each sorted record
+  std::vector<uint32_t> rank;  // [N] position of Gaussian g in bins.splats (where tiles[g] != 0)
   const TrainKernels* kernels = nullptr;
   DiffRenderStats stats;
   FastRenderTimes times;
@@ -77,8 +79,8 @@ struct Stopwatch {
   }
   StageTime lap() {
     StageTime t;
-    t.wall = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - wall0)
-                 .count();
+    t.wall =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - wall0).count();
     t.cpu = cpu_ms() - cpu0;
     *this = Stopwatch();
     return t;
@@ -291,7 +293,7 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
 
   // Blend backward per tile.
   Stopwatch t0;
-  s.pair_grad.assign(P * kPairGrad, 0.f);
+  s.pair_grad.resize(P * kPairGrad);  // each tile clears its own range
   const raster::RasterKernels& rk = raster::raster_kernels();
   std::vector<std::unique_ptr<TileScratch>> scratch(size_t(pool.size()));
   for (auto& p : scratch) p = std::make_unique<TileScratch>();
@@ -324,8 +326,10 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
           }
           uint32_t walked = 0;  // pairs any pixel of the tile walked
           for (int r = 0; r < kTile; ++r) walked = std::max(walked, row_last[r]);
-          if (walked == 0) continue;
           float* tile_grad = s.pair_grad.data() + size_t(begin) * kPairGrad;
+          std::fill(tile_grad, s.pair_grad.data() + size_t(s.bins.tile_start[t + 1]) * kPairGrad,
+                    0.f);
+          if (walked == 0) continue;
           const uint32_t batches = (walked + kBlendBatch - 1) / kBlendBatch;
           for (uint32_t bi = batches; bi-- > 0;) {
             const uint32_t off = bi * kBlendBatch;
@@ -356,22 +360,55 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
     std::vector<uint32_t> fill(s.pairs_start.begin(), s.pairs_start.end() - 1);
     for (size_t k = 0; k < P; ++k) s.pairs_of[fill[s.bins.pair[k]]++] = uint32_t(k);
   }
-  s.times.reduce = t0.lap();
 
-  // Per Gaussian: its pairs summed in tile order (double), then the projection backward.
-  grads->resize(s.n, params.sh_degree);
-  const size_t R = size_t(params.sh_rest());
+  // The pairs of each sorted record summed in tile order (double), in record order (pairs_of
+  // streams; pair_grad is read at random, once per pair).
+  s.record_grad.resize(V * kPairGrad);
+  s.rank.resize(s.n);
   pool.parallel_for(
       V,
       [&](size_t b, size_t e, int) {
         for (size_t v = b; v < e; ++v) {
-          if (s.pairs_start[v] == s.pairs_start[v + 1]) continue;
           double sum[kPairGrad] = {};
           for (uint32_t i = s.pairs_start[v]; i < s.pairs_start[v + 1]; ++i) {
             const float* pg = &s.pair_grad[size_t(s.pairs_of[i]) * kPairGrad];
             for (int c = 0; c < kPairGrad; ++c) sum[c] += double(pg[c]);
           }
-          const size_t g = id_of(s.bins.splats[v]);
+          std::copy(sum, sum + kPairGrad, &s.record_grad[v * kPairGrad]);
+          s.rank[id_of(s.bins.splats[v])] = uint32_t(v);
+        }
+      },
+      1024);
+
+  s.times.reduce = t0.lap();
+
+  // Per Gaussian in index order (the parameter and gradient rows stream; the depth order would
+  // read them at random): the projection backward. Every row is written here (zeros where the
+  // Gaussian has no pair), so the gradient arrays are not cleared beforehand.
+  const size_t R = size_t(params.sh_rest());
+  grads->sh_degree = params.sh_degree;
+  grads->means.resize(s.n * 3);
+  grads->scales.resize(s.n * 3);
+  grads->quats.resize(s.n * 4);
+  grads->opacities.resize(s.n);
+  grads->sh0.resize(s.n * 3);
+  grads->shN.resize(s.n * R * 3);
+  grads->means2d.resize(s.n * 2);
+  pool.parallel_for(
+      s.n,
+      [&](size_t b, size_t e, int) {
+        for (size_t g = b; g < e; ++g) {
+          std::fill_n(&grads->means[3 * g], 3, 0.f);
+          std::fill_n(&grads->scales[3 * g], 3, 0.f);
+          std::fill_n(&grads->quats[4 * g], 4, 0.f);
+          grads->opacities[g] = 0.f;
+          std::fill_n(&grads->sh0[3 * g], 3, 0.f);
+          std::fill_n(grads->shN.data() + g * R * 3, R * 3, 0.f);
+          std::fill_n(&grads->means2d[2 * g], 2, 0.f);
+          if (s.tiles[g] == 0) continue;
+          const size_t v = s.rank[g];
+          if (s.pairs_start[v] == s.pairs_start[v + 1]) continue;
+          const double* sum = &s.record_grad[v * kPairGrad];
           ProjectedGrad up;
           for (int c = 0; c < 3; ++c) up.rgb[c] = sum[c];
           for (int c = 0; c < 3; ++c) up.conic[c] = sum[3 + c];

@@ -37,8 +37,8 @@ struct StageTime {
 };
 // The last forward / backward per stage.
 struct FastRenderTimes {
-  StageTime project, bin, blend;                      // forward
-  StageTime blend_backward, reduce, project_backward;  // backward (reduce: grouping the pairs)
+  StageTime project, bin, blend;                       // forward
+  StageTime blend_backward, reduce, project_backward;  // backward (reduce: the pair sums)
 };
 
 class FastRenderer {

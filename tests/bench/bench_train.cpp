@@ -72,8 +72,18 @@ SplatParams to_params(const GaussianCloud& c) {
 // Stage medians of one configuration (ms): wall and process CPU time.
 constexpr int kStages = 12;
 enum Stage {
-  kProject, kBin, kBlend, kForward, kLoss, kBlendBwd, kReduce, kProjectBwd, kBackward, kAdam,
-  kStrategy, kStep
+  kProject,
+  kBin,
+  kBlend,
+  kForward,
+  kLoss,
+  kBlendBwd,
+  kReduce,
+  kProjectBwd,
+  kBackward,
+  kAdam,
+  kStrategy,
+  kStep
 };
 struct Stages {
   StageTime t[kStages];
@@ -113,8 +123,8 @@ bool measure(const SplatParams& init, const Camera& cam, const std::vector<float
       if (!st) break;
       w = Watch();
       fgrad.resize(fimg.color.size());
-      auto lv = kernels->loss(fimg.color.data(), target.data(), cam.width, cam.height,
-                              fgrad.data(), scratch.data(), pool);
+      auto lv = kernels->loss(fimg.color.data(), target.data(), cam.width, cam.height, fgrad.data(),
+                              scratch.data(), pool);
       t[kLoss] = w.lap();
       if (!lv) {
         st = lv.status();
@@ -136,8 +146,8 @@ bool measure(const SplatParams& init, const Camera& cam, const std::vector<float
       t[kForward] = w.lap();
       if (!st) break;
       w = Watch();
-      auto lv = photometric_loss(dimg.color.data(), target.data(), cam.width, cam.height, &dgrad,
-                                 pool);
+      auto lv =
+          photometric_loss(dimg.color.data(), target.data(), cam.width, cam.height, &dgrad, pool);
       t[kLoss] = w.lap();
       if (!lv) {
         st = lv.status();
@@ -206,17 +216,28 @@ int run(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const char* val = i + 1 < argc ? argv[i + 1] : "";
-    if (a == "--sizes") sizes = parse_list(val), ++i;
-    else if (a == "--threads") threads = parse_list(val), ++i;
-    else if (a == "--reps") reps = std::max(1, std::atoi(val)), ++i;
-    else if (a == "--baseline-reps") baseline_reps = std::max(1, std::atoi(val)), ++i;
-    else if (a == "--width") width = std::atoi(val), ++i;
-    else if (a == "--height") height = std::atoi(val), ++i;
-    else if (a == "--focal") focal = std::atof(val), ++i;
-    else if (a == "--seed") seed = uint64_t(std::atoll(val)), ++i;
-    else if (a == "--scene-dir") scene_dir = val, ++i;
-    else if (a == "--scene-steps") scene_steps = std::max(2, std::atoi(val)), ++i;
-    else if (a == "--no-baseline") baseline = false;
+    if (a == "--sizes")
+      sizes = parse_list(val), ++i;
+    else if (a == "--threads")
+      threads = parse_list(val), ++i;
+    else if (a == "--reps")
+      reps = std::max(1, std::atoi(val)), ++i;
+    else if (a == "--baseline-reps")
+      baseline_reps = std::max(1, std::atoi(val)), ++i;
+    else if (a == "--width")
+      width = std::atoi(val), ++i;
+    else if (a == "--height")
+      height = std::atoi(val), ++i;
+    else if (a == "--focal")
+      focal = std::atof(val), ++i;
+    else if (a == "--seed")
+      seed = uint64_t(std::atoll(val)), ++i;
+    else if (a == "--scene-dir")
+      scene_dir = val, ++i;
+    else if (a == "--scene-steps")
+      scene_steps = std::max(2, std::atoi(val)), ++i;
+    else if (a == "--no-baseline")
+      baseline = false;
     else {
       std::fprintf(stderr, "bench train: unknown flag '%s'\n", a.c_str());
       return 2;
@@ -261,13 +282,13 @@ int run(int argc, char** argv) {
       if (kernels && baseline)
         for (int cpu = 0; cpu < 2; ++cpu) {
           auto at = [&](const Stages& x, int k) { return cpu ? x.t[k].cpu : x.t[k].wall; };
-          std::printf("ratio   %4s %8zu %2ld | double / %s: forward %.1fx, loss %.1fx, backward "
-                      "%.1fx, step %.1fx; backward / forward %.2f (double %.2f)\n",
-                      cpu ? "cpu" : "wall", size_t(n), th, path,
-                      at(ref, kForward) / at(fast, kForward), at(ref, kLoss) / at(fast, kLoss),
-                      at(ref, kBackward) / at(fast, kBackward), at(ref, kStep) / at(fast, kStep),
-                      at(fast, kBackward) / at(fast, kForward),
-                      at(ref, kBackward) / at(ref, kForward));
+          std::printf(
+              "ratio   %4s %8zu %2ld | double / %s: forward %.1fx, loss %.1fx, backward "
+              "%.1fx, step %.1fx; backward / forward %.2f (double %.2f)\n",
+              cpu ? "cpu" : "wall", size_t(n), th, path, at(ref, kForward) / at(fast, kForward),
+              at(ref, kLoss) / at(fast, kLoss), at(ref, kBackward) / at(fast, kBackward),
+              at(ref, kStep) / at(fast, kStep), at(fast, kBackward) / at(fast, kForward),
+              at(ref, kBackward) / at(ref, kForward));
         }
       if (kernels)
         std::printf("        %zu Gaussians: %zu visible, %zu pairs\n", size_t(n), fast.visible,
@@ -288,10 +309,11 @@ int run(int argc, char** argv) {
     std::printf("scene: %s: %s, skipped\n", scene_dir.c_str(), scene.status().message().c_str());
     return 0;
   }
-  std::printf("scene %s: %zu Gaussians (sfm init), %zu views, %dx%d; ms per step (render, loss, "
-              "backward, Adam, accumulate), medians of %d steps\n",
-              scene_dir.c_str(), scene->init.size(), scene->train.size(),
-              scene->train[0].camera.width, scene->train[0].camera.height, scene_steps);
+  std::printf(
+      "scene %s: %zu Gaussians (sfm init), %zu views, %dx%d; ms per step (render, loss, "
+      "backward, Adam, accumulate), medians of %d steps\n",
+      scene_dir.c_str(), scene->init.size(), scene->train.size(), scene->train[0].camera.width,
+      scene->train[0].camera.height, scene_steps);
   for (long th : threads) {
     ThreadPool pool(int(std::max(1L, th)));
     double ms[2] = {0, 0}, cpu[2] = {0, 0};
@@ -326,9 +348,10 @@ int run(int argc, char** argv) {
     }
     if (baseline) std::printf("scene   ratio %2ld threads: %.1fx\n", th, ms[1] / ms[0]);
   }
-  std::printf("(ms per step, medians; wall, and cpu = process CPU ms of all threads; group = the "
-              "pairs grouped by Gaussian; projbwd includes the pair sums and SH; strat = "
-              "DefaultStrategy accumulate)\n");
+  std::printf(
+      "(ms per step, medians; wall, and cpu = process CPU ms of all threads; group = the "
+      "pairs grouped by Gaussian; projbwd includes the pair sums and SH; strat = "
+      "DefaultStrategy accumulate)\n");
   return 0;
 }
 
