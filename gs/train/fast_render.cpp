@@ -117,6 +117,8 @@ struct TileScratch {
   int counts[kTile];
   TrainRowForward fwd[kTile];
   TrainRowBackward bwd[kTile];
+  TrainEntryGrad acc[kBlendBatch];
+  uint8_t touched[kBlendBatch];
 };
 
 // Gathers pairs [b, b + nb) of the tile and builds the row lists of the rows in `live`.
@@ -338,12 +340,14 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
             for (int r = 0; r < rect.h; ++r)
               if (row_last[r] > off) live |= 1u << r;
             gather_batch(s.bins, begin + off, nb, rect, live, rk, sc);
+            std::fill_n(sc.touched, nb, uint8_t(0));
             for (int r = 0; r < rect.h; ++r) {
               if (!(live >> r & 1u) || sc.counts[r] == 0) continue;
               kernels.blend_backward_row(sc.batch, sc.rows[r], sc.counts[r], off,
                                          float(rect.x0) + 0.5f, float(rect.y0 + r) + 0.5f,
-                                         &sc.bwd[r], tile_grad);
+                                         &sc.bwd[r], sc.acc, sc.touched);
             }
+            kernels.flush_batch(sc.acc, sc.touched, nb, tile_grad + size_t(off) * kPairGrad);
           }
         }
       },

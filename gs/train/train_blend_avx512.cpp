@@ -6,7 +6,7 @@ namespace macro::gs::train {
 
 const TrainKernels& train_kernels_avx512() {
   static const TrainKernels k{"avx512", blend_forward_row_lanes, blend_backward_row_lanes,
-                              loss_lanes};
+                              flush_batch_lanes, loss_lanes};
   return k;
 }
 

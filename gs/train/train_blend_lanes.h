@@ -170,7 +170,7 @@ void blend_forward_row_lanes(const raster::TileSplat* splats, const uint32_t* id
 
 void blend_backward_row_lanes(const raster::TileSplat* splats, const uint32_t* idx, int n,
                               uint32_t base, float px0, float py, TrainRowBackward* row,
-                              float* pair_grad) {
+                              TrainEntryGrad* acc, uint8_t* touched) {
   vf T = load(row->T);
   vf br = load(row->behind_r), bg = load(row->behind_g), bb = load(row->behind_b);
   const vf vr = load(row->v_r), vg = load(row->v_g), vb = load(row->v_b), vaT = load(row->va_T);
@@ -196,23 +196,36 @@ void blend_backward_row_lanes(const raster::TileSplat* splats, const uint32_t* i
     const vi live = ok & h.unclamped;
     const vf v_sigma = pick(live, -h.alpha * v_alpha);
     const float dy = s.y - py;
-    const float s_vs = hsum(v_sigma), s_dxvs = hsum(h.dx * v_sigma),
-                s_dx2vs = hsum(h.dx * h.dx * v_sigma);
-    float* pg = pair_grad + size_t(pos) * kPairGrad;
-    pg[0] += hsum(pick(ok, w * vr));
-    pg[1] += hsum(pick(ok, w * vg));
-    pg[2] += hsum(pick(ok, w * vb));
-    pg[3] += 0.5f * s_dx2vs;
-    pg[4] += dy * s_dxvs;
-    pg[5] += 0.5f * dy * dy * s_vs;
-    pg[6] += s.a * s_dxvs + s.b * dy * s_vs;
-    pg[7] += s.b * s_dxvs + s.c * dy * s_vs;
-    pg[8] += hsum(pick(live, h.vis * v_alpha));
+    const vf dxs = h.dx * v_sigma;
+    const vf g[kPairGrad] = {pick(ok, w * vr),
+                             pick(ok, w * vg),
+                             pick(ok, w * vb),
+                             0.5f * h.dx * dxs,
+                             dy * dxs,
+                             (0.5f * dy * dy) * v_sigma,
+                             s.a * dxs + (s.b * dy) * v_sigma,
+                             s.b * dxs + (s.c * dy) * v_sigma,
+                             pick(live, h.vis * v_alpha)};
+    float(*a)[L] = acc[idx[i]].v;
+    if (!touched[idx[i]]) {
+      touched[idx[i]] = 1;
+      for (int c = 0; c < kPairGrad; ++c) store(a[c], g[c]);
+    } else {
+      for (int c = 0; c < kPairGrad; ++c) store(a[c], load(a[c]) + g[c]);
+    }
   }
   store(row->T, T);
   store(row->behind_r, br);
   store(row->behind_g, bg);
   store(row->behind_b, bb);
+}
+
+void flush_batch_lanes(const TrainEntryGrad* acc, const uint8_t* touched, int n, float* pair_grad) {
+  for (int k = 0; k < n; ++k) {
+    if (!touched[k]) continue;
+    float* pg = pair_grad + size_t(k) * kPairGrad;
+    for (int c = 0; c < kPairGrad; ++c) pg[c] += hsum(load(acc[k].v[c]));
+  }
 }
 
 // ---- Loss (loss.h's maths in float; sums of the loss value in double, per row, fixed order) ----

@@ -5,7 +5,9 @@
 //   blend_forward_row   one 16-pixel row of a tile against a row list, front to back, keeping
 //                       what the backward needs (final T, number of the tile's pairs walked)
 //   blend_backward_row  the same row and list back to front from the final T (gsplat's order):
-//                       per entry, the row's contribution to its pair's gradient
+//                       per entry, the row's per-lane contribution to its pair's gradient,
+//                       summed over the tile's rows in a batch accumulator
+//   flush_batch         the accumulators' lane sums into the batch's pair slots
 //   loss                L1 + valid SSIM and dloss/dx in float (loss.h states the maths)
 //
 // Paths: AVX2 (train_blend_avx2.cpp, 2 x 8 lanes) and AVX-512 (train_blend_avx512.cpp, 16 lanes),
@@ -49,13 +51,24 @@ struct alignas(64) TrainRowBackward {
 // Values of one pair's gradient (the tile's contribution to its Gaussian), in this order.
 inline constexpr int kPairGrad = 9;  // rgb 3, conic a b c, mean x y, opacity (d/d sigmoid)
 
+// The backward's per-lane sums of one batch entry over the rows of a tile (rows in order), reduced
+// across lanes once per batch (flush_batch) instead of once per row.
+struct alignas(64) TrainEntryGrad {
+  float v[kPairGrad][raster::kTile];
+};
+
 // splats[idx[i]] for i < n are the row's entries in tile order; entry i is at tile-list position
-// base + idx[i]. pair_grad: the tile's pairs, [tile pairs][kPairGrad] from the tile's first.
+// base + idx[i] (forward) and batch entry idx[i] (backward: acc[idx[i]], touched[idx[i]] set on
+// its first contribution, which stores instead of adding).
 using TrainBlendForwardFn = void (*)(const raster::TileSplat* splats, const uint32_t* idx, int n,
                                      uint32_t base, float px0, float py, TrainRowForward* row);
 using TrainBlendBackwardFn = void (*)(const raster::TileSplat* splats, const uint32_t* idx, int n,
                                       uint32_t base, float px0, float py, TrainRowBackward* row,
-                                      float* pair_grad);
+                                      TrainEntryGrad* acc, uint8_t* touched);
+// pair_grad[k][c] += the lane sum of acc[k].v[c] for the n entries with touched[k] (pair_grad:
+// [n][kPairGrad], the batch's first pair).
+using TrainFlushBatchFn = void (*)(const TrainEntryGrad* acc, const uint8_t* touched, int n,
+                                   float* pair_grad);
 // x, y [H,W,3]; grad (optional) [H,W,3]; scratch holds loss_scratch_floats(W, H) floats.
 using TrainLossFn = Result<LossValue> (*)(const float* x, const float* y, int width, int height,
                                           float* grad, float* scratch, ThreadPool& pool);
@@ -65,6 +78,7 @@ struct TrainKernels {
   const char* name;
   TrainBlendForwardFn blend_forward_row;
   TrainBlendBackwardFn blend_backward_row;
+  TrainFlushBatchFn flush_batch;
   TrainLossFn loss;
 };
 
