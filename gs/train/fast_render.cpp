@@ -9,7 +9,7 @@
 //   final_T[H*W], last[H*W]             per pixel: T after its last blended Gaussian, 1 + its
 //                                       tile-list position (0: none)
 //   pair_grad[P][kPairGrad]             the tile's contribution to each pair's Gaussian
-//   pairs_start[V+1], pairs_of[P]       the pairs of each sorted record in pair (= tile) order
+//   pairs_start[N+1], pairs_of[P]       the pairs of each Gaussian in pair (= tile) order
 #include "gs/train/fast_render.h"
 
 #include <algorithm>
@@ -44,8 +44,8 @@ struct FastRenderer::State {
   std::vector<uint32_t> last;
   std::vector<float> pair_grad;
   std::vector<uint32_t> pairs_start, pairs_of;
-  std::vector<double> record_grad;  // [V][kPairGrad] the pair sums of each sorted record
-  std::vector<uint32_t> rank;  // [N] position of Gaussian g in bins.splats (where tiles[g] != 0)
+  std::vector<uint32_t> record_id;    // [V] the Gaussian of each sorted record
+  std::vector<double> gaussian_grad;  // [N][kPairGrad] each Gaussian's pair sums
   const TrainKernels* kernels = nullptr;
   DiffRenderStats stats;
   FastRenderTimes times;
@@ -354,32 +354,38 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
       1);
   s.times.blend_backward = t0.lap();
 
-  // The pairs of each sorted record in pair order (a stable counting pass).
-  const size_t V = s.num_visible;
-  s.pairs_start.assign(V + 1, 0);
-  for (size_t k = 0; k < P; ++k) ++s.pairs_start[s.bins.pair[k] + 1];
-  for (size_t v = 0; v < V; ++v) s.pairs_start[v + 1] += s.pairs_start[v];
-  s.pairs_of.resize(P);
-  {
-    std::vector<uint32_t> fill(s.pairs_start.begin(), s.pairs_start.end() - 1);
-    for (size_t k = 0; k < P; ++k) s.pairs_of[fill[s.bins.pair[k]]++] = uint32_t(k);
-  }
-
-  // The pairs of each sorted record summed in tile order (double), in record order (pairs_of
-  // streams; pair_grad is read at random, once per pair).
-  s.record_grad.resize(V * kPairGrad);
-  s.rank.resize(s.n);
+  // The pairs of each Gaussian in pair (= tile) order: a stable counting pass by Gaussian, over
+  // the records' indices (record_id, read in order once).
+  const size_t V = s.num_visible, n = s.n;
+  s.record_id.resize(V);
   pool.parallel_for(
       V,
       [&](size_t b, size_t e, int) {
-        for (size_t v = b; v < e; ++v) {
+        for (size_t v = b; v < e; ++v) s.record_id[v] = id_of(s.bins.splats[v]);
+      },
+      4096);
+  s.pairs_start.assign(n + 1, 0);
+  for (size_t k = 0; k < P; ++k) ++s.pairs_start[s.record_id[s.bins.pair[k]] + 1];
+  for (size_t g = 0; g < n; ++g) s.pairs_start[g + 1] += s.pairs_start[g];
+  s.pairs_of.resize(P);
+  {
+    std::vector<uint32_t> fill(s.pairs_start.begin(), s.pairs_start.end() - 1);
+    for (size_t k = 0; k < P; ++k) s.pairs_of[fill[s.record_id[s.bins.pair[k]]]++] = uint32_t(k);
+  }
+
+  // Each Gaussian's pairs summed in tile order (double), Gaussians in index order (pairs_of and
+  // the sums stream; pair_grad is read at random, once per pair).
+  s.gaussian_grad.resize(n * kPairGrad);
+  pool.parallel_for(
+      n,
+      [&](size_t b, size_t e, int) {
+        for (size_t g = b; g < e; ++g) {
           double sum[kPairGrad] = {};
-          for (uint32_t i = s.pairs_start[v]; i < s.pairs_start[v + 1]; ++i) {
+          for (uint32_t i = s.pairs_start[g]; i < s.pairs_start[g + 1]; ++i) {
             const float* pg = &s.pair_grad[size_t(s.pairs_of[i]) * kPairGrad];
             for (int c = 0; c < kPairGrad; ++c) sum[c] += double(pg[c]);
           }
-          std::copy(sum, sum + kPairGrad, &s.record_grad[v * kPairGrad]);
-          s.rank[id_of(s.bins.splats[v])] = uint32_t(v);
+          std::copy(sum, sum + kPairGrad, &s.gaussian_grad[g * kPairGrad]);
         }
       },
       1024);
@@ -409,10 +415,8 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
           std::fill_n(&grads->sh0[3 * g], 3, 0.f);
           std::fill_n(grads->shN.data() + g * R * 3, R * 3, 0.f);
           std::fill_n(&grads->means2d[2 * g], 2, 0.f);
-          if (s.tiles[g] == 0) continue;
-          const size_t v = s.rank[g];
-          if (s.pairs_start[v] == s.pairs_start[v + 1]) continue;
-          const double* sum = &s.record_grad[v * kPairGrad];
+          if (s.pairs_start[g] == s.pairs_start[g + 1]) continue;
+          const double* sum = &s.gaussian_grad[g * kPairGrad];
           ProjectedGrad up;
           for (int c = 0; c < 3; ++c) up.rgb[c] = sum[c];
           for (int c = 0; c < 3; ++c) up.conic[c] = sum[3 + c];
