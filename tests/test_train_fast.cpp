@@ -8,9 +8,11 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <filesystem>
 #include <random>
 
 #include "attention/runtime/io/safetensors.h"
+#include "gs/cameras/camera.h"
 #include "gs/formats/splat_params.h"
 #include "gs/image_io.h"
 #include "gs/train/adam_kernels.h"
@@ -18,6 +20,7 @@
 #include "gs/train/step_gradient.h"
 #include "gs/train/trainer.h"
 #include "test_support.h"
+#include "tests/cli_run.h"
 
 using namespace macro;
 using namespace macro::gs;
@@ -224,4 +227,42 @@ TEST_CASE("train fast: every Adam path gives the scalar twin's bits", "[train][t
     CHECK(v1 == v0);
     CHECK(p1 == p0);
   }
+}
+
+TEST_CASE("train fast: --precision is validated by name; double runs the reference", "[train]") {
+  test::TempDir tmp("train-precision");
+  Scene s = random_scene(9, 200, 1, 40, 30);
+  REQUIRE(write_splat_params(s.params, tmp.file("s.ply")).is_ok());
+  CameraSet set;
+  set.cameras.push_back(s.view.camera);
+  REQUIRE(save_cameras_json(set, tmp.file("cameras.json")).is_ok());
+  Image target(40, 30, 3);
+  target.data = s.view.target;
+  REQUIRE(write_png(tmp.file("t.png"), target).is_ok());
+  const std::string common = "grad --scene " + tmp.file("s.ply") + " --cameras " +
+                             tmp.file("cameras.json") + " --camera random --target " +
+                             tmp.file("t.png") + " --out " + tmp.file("g.safetensors");
+  const test::Run bad = test::run_macro(common + " --precision half", tmp);
+  CHECK(bad.rc == 1);
+  CHECK(bad.err.find("--precision: expected float or double, found 'half'") != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(tmp.file("g.safetensors")));
+  const test::Run train_bad = test::run_macro(
+      "train --images " + tmp.path + " --cameras " + tmp.file("cameras.json") + " --init " +
+          tmp.file("s.ply") + " --out " + tmp.file("o.ply") + " --steps 1 --precision fp16",
+      tmp);
+  CHECK(train_bad.rc == 1);
+  CHECK(train_bad.err.find("--precision: expected float or double, found 'fp16'") !=
+        std::string::npos);
+
+  auto back = read_image(tmp.file("t.png"));
+  REQUIRE(back.is_ok());
+  s.view.target = back->data;
+  auto want = view_gradient(s.params, s.view, {}, ThreadPool::global(), Precision::kDouble);
+  REQUIRE(want.is_ok());
+  REQUIRE(test::run_macro(common + " --precision double --quiet", tmp).rc == 0);
+  auto got = SafeTensors::open(tmp.file("g.safetensors"));
+  REQUIRE(got.is_ok());
+  auto means = got->read_f32("grad.means");
+  REQUIRE(means.is_ok());
+  CHECK(*means == want->grads.means);
 }
