@@ -358,10 +358,9 @@ int run(int argc, char** argv) {
     if (baseline) std::printf("scene   ratio %2ld threads: %.1fx\n", th, ms[1] / ms[0]);
   }
   std::printf(
-      "(ms per step, medians; wall, and cpu = process CPU ms of all threads; group = the "
-      "pairs grouped per Gaussian and summed in tile order; projbwd = projection backward incl. "
-      "SH; strat = "
-      "DefaultStrategy accumulate)\n");
+      "(ms per step, medians; wall, and cpu = process CPU ms of all threads; sums = the pairs "
+      "grouped per Gaussian and summed in tile order; projbwd = projection backward incl. SH; "
+      "strat = DefaultStrategy accumulate)\n");
   return 0;
 }
 
