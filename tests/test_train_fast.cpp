@@ -88,14 +88,15 @@ Scene random_scene(uint32_t seed, size_t n, int degree, int w, int h) {
   return s;
 }
 
-void check_against_twin(const SplatParams& params, const TrainView& view) {
-  auto ref = view_gradient(params, view, {}, ThreadPool::global(), Precision::kDouble);
+void check_against_twin(const SplatParams& params, const TrainView& view,
+                        const DiffRenderOptions& options = {}) {
+  auto ref = view_gradient(params, view, options, ThreadPool::global(), Precision::kDouble);
   REQUIRE(ref.is_ok());
   for (Isa isa : float_isas()) {
     IsaRestore restore;
     REQUIRE(set_isa(isa).is_ok());
     INFO("path " << isa_name(isa));
-    auto got = view_gradient(params, view, {}, ThreadPool::global(), Precision::kFloat);
+    auto got = view_gradient(params, view, options, ThreadPool::global(), Precision::kFloat);
     REQUIRE(got.is_ok());
     const auto color = test::compare(to_float(got->image.color), to_float(ref->image.color));
     const auto alpha = test::compare(to_float(got->image.alpha), to_float(ref->image.alpha));
@@ -125,6 +126,9 @@ TEST_CASE("train fast: every float path matches the double twin on random scenes
     INFO("SH degree " << degree);
     Scene s = random_scene(7 + uint32_t(degree), 2500, degree, 83, 61);
     check_against_twin(s.params, s.view);
+    DiffRenderOptions grey;  // a background reaches the backward through T
+    grey.background = {0.2, 0.4, 0.6};
+    check_against_twin(s.params, s.view, grey);
   }
 }
 
@@ -265,4 +269,29 @@ TEST_CASE("train fast: --precision is validated by name; double runs the referen
   auto means = got->read_f32("grad.means");
   REQUIRE(means.is_ok());
   CHECK(*means == want->grads.means);
+}
+
+TEST_CASE("train fast: empty and fully culled scenes match the twin on every float path",
+          "[train][train_fast]") {
+  for (size_t n : {size_t(0), size_t(5)}) {
+    INFO(n << " Gaussians");
+    Scene s = random_scene(11, n, 2, 33, 21);
+    for (size_t i = 0; i < n; ++i) s.params.means[3 * i + 2] = -1.f;  // behind the camera
+    DiffRenderOptions opt;
+    opt.background = {0.25, 0.5, 0.75};
+    auto ref = view_gradient(s.params, s.view, opt, ThreadPool::global(), Precision::kDouble);
+    REQUIRE(ref.is_ok());
+    for (Isa isa : float_isas()) {
+      IsaRestore restore;
+      REQUIRE(set_isa(isa).is_ok());
+      INFO("path " << isa_name(isa));
+      auto got = view_gradient(s.params, s.view, opt, ThreadPool::global(), Precision::kFloat);
+      REQUIRE(got.is_ok());
+      CHECK(test::compare(to_float(got->image.color), to_float(ref->image.color)).max_abs <= 1e-6);
+      CHECK(std::abs(got->loss.loss - ref->loss.loss) <= 1e-5);
+      const auto want = grad_tensors(ref->grads);
+      const auto have = grad_tensors(got->grads);
+      for (size_t k = 0; k < want.size(); ++k) CHECK(*have[k].second == *want[k].second);
+    }
+  }
 }
