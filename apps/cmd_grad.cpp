@@ -11,7 +11,7 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: macro grad --scene S.ply --cameras C --camera NAME --target IMG --out G.safetensors\n"
-    "         [--mode classic|antialiased|mip] [--threads N] [--quiet]\n"
+    "         [--mode classic|antialiased|mip] [--precision float|double] [--threads N] [--quiet]\n"
     "  --scene    Inria-layout .ply, read as raw parameters (log scales, logit opacities,\n"
     "             raw quaternions)\n"
     "  --target   the photo to fit: PNG/JPEG (byte / 255) or EXR (R, G, B), the camera's size\n"
@@ -20,6 +20,7 @@ constexpr const char* kUsage =
     "             grad.shN [N,K-1,3], grad.means2d [N,2] (F32, gsplat names)\n"
     "  --mode     classic (default), antialiased (gsplat's opacity compensation) or mip\n"
     "             (Mip-Splatting: 3D filter from every camera of --cameras, 2D filter 0.1)\n"
+    "  --precision float (the SIMD float path; default) or double (the scalar reference)\n"
     "  loss = 0.8 L1 + 0.2 (1 - SSIM), SSIM 11x11 valid (docs/training.md)\n";
 
 int run_grad(std::vector<std::string> argv) {
@@ -36,6 +37,7 @@ int run_grad(std::vector<std::string> argv) {
   job.target_path = args.required("--target");
   job.out_path = args.required("--out");
   job.mode = args.value_or("--mode", "classic");
+  job.precision = args.value_or("--precision", job.precision);
   if (Status s = args.finish(); !s)
     return fail("grad", Status::error(s.message() + " (macro grad --help for usage)"));
   auto result = gs::train::run_grad_job(job);

@@ -20,6 +20,7 @@ constexpr const char* kUsage =
     "         [--lr-schedule gsplat|constant]\n"
     "         [--view-order shuffled|sequential] [--sh-degree-interval K] [--max-gaussians N]\n"
     "         [--scene-scale S] [--seed S] [--log LOG.jsonl] [--save-every N] [--resume CKPT]\n"
+    "         [--precision float|double]\n"
     "         [--threads N] [--quiet]\n"
     "  --images    folder of photos: camera NAME is DIR/NAME, or DIR/NAME.png|.jpg|.jpeg|.exr\n"
     "  --cameras   our cameras.json, a COLMAP sparse folder, transforms.json; every camera is a\n"
@@ -52,7 +53,9 @@ constexpr const char* kUsage =
     "              [relocated, added], psnr, seconds\n"
     "  --save-every  write the checkpoint OUT.ckpt (atomically) every N steps\n"
     "  --resume    continue from a checkpoint, with the same inputs and flags; the result is\n"
-    "              bit-identical to an uninterrupted run (docs/training.md)\n";
+    "              bit-identical to an uninterrupted run (docs/training.md)\n"
+    "  --precision float (the SIMD float path of the machine's ISA; default) or double (the\n"
+    "              scalar double-precision reference, docs/training.md)\n";
 
 int run_train(std::vector<std::string> argv) {
   Args args(std::move(argv));
@@ -81,6 +84,7 @@ int run_train(std::vector<std::string> argv) {
   job.cap_max = size_t(args.int_or("--cap-max", int(job.cap_max), 1, 2000000000));
   job.save_every = args.int_or("--save-every", 0, 0, 1000000000);
   job.resume_path = args.value_or("--resume", "");
+  job.precision = args.value_or("--precision", job.precision);
   const std::optional<std::string> scene_scale = args.value("--scene-scale");
   const std::optional<std::string> seed = args.value("--seed");
   if (Status s = args.finish(); !s)

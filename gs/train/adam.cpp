@@ -3,28 +3,38 @@
 
 #include <cmath>
 
+#include "gs/train/adam_kernels.h"
+
 namespace macro::gs::train {
+
+void adam_rows_scalar(double* m, double* v, const float* g, float* p, size_t n,
+                      const AdamCoefficients& c) {
+  for (size_t i = 0; i < n; ++i) {
+    const double gi = g[i];
+    m[i] = c.beta1 * m[i] + c.one_minus_beta1 * gi;
+    v[i] = c.beta2 * v[i] + c.one_minus_beta2 * gi * gi;
+    const double denom = std::sqrt(v[i]) / c.bias2_sqrt + c.eps;
+    p[i] = float(double(p[i]) - c.step_size * m[i] / denom);
+  }
+}
+
+AdamRowsFn adam_rows_for(Isa isa) {
+  return isa >= Isa::kAvx512 && isa_supported(isa) ? adam_rows_avx512 : adam_rows_scalar;
+}
+
 namespace {
 
-// p[i] -= step_size m / (sqrt(v) / bias2_sqrt + eps), element-wise; each element alone, so the
-// thread count cannot change the result.
+// p[i] -= step_size m / (sqrt(v) / bias2_sqrt + eps), element-wise (adam_kernels.h); each
+// element alone, so the thread count cannot change the result, nor the ISA path.
 void adam_update(std::vector<double>& m, std::vector<double>& v, const std::vector<float>& g,
                  std::vector<float>& p, double lr, const AdamOptions& o, int t, ThreadPool& pool) {
   MACRO_CHECK(g.size() == p.size() && m.size() == p.size() && v.size() == p.size());
   const double bias1 = 1 - std::pow(o.beta1, t), bias2 = 1 - std::pow(o.beta2, t);
-  const double step_size = lr / bias1, bias2_sqrt = std::sqrt(bias2);
+  const AdamCoefficients c{o.beta1,    1 - o.beta1,      o.beta2, 1 - o.beta2,
+                           lr / bias1, std::sqrt(bias2), o.eps};
+  const AdamRowsFn rows = adam_rows_for(active_isa());
   pool.parallel_for(
-      p.size(),
-      [&](size_t b, size_t e, int) {
-        for (size_t i = b; i < e; ++i) {
-          const double gi = g[i];
-          m[i] = o.beta1 * m[i] + (1 - o.beta1) * gi;
-          v[i] = o.beta2 * v[i] + (1 - o.beta2) * gi * gi;
-          const double denom = std::sqrt(v[i]) / bias2_sqrt + o.eps;
-          p[i] = float(double(p[i]) - step_size * m[i] / denom);
-        }
-      },
-      4096);
+      p.size(), [&](size_t b, size_t e, int) { rows(&m[b], &v[b], &g[b], &p[b], e - b, c); }, 4096);
 }
 
 }  // namespace

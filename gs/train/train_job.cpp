@@ -196,7 +196,8 @@ Result<GradJobResult> run_grad_job(const GradJob& job, ThreadPool& pool) {
     filter = compute_filter_3d(*params, cameras->cameras);
     ro.filter_3d = &filter;
   }
-  MACRO_ASSIGN_OR_RETURN(ViewGradient vg, view_gradient(*params, view, ro, pool));
+  MACRO_ASSIGN_OR_RETURN(Precision precision, parse_precision(job.precision));
+  MACRO_ASSIGN_OR_RETURN(ViewGradient vg, view_gradient(*params, view, ro, pool, precision));
 
   const int64_t N = int64_t(params->size()), H = camera->height, W = camera->width;
   const int64_t R = params->sh_rest();
@@ -233,6 +234,7 @@ Result<GradJobResult> run_grad_job(const GradJob& job, ThreadPool& pool) {
 }
 
 Status check_train_settings(const TrainJob& job) {
+  if (auto p = parse_precision(job.precision); !p) return p.status();
   if (job.strategy != "none" && job.strategy != "default" && job.strategy != "mcmc")
     return Status::error("--strategy: expected default, mcmc or none, found '" + job.strategy +
                          "'");
@@ -357,6 +359,7 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
   if (job.strategy == "mcmc") options.opacity_reg = options.scale_reg = 0.01;  // gsplat mcmc
   MACRO_ASSIGN_OR_RETURN(options.render.mode, parse_raster_mode("--mode", job.mode));
   options.seed = job.seed;
+  MACRO_ASSIGN_OR_RETURN(options.precision, parse_precision(job.precision));
 
   // Checkpoints: the settings a resume must repeat, the state to continue from.
   std::string settings;
@@ -368,8 +371,8 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
                "\ndata_factor=" + std::to_string(job.data_factor) +
                "\ntest_every=" + std::to_string(job.test_every) +
                "\nsteps=" + std::to_string(job.steps) + "\nstrategy=" + job.strategy +
-               "\nmode=" + job.mode + "\nlr_schedule=" + job.lr_schedule +
-               "\nview_order=" + job.view_order +
+               "\nmode=" + job.mode + "\nprecision=" + job.precision +
+               "\nlr_schedule=" + job.lr_schedule + "\nview_order=" + job.view_order +
                "\nsh_degree_interval=" + std::to_string(job.sh_degree_interval) +
                "\nseed=" + std::to_string(job.seed) + "\nscene_scale=" + scale +
                "\ncap_max=" + std::to_string(options.mcmc.cap_max) + "\nviews=";

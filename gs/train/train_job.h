@@ -31,9 +31,10 @@ struct GradJob {
   std::string scene_path;    // Inria .ply (read as raw parameters)
   std::string cameras_path;  // any camera file load_cameras reads
   std::string camera_name;
-  std::string target_path;       // PNG/JPEG (byte / 255) or EXR (R, G, B)
-  std::string out_path;          // .safetensors
-  std::string mode = "classic";  // classic | antialiased | mip (the 3D filter from every camera)
+  std::string target_path;          // PNG/JPEG (byte / 255) or EXR (R, G, B)
+  std::string out_path;             // .safetensors
+  std::string mode = "classic";     // classic | antialiased | mip (the 3D filter from every camera)
+  std::string precision = "float";  // --precision: float (SIMD path) | double (the reference)
   LoadLimits limits;
 };
 
@@ -66,6 +67,7 @@ struct TrainJob {
   size_t cap_max = 1000000;             // --cap-max (mcmc)
   int save_every = 0;                   // --save-every: a checkpoint every N steps (0: none)
   std::string resume_path;              // --resume CKPT
+  std::string precision = "float";      // --precision: float (SIMD path) | double (reference)
   std::optional<double> scene_scale;    // --scene-scale; absent: gsplat's camera extent
   uint64_t seed = 42;                   // --seed: view order and split samples
   bool progress = true;                 // stderr progress (also off when quiet())

@@ -25,16 +25,14 @@ Status check_view(const TrainView& view) {
 }  // namespace
 
 Result<ViewGradient> view_gradient(const SplatParams& params, const TrainView& view,
-                                   const DiffRenderOptions& options, ThreadPool& pool) {
+                                   const DiffRenderOptions& options, ThreadPool& pool,
+                                   Precision precision) {
   MACRO_TRY(check_view(view));
   ViewGradient out;
-  DiffRenderer renderer;
-  MACRO_TRY(renderer.forward(params, view.camera, options, &out.image, pool));
-  std::vector<double> v_color;
+  StepGradient step(precision);
   MACRO_ASSIGN_OR_RETURN(
-      out.loss, photometric_loss(out.image.color.data(), view.target.data(), out.image.width,
-                                 out.image.height, &v_color, pool));
-  renderer.backward(params, v_color.data(), nullptr, &out.grads, pool);
+      out.loss, step.compute(params, view.camera, view.target.data(), options, &out.grads, pool));
+  step.image(&out.image);
   return out;
 }
 
@@ -145,12 +143,11 @@ Status train(SplatParams* params, const std::vector<TrainView>& views, const Tra
     st.filter_3d = filter_3d;
     return st;
   };
-  DiffRenderer renderer;
+  StepGradient renderer(options.precision);
   DiffRenderOptions render = options.render;
   render.filter_3d = mip ? &filter_3d : nullptr;
   DiffImage image;
   SplatGrads grads;
-  std::vector<double> v_color;
   const auto t0 = std::chrono::steady_clock::now();
   for (int step = first; step < options.steps; ++step) {
     const size_t view_index = order.next();
@@ -158,12 +155,9 @@ Status train(SplatParams* params, const std::vector<TrainView>& views, const Tra
     render.sh_degree =
         std::min(options.render.sh_degree,
                  active_sh_degree(step, options.sh_degree_interval, params->sh_degree));
-    MACRO_TRY(renderer.forward(*params, view.camera, render, &image, pool)
-                  .with_context("step " + std::to_string(step)));
-    MACRO_ASSIGN_OR_RETURN(LossValue loss,
-                           photometric_loss(image.color.data(), view.target.data(), image.width,
-                                            image.height, &v_color, pool));
-    renderer.backward(*params, v_color.data(), nullptr, &grads, pool);
+    auto loss = renderer.compute(*params, view.camera, view.target.data(), render, &grads, pool);
+    if (!loss) return loss.status().with_context("step " + std::to_string(step));
+    renderer.image(&image);
     const double reg = add_regularisers(options, *params, &grads);
     StepRecord rec;
     rec.psnr = render_psnr(image, view.target);
@@ -174,8 +168,8 @@ Status train(SplatParams* params, const std::vector<TrainView>& views, const Tra
     const size_t rows_before = params->size();
     if (options.strategy == Strategy::kDefault) {
       auto rep = default_strategy_step(options.default_strategy, step, options.adam.scene_scale,
-                                       grads.means2d, renderer.visible(), image.width, image.height,
-                                       normal, params, &adam, &strategy_state);
+                                       grads.means2d, renderer.visible(), renderer.width(),
+                                       renderer.height(), normal, params, &adam, &strategy_state);
       if (!rep) return rep.status().with_context("step " + std::to_string(step));
       rec.refine = *rep;
     } else if (options.strategy == Strategy::kMcmc) {
@@ -187,9 +181,9 @@ Status train(SplatParams* params, const std::vector<TrainView>& views, const Tra
     rec.step = step;
     rec.view = view_index;
     rec.sh_degree = render.sh_degree;
-    rec.loss = loss.loss + reg;
-    rec.l1 = loss.l1;
-    rec.ssim = loss.ssim;
+    rec.loss = loss->loss + reg;
+    rec.l1 = loss->l1;
+    rec.ssim = loss->ssim;
     rec.num_gaussians = params->size();
     rec.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (on_step) MACRO_TRY(on_step(rec));

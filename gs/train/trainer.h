@@ -23,6 +23,7 @@
 #include "gs/train/diff_render.h"
 #include "gs/train/loss.h"
 #include "gs/train/schedule.h"
+#include "gs/train/step_gradient.h"
 #include "gs/train/strategy_default.h"
 #include "gs/train/strategy_mcmc.h"
 
@@ -52,6 +53,9 @@ struct TrainOptions {
   // step and after the strategy of every step s with s % 100 == 0 or a change of the rows
   // (render.filter_3d is ignored).
   uint64_t seed = 42;  // view order, split samples, MCMC draws
+  // kFloat: the float SIMD path where active_isa() has one, else the double reference
+  // (step_gradient.h); kDouble: always the reference.
+  Precision precision = Precision::kFloat;
 };
 
 // Everything the loop carries from one step to the next besides the parameters (a checkpoint,
@@ -104,7 +108,8 @@ struct ViewGradient {
 };
 Result<ViewGradient> view_gradient(const SplatParams& params, const TrainView& view,
                                    const DiffRenderOptions& options,
-                                   ThreadPool& pool = ThreadPool::global());
+                                   ThreadPool& pool = ThreadPool::global(),
+                                   Precision precision = Precision::kFloat);
 
 // Runs options.steps Adam steps on *params; on_step (optional) is called after every step and
 // may stop training by returning an error, which train() returns.
