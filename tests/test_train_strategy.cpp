@@ -24,6 +24,7 @@
 #include "gs/train/strategy_default.h"
 #include "gs/train/trainer.h"
 #include "test_support.h"
+#include "train_scene_fixture.h"
 
 using namespace macro;
 using namespace macro::gs;
@@ -372,72 +373,7 @@ TEST_CASE("train schedule: inactive SH bands get zero gradients; train() applies
   CHECK(recs.back().loss < recs.front().loss);
 }
 
-// ---- --scene-dir inputs --------------------------------------------------------------------
-
-namespace {
-
-// A tiny COLMAP scene: 40 coloured Gaussians in a box, 9 cameras 48 x 36 on an arc looking at
-// it, the photos their renders, points3D the Gaussians' centres (jittered) and colours.
-void write_tiny_scene(const std::string& dir, SplatParams* truth) {
-  namespace fs = std::filesystem;
-  fs::create_directories(dir + "/images");
-  fs::create_directories(dir + "/sparse/0");
-  synth_random::Rng rng{11};
-  SplatParams& p = *truth;
-  p.resize(40, 0);
-  for (size_t i = 0; i < 40; ++i) {
-    for (int a = 0; a < 3; ++a) p.means[3 * i + a] = float(rng.range(-0.6, 0.6));
-    for (int a = 0; a < 3; ++a) p.scales[3 * i + a] = float(std::log(rng.range(0.08, 0.2)));
-    p.quats[4 * i] = 1.f;
-    p.opacities[i] = 1.5f;
-    for (int c = 0; c < 3; ++c) p.sh0[3 * i + c] = float(rng.range(-1.5, 1.5));
-  }
-  CameraSet set;
-  for (int k = 0; k < 9; ++k) {
-    Camera cam;
-    cam.name = "v" + std::to_string(k) + ".png";
-    cam.file_path = cam.name;
-    cam.width = 48;
-    cam.height = 36;
-    cam.fx = cam.fy = 45;
-    cam.cx = 24;
-    cam.cy = 18;
-    const double ang = -0.6 + 0.15 * k;
-    const Eigen::Vector3d c(3 * std::sin(ang), 0.2, -3 * std::cos(ang));
-    const Eigen::Vector3d fwd = (-c).normalized();
-    const Eigen::Vector3d right = Eigen::Vector3d(0, 1, 0).cross(fwd).normalized();
-    const Eigen::Vector3d down = fwd.cross(right);
-    cam.R.row(0) = right;
-    cam.R.row(1) = down;
-    cam.R.row(2) = fwd;
-    cam.t = -cam.R * c;
-    set.cameras.push_back(cam);
-    DiffRenderer r;
-    DiffImage img;
-    REQUIRE(r.forward(p, cam, {}, &img).is_ok());
-    Image png(48, 36, 3);
-    for (size_t j = 0; j < png.data.size(); ++j)
-      png.data[j] = float(std::clamp(img.color[j], 0.0, 1.0));
-    REQUIRE(write_png(dir + "/images/" + cam.name, png).is_ok());
-  }
-  REQUIRE(save_colmap_text(set, dir + "/sparse/0").is_ok());
-  ColmapPoints pts;
-  for (size_t i = 0; i < 40; ++i) {
-    pts.ids.push_back(int64_t(i + 1));
-    pts.xyz.emplace_back(p.means[3 * i] + rng.range(-0.05, 0.05),
-                         p.means[3 * i + 1] + rng.range(-0.05, 0.05),
-                         p.means[3 * i + 2] + rng.range(-0.05, 0.05));
-    for (int c = 0; c < 3; ++c)
-      pts.rgb.push_back(uint8_t(
-          std::clamp(std::lround(255 * (0.5 + 0.28209479177387814 * p.sh0[3 * i + c])), 0L, 255L)));
-    pts.error.push_back(0.5);
-    pts.track_offsets.push_back(0);
-  }
-  pts.track_offsets.push_back(0);
-  REQUIRE(save_colmap_points_text(pts, dir + "/sparse/0/points3D.txt").is_ok());
-}
-
-}  // namespace
+// ---- --scene-dir inputs (the scene: train_scene_fixture.h) ---------------------------------
 
 TEST_CASE("train inputs: test-every hold-out, SfM and random initialisation", "[train]") {
   const std::vector<bool> h = test_every_holdout(17, 8);
@@ -476,7 +412,7 @@ TEST_CASE("train inputs: macro train --scene-dir holds out test views and raises
   test::TempDir tmp("train-scene-dir");
   const std::string dir = tmp.file("scene");
   SplatParams truth;
-  write_tiny_scene(dir, &truth);
+  test::write_tiny_scene(dir, &truth);
   SceneDirOptions so;
   auto in = load_scene_dir(dir, so);
   REQUIRE(in.is_ok());
