@@ -109,8 +109,11 @@ int run(int argc, char** argv) {
       n);
   auto ply = gs::encode_scene(cloud, gs::SceneFormat::kPly, "bench.ply");
   auto splat = gs::encode_scene(cloud, gs::SceneFormat::kSplat, "bench.splat");
-  auto spz = gs::encode_scene(cloud, gs::SceneFormat::kSpz, "bench.spz");
-  if (!ply || !splat || !spz) {
+  auto spz = gs::encode_scene(cloud, gs::SceneFormat::kSpz, "bench.spz");  // version 4 (zstd)
+  gs::SaveOptions v2;
+  v2.spz_version = 2;
+  auto spz2 = gs::encode_scene(cloud, gs::SceneFormat::kSpz, "bench.spz", v2);
+  if (!ply || !splat || !spz || !spz2) {
     std::fprintf(stderr, "encode failed\n");
     return 1;
   }
@@ -129,7 +132,16 @@ int run(int argc, char** argv) {
   };
   report("decode .ply (binary LE, all float)", *ply, "bench.ply");
   report("decode .splat", *splat, "bench.splat");
-  report("decode .spz (gzip)", *spz, "bench.spz");
+  report("decode .spz v4 (zstd)", *spz, "bench.spz");
+  report("decode .spz v2 (gzip)", *spz2, "bench.spz");
+  auto encode = [&](const char* name, gs::SceneFormat format, const gs::SaveOptions& o) {
+    const double t = median_cpu_seconds(reps, [&] {
+      if (!gs::encode_scene(cloud, format, "bench", o)) std::abort();
+    });
+    std::printf("%-34s %9.1f ms  %6.1fx baseline\n", name, t * 1e3, t / base);
+  };
+  encode("encode .spz v4 (zstd)", gs::SceneFormat::kSpz, {});
+  encode("encode .spz v2 (gzip)", gs::SceneFormat::kSpz, v2);
   const std::string path = "/tmp/macro-bench-formats-" + std::to_string(::getpid()) + ".ply";
   if (!write_file_atomic(path, ply->data(), ply->size())) return 1;
   const double t = median_cpu_seconds(reps, [&] {
