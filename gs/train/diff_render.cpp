@@ -53,6 +53,22 @@ struct DiffRenderer::State {
   bool ready = false;
 };
 
+Result<ProjectSettings> project_settings(const SplatParams& params,
+                                         const DiffRenderOptions& options) {
+  const bool mip = options.mode == RasterMode::kMip;
+  if (mip && options.filter_3d && options.filter_3d->size() != params.size())
+    return Status::error("render: the 3D filter holds " +
+                         std::to_string(options.filter_3d->size()) + " values for " +
+                         std::to_string(params.size()) + " Gaussians");
+  ProjectSettings ps;
+  ps.sh_degree = std::clamp(options.sh_degree, 0, params.sh_degree);
+  ps.near_plane = options.near_plane;
+  ps.far_plane = options.far_plane;
+  ps.mode = options.mode;
+  ps.filter_3d = mip && options.filter_3d ? options.filter_3d->data() : nullptr;
+  return ps;
+}
+
 DiffRenderer::DiffRenderer() : st_(std::make_unique<State>()) {}
 DiffRenderer::~DiffRenderer() = default;
 DiffRenderer::DiffRenderer(DiffRenderer&&) noexcept = default;
@@ -95,17 +111,7 @@ Status DiffRenderer::forward(const SplatParams& params, const Camera& camera,
   if (params.size() >= (size_t(1) << 32))
     return Status::error("render: more than 2^32-1 Gaussians");
   s.cam = make_camera_d(camera);
-  if (options.mode == RasterMode::kMip && options.filter_3d &&
-      options.filter_3d->size() != params.size())
-    return Status::error("render: the 3D filter holds " +
-                         std::to_string(options.filter_3d->size()) + " values for " +
-                         std::to_string(params.size()) + " Gaussians");
-  s.ps.sh_degree = std::clamp(options.sh_degree, 0, params.sh_degree);
-  s.ps.near_plane = options.near_plane;
-  s.ps.far_plane = options.far_plane;
-  s.ps.mode = options.mode;
-  s.ps.filter_3d =
-      options.mode == RasterMode::kMip && options.filter_3d ? options.filter_3d->data() : nullptr;
+  MACRO_ASSIGN_OR_RETURN(s.ps, project_settings(params, options));
   s.background = options.background;
   const CameraD& cam = s.cam;
   const size_t n = s.n = params.size();

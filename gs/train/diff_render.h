@@ -35,6 +35,7 @@
 #include "gs/cameras/camera.h"
 #include "gs/formats/splat_params.h"
 #include "gs/raster/rasterizer.h"
+#include "gs/train/diff_project.h"
 
 namespace macro::gs::train {
 
@@ -47,6 +48,13 @@ struct DiffRenderOptions {
   // Mip only: the 3D filter [N] (compute_filter_3d), kept alive until the backward; null: none.
   const std::vector<float>* filter_3d = nullptr;
 };
+
+// The per-Gaussian projection settings of a render of `params` with `options` (the SH degree
+// clamped to the parameters', the planes, the mode and the 3D filter's data): what both the double
+// renderer and the float path hand to project_forward / project_backward. An error when a mip
+// filter does not hold one value per Gaussian.
+Result<ProjectSettings> project_settings(const SplatParams& params,
+                                         const DiffRenderOptions& options);
 
 // Gradients of a scalar loss, laid out as SplatParams (gsplat names and shapes):
 struct SplatGrads {

@@ -154,17 +154,7 @@ Status FastRenderer::forward(const SplatParams& params, const Camera& camera,
     return Status::error("render: more than 2^32-1 Gaussians");
   s.cam = make_camera_d(camera);
   s.camf = raster::make_camera_f(camera);
-  if (options.mode == RasterMode::kMip && options.filter_3d &&
-      options.filter_3d->size() != params.size())
-    return Status::error("render: the 3D filter holds " +
-                         std::to_string(options.filter_3d->size()) + " values for " +
-                         std::to_string(params.size()) + " Gaussians");
-  s.ps.sh_degree = std::clamp(options.sh_degree, 0, params.sh_degree);
-  s.ps.near_plane = options.near_plane;
-  s.ps.far_plane = options.far_plane;
-  s.ps.mode = options.mode;
-  s.ps.filter_3d =
-      options.mode == RasterMode::kMip && options.filter_3d ? options.filter_3d->data() : nullptr;
+  MACRO_ASSIGN_OR_RETURN(s.ps, project_settings(params, options));
   s.background = options.background;
   const size_t n = s.n = params.size();
 
