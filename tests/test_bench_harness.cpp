@@ -13,6 +13,8 @@
 #include "enhance/bench/bench_harness.h"
 #include "enhance/bench/bench_report.h"
 #include "enhance/datasets/synth_scene_folder.h"
+#include "enhance/scene_input.h"
+#include "gs/cameras/camera.h"
 #include "gs/image_io.h"
 #include "gs/synth/synth.h"
 #include "tests/test_support.h"
@@ -427,6 +429,64 @@ TEST_CASE("bench report files: table, SVG well formed, PDF, PNG at twice the cha
     if (std::fabs(p[0] - p[1]) > 0.2f || std::fabs(p[1] - p[2]) > 0.2f) ++coloured;
   }
   CHECK(coloured > 50);
+}
+
+TEST_CASE("bench run scores a scene with lens distortion on its undistorted copy", "[harness]") {
+  test::TempDir tmp("bench-distorted");
+  make_root(tmp.file("root"));
+  fs::remove_all(tmp.file("root/scene_b"));
+  const std::string dir = tmp.file("root/scene_a");
+  // The scene's cameras and the split's intrinsics become OPENCV with a small k1.
+  auto cams = gs::load_cameras(dir);
+  REQUIRE(cams.is_ok());
+  for (gs::Camera& c : cams->cameras) {
+    c.model = gs::CameraModel::kOpenCV;
+    c.distortion = {0.05, 0, 0, 0};
+  }
+  REQUIRE(gs::save_colmap_text(*cams, dir + "/sparse/0").is_ok());
+  std::string split = *read_text_file(dir + "/split.json");
+  const size_t at = split.find("\"intrinsics\"");
+  REQUIRE(at != std::string::npos);
+  const size_t brace = split.find('{', at);
+  split.insert(brace + 1, "\"k1\": 0.05, \"camera_model\": \"OPENCV\", ");
+  REQUIRE(write_file_atomic(dir + "/split.json", split).is_ok());
+  // Loading it directly is refused; the benchmark undistorts it first and scores every pair.
+  SceneInputOptions so;
+  so.scene_dir = dir;
+  so.closeup = gs::load_closeup_split(dir + "/split.json")->closeup_eval_pairs.at(0).closeup_frame;
+  auto refused = load_scene_inputs(so);
+  REQUIRE_FALSE(refused.is_ok());
+  CHECK_THAT(refused.status().message(), Catch::Contains("macro undistort"));
+  BenchRunOptions o;
+  o.root = tmp.file("root");
+  o.results = tmp.file("r.jsonl");
+  set_quiet(true);
+  auto summary = run_benchmark(o, default_method_registry());
+  REQUIRE(summary.is_ok());
+  CHECK(summary->ran == 3);
+  CHECK(summary->ok == 3);
+  const std::string copy = tmp.file("r.jsonl.undistorted/scene_a");
+  auto undistorted = gs::load_cameras(copy);
+  REQUIRE(undistorted.is_ok());
+  for (const gs::Camera& c : undistorted->cameras) CHECK_FALSE(c.has_distortion());
+  auto records = read_records(o.results);
+  REQUIRE(records.is_ok());
+  REQUIRE(!records->empty());
+  auto gt = gs::read_image(copy + "/closeup_gt/" + records->front().closeup_frame);
+  REQUIRE(gt.is_ok());
+  // The copy's pinhole camera is OpenCV's new K, not the distorted camera's.
+  CHECK(std::abs(undistorted->cameras.front().fx - cams->cameras.front().fx) > 1e-3);
+  auto split_copy = gs::load_closeup_split(copy + "/split.json");
+  REQUIRE(split_copy.is_ok());
+  CHECK_FALSE(split_copy->closeups.cameras.front().has_distortion());
+  CHECK(gt->width == split_copy->closeups.cameras.front().width);
+  for (const BenchRecord& r : *records) CHECK(r.width == gt->width);
+  // A second run reuses the copy (the marker names the source).
+  const auto stamp = fs::last_write_time(copy + "/.undistorted-from");
+  o.results = tmp.file("r.jsonl");
+  fs::remove(tmp.file("r.jsonl"));
+  REQUIRE(run_benchmark(o, default_method_registry()).is_ok());
+  CHECK(fs::last_write_time(copy + "/.undistorted-from") == stamp);
 }
 
 TEST_CASE("macro bench run, merge and report end to end on synthetic scene folders",

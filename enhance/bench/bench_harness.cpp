@@ -13,10 +13,12 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <map>
 #include <nlohmann/json.hpp>
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/progress.h"
+#include "gs/cameras/undistort_scene.h"
 
 namespace macro::enhance {
 namespace fs = std::filesystem;
@@ -457,7 +459,8 @@ BenchRecord run_work_item(const BenchWorkItem& item, const MethodRegistry& regis
     // Sharpness against the GT (metrics.h gradient_energy_ratio), on the prediction at GT size.
     MetricValue g{"grad_ratio", false, 0.0, "", ""};
     Result<gs::Image> sized = match_size(out->image, gt->width, gt->height);
-    Result<double> ratio = sized ? gradient_energy_ratio(*sized, *gt) : Result<double>(sized.status());
+    Result<double> ratio =
+        sized ? gradient_energy_ratio(*sized, *gt) : Result<double>(sized.status());
     if (ratio) {
       g.computed = true;
       g.value = *ratio;
@@ -469,6 +472,45 @@ BenchRecord run_work_item(const BenchWorkItem& item, const MethodRegistry& regis
   r.ok = true;
   return r;
 }
+
+namespace {
+
+// The first camera of a scene folder (its reference cameras, then the split's close-up
+// intrinsics) with lens distortion, as "camera 'NAME' (MODEL k1=...)"; "" when none has any.
+Result<std::string> distorted_camera(const std::string& dir) {
+  gs::CameraLoadOptions lenient;
+  MACRO_ASSIGN_OR_RETURN(gs::CameraSet set, gs::load_cameras(dir, lenient));
+  for (const gs::Camera& c : set.cameras)
+    if (c.has_distortion()) return "camera '" + c.name + "' (" + c.model_text() + ")";
+  const std::string split = (fs::path(dir) / "split.json").string();
+  if (file_exists(split)) {
+    MACRO_ASSIGN_OR_RETURN(gs::CloseupSplit sp, gs::load_closeup_split(split, lenient));
+    if (!sp.closeups.cameras.empty() && sp.closeups.cameras.front().has_distortion())
+      return "the split's intrinsics (" + sp.closeups.cameras.front().model_text() + ")";
+  }
+  return std::string();
+}
+
+// A distorted scene is scored as gsplat trains and evaluates it: undistorted once (gs/cameras/
+// undistort_scene.h, gsplat's K hand-over) into CACHE/<scene>, which later runs reuse (its marker
+// file names the source folder and is written last). Returns the folder to read.
+Result<std::string> undistorted_scene(const std::string& dir, const std::string& cache) {
+  MACRO_ASSIGN_OR_RETURN(std::string which, distorted_camera(dir));
+  if (which.empty()) return dir;
+  const std::string out = (fs::path(cache) / fs::path(dir).filename()).string();
+  const std::string marker = out + "/.undistorted-from";
+  const std::string source = fs::absolute(dir).lexically_normal().string() + "\n";
+  if (auto m = read_text_file(marker); m && *m == source) return out;
+  log_info("bench", dir + ": " + which +
+                        " has lens distortion: undistorting it as gsplat does "
+                        "into " +
+                        out);
+  MACRO_TRY(gs::undistort_scene_folder(dir, out).status().with_context("bench: " + dir));
+  MACRO_TRY(write_file_atomic(marker, source));
+  return out;
+}
+
+}  // namespace
 
 Result<BenchRunSummary> run_benchmark(const BenchRunOptions& options,
                                       const MethodRegistry& registry) {
@@ -497,9 +539,20 @@ Result<BenchRunSummary> run_benchmark(const BenchRunOptions& options,
   if (options.limit > 0 && todo.size() > size_t(options.limit)) todo.resize(size_t(options.limit));
 
   if (todo.empty()) return summary;
+  // Scenes with lens distortion are read from their undistorted copies.
+  std::map<std::string, std::string> scene_dirs;
+  for (const BenchWorkItem* it : todo) {
+    const std::string& dir = it->pair.scene_dir;
+    if (scene_dirs.count(dir)) continue;
+    MACRO_ASSIGN_OR_RETURN(scene_dirs[dir],
+                           undistorted_scene(dir, options.results + ".undistorted"));
+  }
   Progress progress("bench", todo.size());
   PairInputsCache cache;
-  for (const BenchWorkItem* it : todo) {
+  for (const BenchWorkItem* todo_item : todo) {
+    BenchWorkItem item = *todo_item;
+    item.pair.scene_dir = scene_dirs.at(item.pair.scene_dir);
+    const BenchWorkItem* it = &item;
     BenchRecord r = run_work_item(*it, registry, options.metrics, &cache);
     MACRO_TRY(appender.append(r));
     ++summary.ran;

@@ -151,6 +151,9 @@ struct BenchRunSummary {
 
 // Runs the shard's items that the results file does not hold yet, appending each record as it
 // finishes. Progress with ETA on stderr (attention/runtime/progress.h; --quiet silences it).
+// A scene folder whose cameras (or split intrinsics) have lens distortion is first undistorted as
+// gsplat does (`macro undistort`) into RESULTS.undistorted/<scene>, reused by later runs, and
+// scored there: against its undistorted close-up ground truth.
 Result<BenchRunSummary> run_benchmark(const BenchRunOptions& options,
                                       const MethodRegistry& registry);
 
