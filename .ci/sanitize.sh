@@ -34,6 +34,8 @@ t1=$(date +%s)
 # allows it; harmless elsewhere).
 export ASAN_OPTIONS=${ASAN_OPTIONS:-halt_on_error=1:abort_on_error=1:detect_leaks=1}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-halt_on_error=1:print_stacktrace=1}
+# Third-party caches that live until exit by design (.ci/lsan.supp says which and why).
+export LSAN_OPTIONS=${LSAN_OPTIONS:-suppressions=$PWD/.ci/lsan.supp}
 export MACRO_QUIET=1
 "$BUILD/macro_tests" "$SUBSET"
 t2=$(date +%s)
