@@ -549,11 +549,10 @@ Result<BenchRunSummary> run_benchmark(const BenchRunOptions& options,
   }
   Progress progress("bench", todo.size());
   PairInputsCache cache;
-  for (const BenchWorkItem* todo_item : todo) {
-    BenchWorkItem item = *todo_item;
+  for (const BenchWorkItem* it : todo) {
+    BenchWorkItem item = *it;
     item.pair.scene_dir = scene_dirs.at(item.pair.scene_dir);
-    const BenchWorkItem* it = &item;
-    BenchRecord r = run_work_item(*it, registry, options.metrics, &cache);
+    BenchRecord r = run_work_item(item, registry, options.metrics, &cache);
     MACRO_TRY(appender.append(r));
     ++summary.ran;
     if (r.ok) {

@@ -70,12 +70,11 @@ Status undistort_file(const Undistortion& u, const std::string& from, const std:
                          "'): undistorted images are written as PNG or JPEG, and this name ends "
                          "in neither .png, .jpg nor .jpeg");
   }
-  Image img;
-  if (already_read) {
-    img = *already_read;
-  } else {
-    MACRO_ASSIGN_OR_RETURN(img, read_image(from));
+  Image loaded;
+  if (!already_read) {
+    MACRO_ASSIGN_OR_RETURN(loaded, read_image(from));
   }
+  const Image& img = already_read ? *already_read : loaded;
   MACRO_ASSIGN_OR_RETURN(Image out, undistort_image(u, img, from));
   MACRO_TRY(make_parent(to));
   if (kind == OutputKind::kPng) return write_png(to, out);
