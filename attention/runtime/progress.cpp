@@ -5,19 +5,11 @@
 #include <cstdlib>
 #include <cstring>
 
+#include "attention/runtime/text.h"
+
 namespace macro {
 namespace {
 std::atomic<int> g_quiet{-1};
-std::string format_seconds(double s) {
-  char buf[32];
-  if (s < 60)
-    std::snprintf(buf, sizeof buf, "%.1fs", s);
-  else if (s < 3600)
-    std::snprintf(buf, sizeof buf, "%dm%02ds", int(s) / 60, int(s) % 60);
-  else
-    std::snprintf(buf, sizeof buf, "%dh%02dm", int(s) / 3600, (int(s) / 60) % 60);
-  return buf;
-}
 }  // namespace
 
 void set_quiet(bool q) {

@@ -1,6 +1,7 @@
 // Numbers as text (text.h).
 #include "attention/runtime/text.h"
 
+#include <cmath>
 #include <cstdio>
 
 #include "attention/runtime/status.h"
@@ -35,6 +36,18 @@ std::string format_fixed(double v, int decimals) {
 std::string count_noun(size_t count, const std::string& singular, const std::string& plural) {
   return std::to_string(count) + " " +
          (count == 1 ? singular : (plural.empty() ? singular + "s" : plural));
+}
+
+std::string format_seconds(double s) {
+  char buf[32];
+  if (!(s >= 0) || !std::isfinite(s)) return "?";
+  if (s < 60)
+    std::snprintf(buf, sizeof buf, "%.1fs", s);
+  else if (s < 3600)
+    std::snprintf(buf, sizeof buf, "%dm%02ds", int(s) / 60, int(s) % 60);
+  else
+    std::snprintf(buf, sizeof buf, "%dh%02dm", int(s) / 3600, (int(s) / 60) % 60);
+  return buf;
 }
 
 }  // namespace macro

@@ -23,4 +23,7 @@ std::string format_fixed(double v, int decimals);
 // "<count> <noun>": the singular for one, else `plural` (default: the singular + "s").
 std::string count_noun(size_t count, const std::string& singular, const std::string& plural = "");
 
+// A duration for progress lines: "12.3s", "4m05s", "2h07m"; "?" when negative or not finite.
+std::string format_seconds(double seconds);
+
 }  // namespace macro

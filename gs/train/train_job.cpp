@@ -13,6 +13,7 @@
 #include "attention/runtime/interrupt_note.h"
 #include "attention/runtime/io/safetensors.h"
 #include "attention/runtime/progress.h"
+#include "attention/runtime/text.h"
 #include "gs/formats/splat_params.h"
 #include "gs/image_io.h"
 #include "gs/train/checkpoint.h"
@@ -72,18 +73,6 @@ std::string json_string(const std::string& v) {
     }
   }
   return out + "\"";
-}
-
-std::string format_seconds(double s) {
-  char buf[32];
-  if (!(s >= 0) || !std::isfinite(s)) return "?";
-  if (s < 60)
-    std::snprintf(buf, sizeof buf, "%.1fs", s);
-  else if (s < 3600)
-    std::snprintf(buf, sizeof buf, "%dm%02ds", int(s) / 60, int(s) % 60);
-  else
-    std::snprintf(buf, sizeof buf, "%dh%02dm", int(s) / 3600, (int(s) / 60) % 60);
-  return buf;
 }
 
 // Training fits pinhole renders to the photos, so a camera with distortion (whose photos are not
