@@ -218,23 +218,23 @@ TEST_CASE("train fast: every Adam path gives the scalar twin's bits", "[train][t
   std::mt19937 rng(5);
   std::normal_distribution<double> nd(0, 1);
   const size_t n = 1003;  // a tail after the last full vector
-  std::vector<double> m(n), v(n);
+  std::vector<float> m(n), v(n);
   std::vector<float> g(n), p(n);
   for (size_t i = 0; i < n; ++i) {
-    m[i] = 1e-3 * nd(rng);
-    v[i] = 1e-6 * std::abs(nd(rng));
+    m[i] = float(1e-3 * nd(rng));
+    v[i] = float(1e-6 * std::abs(nd(rng)));
     g[i] = float(1e-3 * nd(rng));
     p[i] = float(nd(rng));
   }
-  const AdamCoefficients c{0.9,  0.1, 0.999, 0.001, 1.6e-4 / 0.19, std::sqrt(1 - 0.999 * 0.999),
-                           1e-15};
-  std::vector<double> m0 = m, v0 = v;
+  const AdamCoefficients c{0.1f, 0.999f, 0.001f, float(1.6e-4 / 0.19),
+                           float(std::sqrt(1 - 0.999 * 0.999)), 1e-15f};
+  std::vector<float> m0 = m, v0 = v;
   std::vector<float> p0 = p;
   adam_rows_scalar(m0.data(), v0.data(), g.data(), p0.data(), n, c);
   CHECK(p0 != p);
   for (Isa isa : test::supported_isas()) {
     INFO("path " << isa_name(isa));
-    std::vector<double> m1 = m, v1 = v;
+    std::vector<float> m1 = m, v1 = v;
     std::vector<float> p1 = p;
     adam_rows_for(isa)(m1.data(), v1.data(), g.data(), p1.data(), n, c);
     CHECK(m1 == m0);

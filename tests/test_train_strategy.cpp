@@ -66,10 +66,10 @@ SplatAdam stepped_adam(SplatParams* p) {
 }
 
 // The first moment of group `name`, row r (width values).
-std::vector<double> moment_row(const SplatAdam& adam, const std::string& name, size_t r,
-                               size_t width) {
-  const std::vector<double>& m = *adam.exp_avg(name);
-  return std::vector<double>(m.begin() + r * width, m.begin() + (r + 1) * width);
+std::vector<float> moment_row(const SplatAdam& adam, const std::string& name, size_t r,
+                              size_t width) {
+  const std::vector<float>& m = *adam.exp_avg(name);
+  return std::vector<float>(m.begin() + r * width, m.begin() + (r + 1) * width);
 }
 
 }  // namespace
@@ -189,8 +189,8 @@ TEST_CASE("train strategy: split children lie at mean + R (s * z) for the drawn 
 TEST_CASE("train strategy: new rows get zero Adam moments, kept rows keep theirs", "[train]") {
   SplatParams p = tagged_cloud(4, 1);
   SplatAdam adam = stepped_adam(&p);
-  const std::vector<double> m2 = moment_row(adam, "scales", 2, 3);
-  const std::vector<double> m3 = moment_row(adam, "shN", 3, 9);
+  const std::vector<float> m2 = moment_row(adam, "scales", 2, 3);
+  const std::vector<float> m3 = moment_row(adam, "shN", 3, 9);
   REQUIRE(m2[0] != 0.0);
   duplicate_gaussians({1, 0, 0, 0}, &p, &adam, nullptr);  // rows 0 1 2 3 copy0
   REQUIRE(p.size() == 5);
@@ -207,7 +207,7 @@ TEST_CASE("train strategy: new rows get zero Adam moments, kept rows keep theirs
   split_gaussians({0, 0, 1, 0, 0}, rng, &p, &adam, nullptr);  // 0 1 3 copy0 c2 c2
   REQUIRE(p.size() == 6);
   CHECK(moment_row(adam, "shN", 2, 9) == m3);
-  for (size_t r : {4, 5}) CHECK(moment_row(adam, "scales", r, 3) == std::vector<double>(3, 0.0));
+  for (size_t r : {4, 5}) CHECK(moment_row(adam, "scales", r, 3) == std::vector<float>(3, 0.f));
   remove_gaussians({1, 0, 0, 0, 0, 0}, &p, &adam, nullptr);  // 1 3 copy0 c2 c2
   REQUIRE(p.size() == 5);
   CHECK(moment_row(adam, "shN", 1, 9) == m3);

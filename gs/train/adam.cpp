@@ -7,14 +7,17 @@
 
 namespace macro::gs::train {
 
-void adam_rows_scalar(double* m, double* v, const float* g, float* p, size_t n,
+// Each operation rounded on its own: this file is built with the baseline x86-64 flags (no FMA),
+// so nothing is contracted.
+void adam_rows_scalar(float* m, float* v, const float* g, float* p, size_t n,
                       const AdamCoefficients& c) {
+  const float neg_step = -c.step_size;
   for (size_t i = 0; i < n; ++i) {
-    const double gi = g[i];
-    m[i] = c.beta1 * m[i] + c.one_minus_beta1 * gi;
-    v[i] = c.beta2 * v[i] + c.one_minus_beta2 * gi * gi;
-    const double denom = std::sqrt(v[i]) / c.bias2_sqrt + c.eps;
-    p[i] = float(double(p[i]) - c.step_size * m[i] / denom);
+    const float gi = g[i];
+    m[i] = m[i] + c.one_minus_beta1 * (gi - m[i]);
+    v[i] = c.beta2 * v[i] + (c.one_minus_beta2 * gi) * gi;
+    const float denom = std::sqrt(v[i]) / c.bias2_sqrt + c.eps;
+    p[i] = p[i] + (neg_step * m[i]) / denom;
   }
 }
 
@@ -26,12 +29,12 @@ namespace {
 
 // p[i] -= step_size m / (sqrt(v) / bias2_sqrt + eps), element-wise (adam_kernels.h); each
 // element alone, so the thread count cannot change the result, nor the ISA path.
-void adam_update(std::vector<double>& m, std::vector<double>& v, const std::vector<float>& g,
+void adam_update(std::vector<float>& m, std::vector<float>& v, const std::vector<float>& g,
                  std::vector<float>& p, double lr, const AdamOptions& o, int t, ThreadPool& pool) {
   MACRO_CHECK(g.size() == p.size() && m.size() == p.size() && v.size() == p.size());
   const double bias1 = 1 - std::pow(o.beta1, t), bias2 = 1 - std::pow(o.beta2, t);
-  const AdamCoefficients c{o.beta1,    1 - o.beta1,      o.beta2, 1 - o.beta2,
-                           lr / bias1, std::sqrt(bias2), o.eps};
+  const AdamCoefficients c{float(1 - o.beta1), float(o.beta2),           float(1 - o.beta2),
+                           float(lr / bias1),  float(std::sqrt(bias2)), float(o.eps)};
   const AdamRowsFn rows = adam_rows_for(active_isa());
   pool.parallel_for(
       p.size(), [&](size_t b, size_t e, int) { rows(&m[b], &v[b], &g[b], &p[b], e - b, c); }, 4096);
@@ -43,8 +46,8 @@ SplatAdam::SplatAdam(const SplatParams& params, const AdamOptions& options) : op
   const size_t N = params.size();
   auto init = [N](Group& grp, size_t width, double lr) {
     grp.width = width;
-    grp.m.assign(N * width, 0.0);
-    grp.v.assign(N * width, 0.0);
+    grp.m.assign(N * width, 0.f);
+    grp.v.assign(N * width, 0.f);
     grp.lr = lr;
   };
   init(means_, 3, options.lr.means * options.scene_scale);
@@ -68,9 +71,9 @@ void SplatAdam::step(const SplatGrads& g, SplatParams* p, ThreadPool& pool) {
 
 namespace {
 
-void remap_group(std::vector<double>& m, std::vector<double>& v, const std::vector<int64_t>& src,
+void remap_group(std::vector<float>& m, std::vector<float>& v, const std::vector<int64_t>& src,
                  size_t n_old, size_t width) {
-  std::vector<double> nm(src.size() * width, 0.0), nv(src.size() * width, 0.0);
+  std::vector<float> nm(src.size() * width, 0.f), nv(src.size() * width, 0.f);
   for (size_t i = 0; i < src.size(); ++i) {
     if (src[i] < 0) continue;
     const size_t r = size_t(src[i]);
@@ -93,7 +96,7 @@ void SplatAdam::remap_rows(const std::vector<int64_t>& src) {
 void SplatAdam::zero_rows(const std::vector<size_t>& rows) {
   for (Group* g : {&means_, &scales_, &quats_, &opacities_, &sh0_, &shN_})
     for (size_t r : rows)
-      for (size_t k = 0; k < g->width; ++k) g->m[r * g->width + k] = g->v[r * g->width + k] = 0.0;
+      for (size_t k = 0; k < g->width; ++k) g->m[r * g->width + k] = g->v[r * g->width + k] = 0.f;
 }
 
 std::vector<SplatAdam::GroupState> SplatAdam::state() {
@@ -106,8 +109,8 @@ std::vector<SplatAdam::GroupState> SplatAdam::state() {
 }
 
 void SplatAdam::zero_opacity_state() {
-  std::fill(opacities_.m.begin(), opacities_.m.end(), 0.0);
-  std::fill(opacities_.v.begin(), opacities_.v.end(), 0.0);
+  std::fill(opacities_.m.begin(), opacities_.m.end(), 0.f);
+  std::fill(opacities_.v.begin(), opacities_.v.end(), 0.f);
 }
 
 const SplatAdam::Group* SplatAdam::group(const std::string& name) const {
@@ -119,11 +122,11 @@ const SplatAdam::Group* SplatAdam::group(const std::string& name) const {
   if (name == "shN") return &shN_;
   return nullptr;
 }
-const std::vector<double>* SplatAdam::exp_avg(const std::string& name) const {
+const std::vector<float>* SplatAdam::exp_avg(const std::string& name) const {
   const Group* g = group(name);
   return g ? &g->m : nullptr;
 }
-const std::vector<double>* SplatAdam::exp_avg_sq(const std::string& name) const {
+const std::vector<float>* SplatAdam::exp_avg_sq(const std::string& name) const {
   const Group* g = group(name);
   return g ? &g->v : nullptr;
 }

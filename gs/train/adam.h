@@ -1,10 +1,12 @@
-// Adam over the splat parameters, one optimizer per parameter group, as torch.optim.Adam:
-//   m = b1 m + (1 - b1) g;  v = b2 v + (1 - b2) g^2
+// Adam over the splat parameters, one optimizer per parameter group, as torch.optim.Adam
+// (its single-tensor float operations, adam_kernels.h):
+//   m = lerp(m, g, 1 - b1);  v = b2 v + (1 - b2) g^2
 //   p -= lr / (1 - b1^t) * m / (sqrt(v) / sqrt(1 - b2^t) + eps)
 // with gsplat's defaults: betas 0.9 / 0.999, eps 1e-15, learning rates means 1.6e-4 x scene
 // scale, scales 5e-3, quats 1e-3, opacities 5e-2, sh0 2.5e-3, shN 2.5e-3 / 20.
 // Legend: N Gaussians, K SH coefficients per channel; the moments have the parameters' shapes
-// (SplatParams, gs/formats/splat_params.h) and are kept in double.
+// (SplatParams, gs/formats/splat_params.h) and are float, as torch keeps them for float
+// parameters.
 #pragma once
 
 #include <cstdint>
@@ -50,16 +52,16 @@ class SplatAdam {
   void zero_opacity_state();
   // The moments of a group by gsplat's name ("means", "scales", "quats", "opacities", "sh0",
   // "shN"), for tests and checks; nullptr for another name.
-  const std::vector<double>* exp_avg(const std::string& name) const;
-  const std::vector<double>* exp_avg_sq(const std::string& name) const;
+  const std::vector<float>* exp_avg(const std::string& name) const;
+  const std::vector<float>* exp_avg_sq(const std::string& name) const;
   // Zeros both moments of the given rows in every group (gsplat relocate's optimizer_fn).
   void zero_rows(const std::vector<size_t>& rows);
 
   // Every group's state by gsplat name, for checkpoints (gs/train/checkpoint.h).
   struct GroupState {
     std::string name;
-    std::vector<double>* m;
-    std::vector<double>* v;
+    std::vector<float>* m;
+    std::vector<float>* v;
     double* lr;
     size_t width;  // values per Gaussian
   };
@@ -68,7 +70,7 @@ class SplatAdam {
 
  private:
   struct Group {
-    std::vector<double> m, v;
+    std::vector<float> m, v;
     double lr;
     size_t width = 0;  // values per Gaussian
   };

@@ -183,8 +183,8 @@ Result<Checkpoint> read_checkpoint(const std::string& path, const std::string& s
     TrainState::AdamGroup g;
     g.name = r.text();
     g.lr = r.pod<double>();
-    g.m = r.array<double>(cap);
-    g.v = r.array<double>(cap);
+    g.m = r.array<float>(cap);
+    g.v = r.array<float>(cap);
     st.adam.push_back(std::move(g));
   }
   const std::vector<uint64_t> perm = r.array<uint64_t>(cap);

@@ -20,7 +20,7 @@
 
 namespace macro::gs::train {
 
-inline constexpr uint32_t kCheckpointVersion = 1;
+inline constexpr uint32_t kCheckpointVersion = 2;  // 2: float Adam moments
 
 // OUT.ply -> OUT.ply.ckpt
 std::string checkpoint_path_for(const std::string& out_path);

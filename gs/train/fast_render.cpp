@@ -97,6 +97,33 @@ inline uint32_t id_of(const TileSplat& s) {
   return g;
 }
 
+constexpr size_t kLanes = 16;  // Gaussians per projection kernel call
+
+// The projection kernels' view of the parameters, camera and settings (train_kernels.h).
+ProjectInput project_input(const SplatParams& p, const CameraD& c, const ProjectSettings& ps) {
+  ProjectInput in;
+  in.means = p.means.data();
+  in.quats = p.quats.data();
+  in.scales = p.scales.data();
+  in.opacities = p.opacities.data();
+  in.sh0 = p.sh0.data();
+  in.shN = p.shN.data();
+  in.sh_rest = size_t(p.sh_rest());
+  in.sh_degree = ps.sh_degree;
+  in.mode = ps.mode;
+  in.filter_3d = ps.filter_3d;
+  in.near_plane = float(ps.near_plane);
+  in.far_plane = float(std::min(ps.far_plane, 1e30));
+  ProjectCameraF& f = in.cam;
+  for (int i = 0; i < 9; ++i) f.R[i] = float(c.R[i]);
+  for (int i = 0; i < 3; ++i) f.t[i] = float(c.t[i]), f.center[i] = float(c.center[i]);
+  f.fx = float(c.fx), f.fy = float(c.fy), f.cx = float(c.cx), f.cy = float(c.cy);
+  f.lim_x_pos = float(c.lim_x_pos), f.lim_x_neg = float(c.lim_x_neg);
+  f.lim_y_pos = float(c.lim_y_pos), f.lim_y_neg = float(c.lim_y_neg);
+  f.width = float(c.width), f.height = float(c.height);
+  return in;
+}
+
 struct TileRect {
   int x0, y0, w, h;
 };
@@ -164,30 +191,26 @@ Status FastRenderer::forward(const SplatParams& params, const Camera& camera,
   s.tiles.assign(n, 0);
   s.depth_key.assign(n, 0);
   s.visible.assign(n, 0);
+  const ProjectInput pin = project_input(params, s.cam, s.ps);
   pool.parallel_for(
-      n,
+      (n + kLanes - 1) / kLanes,
       [&](size_t b, size_t e, int) {
-        for (size_t g = b; g < e; ++g) {
-          ProjectedD pd;
-          if (!project_forward(params, g, s.cam, s.ps, &pd)) continue;
-          TileSplat& t = s.splats[g];
-          t = pd.cover;
-          t.opacity = float(pd.opacity);
-          t.r = float(pd.rgb[0]);
-          t.g = float(pd.rgb[1]);
-          t.bl = float(pd.rgb[2]);
-          t.z = float(pd.depth);
-          set_id(&t, uint32_t(g));
-          s.visible[g] = 1;
-          uint32_t c = 0;
-          raster::for_each_tile(t, s.camf, raster::TileRule::kEllipse, [&](int, int) { ++c; });
-          if (c == 0) continue;
-          const float depth = float(pd.depth);
-          std::memcpy(&s.depth_key[g], &depth, sizeof depth);
-          s.tiles[g] = c;
+        for (size_t blk = b; blk < e; ++blk) {
+          const size_t g0 = blk * kLanes;
+          const int cnt = int(std::min<size_t>(kLanes, n - g0));
+          kernels.project_forward(pin, g0, cnt, &s.splats[g0], &s.visible[g0]);
+          for (int i = 0; i < cnt; ++i) {
+            if (!s.visible[g0 + size_t(i)]) continue;
+            const TileSplat& t = s.splats[g0 + size_t(i)];
+            uint32_t c = 0;
+            raster::for_each_tile(t, s.camf, raster::TileRule::kEllipse, [&](int, int) { ++c; });
+            if (c == 0) continue;
+            std::memcpy(&s.depth_key[g0 + size_t(i)], &t.z, sizeof t.z);
+            s.tiles[g0 + size_t(i)] = c;
+          }
         }
       },
-      256);
+      16);
   uint64_t pairs = 0;
   size_t visible = 0, binned = 0;
   for (size_t g = 0; g < n; ++g) {
@@ -352,8 +375,8 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
       1);
   s.times.blend_backward = t0.lap();
 
-  // The pairs of each Gaussian in pair (= tile) order: a stable counting pass by Gaussian, over
-  // the records' indices (record_id, read in order once).
+  // The pairs of each Gaussian in pair (= tile) order: a stable counting sort by Gaussian (the
+  // counts are the projection's tile counts), over the records' indices (record_id).
   const size_t V = s.num_visible, n = s.n;
   s.record_id.resize(V);
   pool.parallel_for(
@@ -362,9 +385,11 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
         for (size_t v = b; v < e; ++v) s.record_id[v] = id_of(s.bins.splats[v]);
       },
       4096);
-  s.pairs_start.assign(n + 1, 0);
-  for (size_t k = 0; k < P; ++k) ++s.pairs_start[s.record_id[s.bins.pair[k]] + 1];
-  for (size_t g = 0; g < n; ++g) s.pairs_start[g + 1] += s.pairs_start[g];
+  // Gaussian g has tiles[g] pairs (bin_stage writes one per tile the projection counted).
+  s.pairs_start.resize(n + 1);
+  s.pairs_start[0] = 0;
+  for (size_t g = 0; g < n; ++g) s.pairs_start[g + 1] = s.pairs_start[g] + s.tiles[g];
+  MACRO_CHECK(s.pairs_start[n] == P);
   s.pairs_of.resize(P);
   {
     std::vector<uint32_t> fill(s.pairs_start.begin(), s.pairs_start.end() - 1);
@@ -402,34 +427,27 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
   grads->sh0.resize(s.n * 3);
   grads->shN.resize(s.n * R * 3);
   grads->means2d.resize(s.n * 2);
+  const ProjectInput pin = project_input(params, s.cam, s.ps);
+  const ProjectGradOut out{grads->means.data(),     grads->scales.data(), grads->quats.data(),
+                           grads->opacities.data(), grads->sh0.data(),    grads->shN.data()};
   pool.parallel_for(
-      s.n,
+      (s.n + kLanes - 1) / kLanes,
       [&](size_t b, size_t e, int) {
-        for (size_t g = b; g < e; ++g) {
-          std::fill_n(&grads->means[3 * g], 3, 0.f);
-          std::fill_n(&grads->scales[3 * g], 3, 0.f);
-          std::fill_n(&grads->quats[4 * g], 4, 0.f);
-          grads->opacities[g] = 0.f;
-          std::fill_n(&grads->sh0[3 * g], 3, 0.f);
-          std::fill_n(grads->shN.data() + g * R * 3, R * 3, 0.f);
-          std::fill_n(&grads->means2d[2 * g], 2, 0.f);
-          if (s.pairs_start[g] == s.pairs_start[g + 1]) continue;
-          const double* sum = &s.gaussian_grad[g * kPairGrad];
-          ProjectedGrad up;
-          for (int c = 0; c < 3; ++c) up.rgb[c] = sum[c];
-          for (int c = 0; c < 3; ++c) up.conic[c] = sum[3 + c];
-          up.xy[0] = sum[6];
-          up.xy[1] = sum[7];
-          up.opacity = sum[8];
-          grads->means2d[2 * g] = float(up.xy[0]);
-          grads->means2d[2 * g + 1] = float(up.xy[1]);
-          const GradRows rows{&grads->means[3 * g], &grads->scales[3 * g],
-                              &grads->quats[4 * g], &grads->opacities[g],
-                              &grads->sh0[3 * g],   grads->shN.data() + g * R * 3};
-          project_backward(params, g, s.cam, s.ps, up, rows);
+        for (size_t blk = b; blk < e; ++blk) {
+          const size_t g0 = blk * kLanes;
+          const int cnt = int(std::min<size_t>(kLanes, s.n - g0));
+          uint8_t has_pairs[kLanes];
+          for (int i = 0; i < cnt; ++i) {
+            const size_t g = g0 + size_t(i);
+            has_pairs[i] = s.pairs_start[g] != s.pairs_start[g + 1];
+            grads->means2d[2 * g] = has_pairs[i] ? float(s.gaussian_grad[g * kPairGrad + 6]) : 0.f;
+            grads->means2d[2 * g + 1] =
+                has_pairs[i] ? float(s.gaussian_grad[g * kPairGrad + 7]) : 0.f;
+          }
+          kernels.project_backward(pin, g0, cnt, &s.gaussian_grad[g0 * kPairGrad], has_pairs, out);
         }
       },
-      256);
+      16);
   s.times.project_backward = t0.lap();
 }
 

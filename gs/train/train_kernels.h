@@ -9,6 +9,12 @@
 //                       summed over the tile's rows in a batch accumulator
 //   flush_batch         the accumulators' lane sums into the batch's pair slots
 //   loss                L1 + valid SSIM and dloss/dx in float (loss.h states the maths)
+//   project_forward     16 Gaussians at a time: the projection of diff_project.h (EWA with the
+//                       clamped Jacobian, the mode's dilation and opacity factors, SH colour),
+//                       in float, into the rasterizer's TileSplat record and a visible flag
+//   project_backward    the same 16 Gaussians' projection backward from their pair sums, writing
+//                       every gradient row (zeros for a Gaussian without pairs or culled)
+// The projection's twin is diff_project.cpp's project_forward / project_backward (double).
 //
 // Paths: AVX2 (train_blend_avx2.cpp, 2 x 8 lanes) and AVX-512 (train_blend_avx512.cpp, 16 lanes),
 // one source (train_blend_lanes.h) compiled per ISA; exp is a polynomial (relative error ~2e-7).
@@ -25,6 +31,7 @@
 #include "attention/runtime/thread_pool.h"
 #include "gs/constants.h"
 #include "gs/raster/raster_kernels.h"
+#include "gs/raster/rasterizer.h"
 #include "gs/train/loss.h"
 
 namespace macro::gs::train {
@@ -74,12 +81,44 @@ using TrainLossFn = Result<LossValue> (*)(const float* x, const float* y, int wi
                                           float* grad, float* scratch, ThreadPool& pool);
 size_t loss_scratch_floats(int width, int height);
 
+// What the projection kernels read: the parameters (SplatParams' arrays), the frame's settings
+// (diff_project.h ProjectSettings) and the camera in float (diff_project.h CameraD's fields).
+struct ProjectCameraF {
+  float R[9], t[3], center[3];
+  float fx, fy, cx, cy;
+  float lim_x_pos, lim_x_neg, lim_y_pos, lim_y_neg;
+  float width, height;
+};
+struct ProjectInput {
+  const float *means, *quats, *scales, *opacities, *sh0, *shN;  // [N,3] [N,4] [N,3] [N] [N,3]
+  size_t sh_rest = 0;                                           // shN [N, sh_rest, 3]
+  int sh_degree = 0;
+  RasterMode mode = RasterMode::kClassic;
+  const float* filter_3d = nullptr;  // [N] (mip only) or nullptr
+  float near_plane = 0.01f, far_plane = 1e10f;
+  ProjectCameraF cam{};
+};
+// The gradient arrays (SplatGrads' shapes), written at rows g0 .. g0 + n - 1.
+struct ProjectGradOut {
+  float *means, *scales, *quats, *opacities, *sh0, *shN;
+};
+// Gaussians g0 .. g0 + n - 1 (n <= 16). Forward: splats[i] and visible[i] for Gaussian g0 + i;
+// a visible record carries the Gaussian's index in its inv_z slot; an invisible one is left as
+// it was. Backward: sums [n][kPairGrad] (rgb 3, conic 3, mean2d 2, opacity), has_pairs[n].
+using TrainProjectForwardFn = void (*)(const ProjectInput& in, size_t g0, int n,
+                                       raster::TileSplat* splats, uint8_t* visible);
+using TrainProjectBackwardFn = void (*)(const ProjectInput& in, size_t g0, int n,
+                                        const double* sums, const uint8_t* has_pairs,
+                                        const ProjectGradOut& out);
+
 struct TrainKernels {
   const char* name;
   TrainBlendForwardFn blend_forward_row;
   TrainBlendBackwardFn blend_backward_row;
   TrainFlushBatchFn flush_batch;
   TrainLossFn loss;
+  TrainProjectForwardFn project_forward;
+  TrainProjectBackwardFn project_backward;
 };
 
 // The float table for a path, or nullptr for the scalar path (the double reference) and for paths

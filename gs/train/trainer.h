@@ -66,7 +66,7 @@ struct TrainState {
   struct AdamGroup {
     std::string name;
     double lr = 0;
-    std::vector<double> m, v;
+    std::vector<float> m, v;
   };
   std::vector<AdamGroup> adam;
   ViewOrder::Snapshot view_order;
