@@ -19,10 +19,7 @@ namespace {
 
 using test::supported_isas;
 
-struct IsaGuard {
-  Isa saved = active_isa();
-  ~IsaGuard() { (void)set_isa(saved); }
-};
+using test::IsaGuard;
 
 using test::random_vec;
 

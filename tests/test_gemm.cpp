@@ -33,10 +33,7 @@ const Shape kShapes[] = {{1, 1, 1},     {1, 17, 3},     {13, 1, 29},    {15, 33,
 using test::supported_isas;
 
 // Restores the process's path when a test section ends.
-struct IsaGuard {
-  Isa saved = active_isa();
-  ~IsaGuard() { (void)set_isa(saved); }
-};
+using test::IsaGuard;
 
 std::vector<float> random_vec(size_t n, uint32_t seed, float lo = -1.0f, float hi = 1.0f) {
   std::mt19937 rng(seed);

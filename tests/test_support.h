@@ -88,4 +88,11 @@ inline std::vector<Isa> supported_isas() {
   return v;
 }
 
+// Puts back the path that was active at construction (tests that set_isa() one path after
+// another).
+struct IsaGuard {
+  Isa saved = active_isa();
+  ~IsaGuard() { (void)set_isa(saved); }
+};
+
 }  // namespace macro::test

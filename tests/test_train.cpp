@@ -7,6 +7,8 @@
 // entries of each tensor.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -21,9 +23,12 @@
 #include "gs/train/adam.h"
 #include "gs/train/diff_render.h"
 #include "gs/train/loss.h"
+#include "gs/train/step_gradient.h"
 #include "gs/train/train_job.h"
+#include "gs/train/train_kernels.h"
 #include "gs/train/trainer.h"
 #include "test_support.h"
+#include "train_fd.h"
 
 using namespace macro;
 using namespace macro::gs;
@@ -324,89 +329,68 @@ double loss_of(const SplatParams& p, const TrainView& view, ThreadPool& pool) {
   return l->loss;
 }
 
-// Central differences of the loss (all in double) for every entry of one parameter tensor.
-// A step that straddles a discontinuity (a pixel's alpha crossing 1/255 or T crossing 1e-4)
-// shows as two step sizes disagreeing; such entries are skipped, and at most 10% may be.
-void check_fd(SplatParams p, std::vector<float> SplatParams::*field,
-              const std::vector<float>& analytic, const TrainView& view, const char* name,
-              ThreadPool& pool) {
-  std::vector<float>& x = p.*field;
-  REQUIRE(x.size() == analytic.size());
-  size_t checked = 0, skipped = 0, nonzero = 0;
-  double worst = 0;
-  for (size_t i = 0; i < x.size(); ++i) {
-    const float x0 = x[i];
-    double est[2];
-    for (int k = 0; k < 2; ++k) {
-      const double h = (k == 0 ? 1e-4 : 2.5e-5) * std::max(1.0, std::abs(double(x0)));
-      const float xp = float(x0 + h), xm = float(x0 - h);
-      x[i] = xp;
-      const double lp = loss_of(p, view, pool);
-      x[i] = xm;
-      const double lm = loss_of(p, view, pool);
-      x[i] = x0;
-      est[k] = (lp - lm) / (double(xp) - double(xm));
-    }
-    const double scale = std::max({std::abs(est[0]), std::abs(est[1]), 1e-6});
-    if (std::abs(est[0] - est[1]) > 2e-3 * scale) {
-      ++skipped;
-      continue;
-    }
-    ++checked;
-    nonzero += analytic[i] != 0.f;
-    const double err = std::abs(double(analytic[i]) - est[1]) /
-                       std::max({std::abs(est[1]), std::abs(double(analytic[i])), 1e-6});
-    worst = std::max(worst, err);
-    INFO(name << "[" << i << "]: analytic " << analytic[i] << ", central difference " << est[1]
-              << " (" << est[0] << " at 4x the step)");
-    CHECK(err <= 5e-3);
-  }
-  INFO(name << ": " << checked << " checked, " << skipped << " skipped, worst relative error "
-            << worst);
-  CHECK(skipped * 10 <= x.size());
-  CHECK(nonzero * 2 >= checked);
-}
-
 }  // namespace
 
 TEST_CASE("train: gradients agree with central differences for every parameter kind", "[train]") {
   ThreadPool pool(1);
+  // The double reference ("scalar") and each float table this machine has (AVX512-BF16 and AMX
+  // machines run the AVX-512 one), against central differences of the double loss.
+  std::vector<std::pair<std::string, Isa>> paths = {{"scalar", Isa::kScalar}};
+  std::vector<const TrainKernels*> seen;
+  for (Isa isa : test::supported_isas()) {
+    const TrainKernels* k = train_kernels_for(isa);
+    if (k == nullptr || std::find(seen.begin(), seen.end(), k) != seen.end()) continue;
+    seen.push_back(k);
+    paths.push_back({k->name, isa});
+  }
   for (int degree : {3, 0}) {
     INFO("SH degree " << degree);
     RandomCase rc = random_case(7 + uint32_t(degree), 14, degree, 32, 24);
-    DiffRenderer r;
-    DiffImage img;
-    REQUIRE(r.forward(rc.params, rc.view.camera, {}, &img, pool).is_ok());
-    std::vector<double> v_color;
-    REQUIRE(photometric_loss(img.color.data(), rc.view.target.data(), img.width, img.height,
-                             &v_color, pool)
-                .is_ok());
-    SplatGrads g;
-    r.backward(rc.params, v_color.data(), nullptr, &g, pool);
-    // Culled near-plane Gaussian 1: zero gradients. Gaussians 3, 10 (x) and 5, 12 (y) lie
-    // beyond gsplat's Jacobian clamp limits (W - cx)/fx + 0.3 tan_fovx, cy/fy + 0.3 tan_fovy:
-    // at least one of each pair reaches the image.
-    for (int a = 0; a < 3; ++a) CHECK(g.means[3 + a] == 0.f);
-    const Camera& cam = rc.view.camera;
-    const double lim_x = (cam.width - cam.cx) / cam.fx + 0.3 * 0.5 * cam.width / cam.fx;
-    const double lim_y = cam.cy / cam.fy + 0.3 * 0.5 * cam.height / cam.fy;
-    int clamped_x = 0, clamped_y = 0;
-    for (size_t i : {3, 10, 5, 12}) {
-      const Eigen::Vector3d xw(rc.params.means[3 * i], rc.params.means[3 * i + 1],
-                               rc.params.means[3 * i + 2]);
-      const Eigen::Vector3d xc = cam.R * xw + cam.t;
-      const bool reaches = g.means2d[2 * i] != 0.f;
-      clamped_x += xc(0) / xc(2) > lim_x && reaches;
-      clamped_y += xc(1) / xc(2) < -lim_y && reaches;
+    struct Kind {
+      const char* name;
+      std::vector<float> SplatParams::*field;
+      std::vector<float> SplatGrads::*grad;
+    };
+    std::vector<Kind> kinds = {{"means", &SplatParams::means, &SplatGrads::means},
+                               {"scales", &SplatParams::scales, &SplatGrads::scales},
+                               {"quats", &SplatParams::quats, &SplatGrads::quats},
+                               {"opacities", &SplatParams::opacities, &SplatGrads::opacities},
+                               {"sh0", &SplatParams::sh0, &SplatGrads::sh0}};
+    if (degree > 0) kinds.push_back({"shN", &SplatParams::shN, &SplatGrads::shN});
+    const auto loss = [&](const SplatParams& p) { return loss_of(p, rc.view, pool); };
+    std::vector<std::vector<std::array<double, 2>>> est;
+    for (const Kind& k : kinds) est.push_back(test::fd_estimates(rc.params, k.field, loss));
+    for (const auto& [path, isa] : paths) {
+      INFO("path " << path);
+      test::IsaGuard restore;
+      REQUIRE(set_isa(isa).is_ok());
+      StepGradient sg(isa == Isa::kScalar ? Precision::kDouble : Precision::kFloat);
+      SplatGrads g;
+      REQUIRE(sg.compute(rc.params, rc.view.camera, rc.view.target.data(), {}, &g, pool).is_ok());
+      if (isa != Isa::kScalar) REQUIRE(std::string(sg.path_name()) == path);
+      // Culled near-plane Gaussian 1: zero gradients. Gaussians 3, 10 (x) and 5, 12 (y) lie
+      // beyond gsplat's Jacobian clamp limits (W - cx)/fx + 0.3 tan_fovx, cy/fy + 0.3 tan_fovy:
+      // at least one of each pair reaches the image.
+      for (int a = 0; a < 3; ++a) CHECK(g.means[3 + a] == 0.f);
+      const Camera& cam = rc.view.camera;
+      const double lim_x = (cam.width - cam.cx) / cam.fx + 0.3 * 0.5 * cam.width / cam.fx;
+      const double lim_y = cam.cy / cam.fy + 0.3 * 0.5 * cam.height / cam.fy;
+      int clamped_x = 0, clamped_y = 0;
+      for (size_t i : {3, 10, 5, 12}) {
+        const Eigen::Vector3d xw(rc.params.means[3 * i], rc.params.means[3 * i + 1],
+                                 rc.params.means[3 * i + 2]);
+        const Eigen::Vector3d xc = cam.R * xw + cam.t;
+        const bool reaches = g.means2d[2 * i] != 0.f;
+        clamped_x += xc(0) / xc(2) > lim_x && reaches;
+        clamped_y += xc(1) / xc(2) < -lim_y && reaches;
+      }
+      CHECK(clamped_x >= 1);
+      CHECK(clamped_y >= 1);
+      double worst = 0;
+      for (size_t k = 0; k < kinds.size(); ++k)
+        worst = std::max(worst, test::check_fd(g.*(kinds[k].grad), est[k], kinds[k].name));
+      WARN(path << " classic degree " << degree << ": worst relative error " << worst);
     }
-    CHECK(clamped_x >= 1);
-    CHECK(clamped_y >= 1);
-    check_fd(rc.params, &SplatParams::means, g.means, rc.view, "means", pool);
-    check_fd(rc.params, &SplatParams::scales, g.scales, rc.view, "scales", pool);
-    check_fd(rc.params, &SplatParams::quats, g.quats, rc.view, "quats", pool);
-    check_fd(rc.params, &SplatParams::opacities, g.opacities, rc.view, "opacities", pool);
-    check_fd(rc.params, &SplatParams::sh0, g.sh0, rc.view, "sh0", pool);
-    if (degree > 0) check_fd(rc.params, &SplatParams::shN, g.shN, rc.view, "shN", pool);
   }
 }
 

@@ -1,14 +1,17 @@
 // The trainer's float path (gs/train/fast_render.h, train_kernels.h) against its double twin
 // (diff_render.h, loss.h) on every ISA path the machine runs: forward max abs, loss value and
 // gradients relative L2; the goldens (../shared/golden/train) through the float path; the same
-// bits for 1, 2, 4 and 8 threads.
+// bits for 1, 2, 4 and 8 threads; the projection kernels against diff_project per Gaussian.
 // Tolerances: forward and loss max abs 2e-3 against the goldens (README "train/"), 1e-4 against
 // the twin (float rounding only); gradients relative L2 1e-3; Adam after 10 steps max abs 1e-4
 // for >= 99% of each tensor.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
+#include <limits>
 #include <random>
 
 #include "attention/runtime/io/safetensors.h"
@@ -29,10 +32,8 @@ using namespace macro::gs::train;
 
 namespace {
 
-// The ISA paths with a float table; set_isa() back to the best path on exit.
-struct IsaRestore {
-  ~IsaRestore() { (void)set_isa(best_isa()); }
-};
+// The ISA paths with a float table.
+using IsaRestore = test::IsaGuard;
 std::vector<Isa> float_isas() {
   std::vector<Isa> v;
   for (Isa isa : test::supported_isas())
@@ -302,6 +303,183 @@ TEST_CASE("train fast: empty and fully culled scenes match the twin on every flo
       const auto want = grad_tensors(ref->grads);
       const auto have = grad_tensors(got->grads);
       for (size_t k = 0; k < want.size(); ++k) CHECK(*have[k].second == *want[k].second);
+    }
+  }
+}
+
+namespace {
+
+// Gaussians around a rotated camera (off-centre principal point) with every culling case the
+// projection has: behind the camera or before the near plane, a zero or non-finite quaternion, a
+// non-finite mean, too faint, off the image, far beyond the Jacobian clamp limits, huge and tiny.
+SplatParams projection_cases(uint32_t seed, size_t n, int degree, Camera* cam) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::normal_distribution<double> nd(0, 1);
+  cam->name = "projection";
+  cam->width = 120;
+  cam->height = 90;
+  cam->fx = 110;
+  cam->fy = 104;
+  cam->cx = 57.5;
+  cam->cy = 47.25;
+  const double qn = std::sqrt(1 + 0.06 * 0.06 + 0.09 * 0.09 + 0.02 * 0.02);
+  cam->R = rotation_from_quaternion_wxyz(1 / qn, 0.06 / qn, -0.09 / qn, 0.02 / qn);
+  cam->t = Eigen::Vector3d(0.2, -0.1, 0.3);
+  SplatParams p;
+  p.resize(n, degree);
+  const size_t R = size_t(p.sh_rest());
+  for (size_t i = 0; i < n; ++i) {
+    const double z = 0.5 + 6 * u(rng);
+    Eigen::Vector3d xc((u(rng) - 0.5) * 2.2 * z, (u(rng) - 0.5) * 1.8 * z, z);
+    if (i % 13 == 1) xc.z() = -xc.z();  // behind
+    if (i % 13 == 2) xc.z() = 0.004;    // before the near plane
+    const Eigen::Vector3d xw = cam->R.transpose() * (xc - cam->t);
+    for (int a = 0; a < 3; ++a) p.means[i * 3 + a] = float(xw(a));
+    const double log_s = (i % 17 == 3 ? -0.3 : i % 17 == 4 ? -7.0 : -3.0) + 0.8 * u(rng);
+    for (int a = 0; a < 3; ++a) p.scales[i * 3 + a] = float(log_s + 0.5 * nd(rng));
+    for (int a = 0; a < 4; ++a) p.quats[i * 4 + a] = float(nd(rng) + (a == 0 ? 0.8 : 0.0));
+    if (i % 19 == 5) std::fill_n(&p.quats[i * 4], 4, 0.f);
+    if (i % 23 == 6) p.quats[i * 4 + 2] = std::numeric_limits<float>::quiet_NaN();
+    if (i % 29 == 7) p.means[i * 3] = std::numeric_limits<float>::infinity();
+    p.opacities[i] = float(i % 11 == 8 ? -9.0 : -2 + 6 * u(rng));
+    for (int c = 0; c < 3; ++c) p.sh0[i * 3 + c] = float(0.9 * nd(rng));
+    for (size_t j = 0; j < R * 3; ++j) p.shN[i * R * 3 + j] = float(0.3 * nd(rng));
+  }
+  return p;
+}
+
+double rel(double got, double want, double floor) {
+  return std::abs(got - want) / std::max(std::abs(want), floor);
+}
+
+}  // namespace
+
+TEST_CASE("train fast: the projection kernels match diff_project per Gaussian on every float path",
+          "[train][train_fast]") {
+  for (RasterMode mode : {RasterMode::kClassic, RasterMode::kAntialiased, RasterMode::kMip}) {
+    for (int degree : {0, 1, 2, 3}) {
+      INFO("mode " << int(mode) << ", SH degree " << degree);
+      Camera camera;
+      const size_t n = 16 * 40 + 7;  // a tail call of 7
+      const SplatParams p = projection_cases(40 + uint32_t(degree), n, degree, &camera);
+      const std::vector<float> filter = compute_filter_3d(p, {camera});
+      DiffRenderOptions o;
+      o.mode = mode;
+      if (mode == RasterMode::kMip) o.filter_3d = &filter;
+      auto ps = project_settings(p, o);
+      REQUIRE(ps.is_ok());
+      const CameraD cam = make_camera_d(camera);
+      const ProjectInput in = project_input(p, cam, *ps);
+      // The twin, and its backward from seeded upstream gradients.
+      std::mt19937 rng(7);
+      std::normal_distribution<double> nd(0, 1);
+      std::vector<double> sums(n * kPairGrad);
+      for (double& v : sums) v = nd(rng);
+      std::vector<uint8_t> has_pairs(n), want_visible(n);
+      std::vector<ProjectedD> want(n);
+      const size_t R3 = size_t(p.sh_rest()) * 3;
+      SplatGrads want_g;
+      want_g.means.assign(n * 3, 0.f);
+      want_g.scales.assign(n * 3, 0.f);
+      want_g.quats.assign(n * 4, 0.f);
+      want_g.opacities.assign(n, 0.f);
+      want_g.sh0.assign(n * 3, 0.f);
+      want_g.shN.assign(n * R3, 0.f);
+      size_t visible = 0;
+      for (size_t g = 0; g < n; ++g) {
+        want_visible[g] = project_forward(p, g, cam, *ps, &want[g]);
+        visible += want_visible[g];
+        has_pairs[g] = want_visible[g] && g % 7 != 3;  // only a visible Gaussian has pairs
+        if (!has_pairs[g]) continue;
+        ProjectedGrad up;
+        const double* s = &sums[g * kPairGrad];
+        for (int c = 0; c < 3; ++c) up.rgb[c] = s[c], up.conic[c] = s[3 + c];
+        up.xy[0] = s[6], up.xy[1] = s[7], up.opacity = s[8];
+        project_backward(p, g, cam, *ps, up,
+                         {&want_g.means[3 * g], &want_g.scales[3 * g], &want_g.quats[4 * g],
+                          &want_g.opacities[g], &want_g.sh0[3 * g], want_g.shN.data() + g * R3});
+      }
+      CHECK(visible > n / 5);
+      CHECK(visible < n - n / 10);
+      for (Isa isa : float_isas()) {
+        INFO("path " << isa_name(isa));
+        const TrainKernels& k = *train_kernels_for(isa);
+        std::vector<raster::TileSplat> got(n);
+        std::vector<uint8_t> got_visible(n);
+        SplatGrads g;
+        g.means.assign(n * 3, 9.f);  // every row must be written
+        g.scales.assign(n * 3, 9.f);
+        g.quats.assign(n * 4, 9.f);
+        g.opacities.assign(n, 9.f);
+        g.sh0.assign(n * 3, 9.f);
+        g.shN.assign(n * R3, 9.f);
+        const ProjectGradOut out{g.means.data(),     g.scales.data(), g.quats.data(),
+                                 g.opacities.data(), g.sh0.data(),    g.shN.data()};
+        for (size_t g0 = 0; g0 < n; g0 += 16) {
+          const int cnt = int(std::min<size_t>(16, n - g0));
+          k.project_forward(in, g0, cnt, &got[g0], &got_visible[g0]);
+          k.project_backward(in, g0, cnt, &sums[g0 * kPairGrad], &has_pairs[g0], out);
+        }
+        size_t differ = 0;
+        double worst = 0;
+        for (size_t i = 0; i < n; ++i) {
+          if (got_visible[i] != want_visible[i]) {
+            ++differ;
+            continue;
+          }
+          if (!want_visible[i]) continue;
+          const raster::TileSplat& t = got[i];
+          const ProjectedD& w = want[i];
+          uint32_t id;
+          std::memcpy(&id, &t.inv_z, sizeof id);
+          CHECK(id == i);
+          const double ext = std::max(w.ext_x, w.ext_y);
+          const double e[] = {rel(t.x, w.x, ext),
+                              rel(t.y, w.y, ext),
+                              rel(t.a, w.a, std::max(std::abs(w.a), std::abs(w.c))),
+                              rel(t.b, w.b, std::max(std::abs(w.a), std::abs(w.c))),
+                              rel(t.c, w.c, std::max(std::abs(w.a), std::abs(w.c))),
+                              rel(t.opacity, w.opacity, 1e-3),
+                              rel(t.r, w.rgb[0], 1e-2),
+                              rel(t.g, w.rgb[1], 1e-2),
+                              rel(t.bl, w.rgb[2], 1e-2),
+                              rel(t.z, w.depth, 1e-3),
+                              rel(t.ext_x, w.ext_x, 1e-3),
+                              rel(t.ext_y, w.ext_y, 1e-3),
+                              rel(t.row_k, w.cover.row_k, 1.0),
+                              rel(t.row_a0, w.cover.row_a0, w.cover.row_a0),
+                              rel(t.row_a1, w.cover.row_a1, w.cover.row_a1)};
+          for (double x : e) worst = std::max(worst, x);
+        }
+        INFO("forward: " << differ << " visibility differences, worst relative error " << worst);
+        CHECK(differ == 0);
+        CHECK(worst <= 5e-5);
+        // The backward: every row written; rows relative L2 against the twin's.
+        const auto have = grad_tensors(g), wantt = grad_tensors(want_g);
+        for (size_t t = 0; t < 6; ++t) {
+          const std::vector<float>& a = *have[t].second;
+          const std::vector<float>& b = *wantt[t].second;
+          REQUIRE(a.size() == b.size());
+          const size_t w = n == 0 ? 0 : a.size() / n;
+          double worst_row = 0;
+          for (size_t i = 0; i < n; ++i) {
+            double d2 = 0, n2 = 0;
+            for (size_t j = 0; j < w; ++j) {
+              const double d = double(a[i * w + j]) - double(b[i * w + j]);
+              d2 += d * d;
+              n2 += double(b[i * w + j]) * b[i * w + j];
+            }
+            if (n2 == 0) {
+              CHECK(d2 == 0);  // zero rows stay exactly zero (culled, no pairs)
+              continue;
+            }
+            worst_row = std::max(worst_row, std::sqrt(d2 / n2));
+          }
+          INFO("grad." << have[t].first << ": worst row relative L2 " << worst_row);
+          CHECK(worst_row <= 2e-4);
+        }
+      }
     }
   }
 }

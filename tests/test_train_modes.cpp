@@ -5,8 +5,11 @@
 // means.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <random>
+#include <string>
 
 #include "gs/cameras/camera.h"
 #include "gs/formats/splat_params.h"
@@ -14,8 +17,11 @@
 #include "gs/train/diff_project.h"
 #include "gs/train/diff_render.h"
 #include "gs/train/loss.h"
+#include "gs/train/step_gradient.h"
+#include "gs/train/train_kernels.h"
 #include "gs/train/trainer.h"
 #include "test_support.h"
+#include "train_fd.h"
 
 using namespace macro;
 using namespace macro::gs;
@@ -86,49 +92,6 @@ double loss_at(const SplatParams& p, const Camera& cam, const ModeCase& mc, Rast
   return l->loss;
 }
 
-// Central differences (as tests/test_train.cpp): two step sizes; entries where they disagree (a
-// step across the 1/255 or T-stop discontinuity) are skipped, at most 10%. Returns the worst
-// relative error.
-double check_fd(SplatParams p, std::vector<float> SplatParams::*field,
-                const std::vector<float>& analytic, const ModeCase& mc, RasterMode mode,
-                const char* name, ThreadPool& pool) {
-  std::vector<float>& x = p.*field;
-  REQUIRE(x.size() == analytic.size());
-  size_t checked = 0, skipped = 0, nonzero = 0;
-  double worst = 0;
-  for (size_t i = 0; i < x.size(); ++i) {
-    const float x0 = x[i];
-    double est[2];
-    for (int k = 0; k < 2; ++k) {
-      const double h = (k == 0 ? 1e-4 : 2.5e-5) * std::max(1.0, std::abs(double(x0)));
-      const float xp = float(x0 + h), xm = float(x0 - h);
-      x[i] = xp;
-      const double lp = loss_at(p, mc.view.camera, mc, mode, pool);
-      x[i] = xm;
-      const double lm = loss_at(p, mc.view.camera, mc, mode, pool);
-      x[i] = x0;
-      est[k] = (lp - lm) / (double(xp) - double(xm));
-    }
-    const double scale = std::max({std::abs(est[0]), std::abs(est[1]), 1e-6});
-    if (std::abs(est[0] - est[1]) > 2e-3 * scale) {
-      ++skipped;
-      continue;
-    }
-    ++checked;
-    nonzero += analytic[i] != 0.f;
-    const double err = std::abs(double(analytic[i]) - est[1]) /
-                       std::max({std::abs(est[1]), std::abs(double(analytic[i])), 1e-6});
-    worst = std::max(worst, err);
-    INFO(name << "[" << i << "]: analytic " << analytic[i] << ", central difference " << est[1]
-              << " (" << est[0] << " at 4x the step)");
-    CHECK(err <= 5e-3);
-  }
-  INFO(name << ": " << checked << " checked, " << skipped << " skipped, worst " << worst);
-  CHECK(skipped * 10 <= x.size());
-  CHECK(nonzero * 2 >= checked);
-  return worst;
-}
-
 const char* mode_name(RasterMode m) {
   return m == RasterMode::kAntialiased ? "antialiased" : m == RasterMode::kMip ? "mip" : "classic";
 }
@@ -183,61 +146,78 @@ TEST_CASE("train modes: the forward is gs::render's in the same mode", "[train]"
 TEST_CASE("train modes: gradients agree with central differences for every parameter kind",
           "[train]") {
   ThreadPool pool(1);
-  // One entry per blend path; the scalar double reference is the only one so far.
-  const std::vector<const char*> paths = {"scalar"};
+  // The double reference ("scalar") and every float path this machine has (its own projection,
+  // blend and loss kernels), each against the central differences of the double loss.
+  // (AVX512-BF16 and AMX machines run the AVX-512 table: each table once.)
+  std::vector<std::pair<std::string, Isa>> paths = {{"scalar", Isa::kScalar}};
+  std::vector<const TrainKernels*> seen;
+  for (Isa isa : test::supported_isas()) {
+    const TrainKernels* k = train_kernels_for(isa);
+    if (k == nullptr || std::find(seen.begin(), seen.end(), k) != seen.end()) continue;
+    seen.push_back(k);
+    paths.push_back({k->name, isa});
+  }
   int means2d_skipped = 0;
-  for (const char* path : paths) {
-    for (RasterMode mode : {RasterMode::kAntialiased, RasterMode::kMip}) {
-      for (int degree : {3, 0}) {
-        INFO(path << ", " << mode_name(mode) << ", SH degree " << degree);
-        ModeCase mc = mode_case(31 + uint32_t(degree), 14, degree, 32, 24);
-        DiffRenderer r;
-        DiffImage img;
-        REQUIRE(r.forward(mc.params, mc.view.camera, options_for(mode, mc), &img, pool).is_ok());
-        std::vector<double> v_color;
-        REQUIRE(photometric_loss(img.color.data(), mc.view.target.data(), img.width, img.height,
-                                 &v_color, pool)
-                    .is_ok());
-        SplatGrads g;
-        r.backward(mc.params, v_color.data(), nullptr, &g, pool);
-        double worst = 0;
-        worst = std::max(
-            worst, check_fd(mc.params, &SplatParams::means, g.means, mc, mode, "means", pool));
-        worst = std::max(
-            worst, check_fd(mc.params, &SplatParams::scales, g.scales, mc, mode, "scales", pool));
-        worst = std::max(
-            worst, check_fd(mc.params, &SplatParams::quats, g.quats, mc, mode, "quats", pool));
-        worst = std::max(worst, check_fd(mc.params, &SplatParams::opacities, g.opacities, mc, mode,
-                                         "opacities", pool));
-        worst =
-            std::max(worst, check_fd(mc.params, &SplatParams::sh0, g.sh0, mc, mode, "sh0", pool));
-        if (degree > 0)
-          worst =
-              std::max(worst, check_fd(mc.params, &SplatParams::shN, g.shN, mc, mode, "shN", pool));
+  for (RasterMode mode : {RasterMode::kAntialiased, RasterMode::kMip}) {
+    for (int degree : {3, 0}) {
+      INFO(mode_name(mode) << ", SH degree " << degree);
+      ModeCase mc = mode_case(31 + uint32_t(degree), 14, degree, 32, 24);
+      struct Kind {
+        const char* name;
+        std::vector<float> SplatParams::*field;
+        std::vector<float> SplatGrads::*grad;
+      };
+      std::vector<Kind> kinds = {{"means", &SplatParams::means, &SplatGrads::means},
+                                 {"scales", &SplatParams::scales, &SplatGrads::scales},
+                                 {"quats", &SplatParams::quats, &SplatGrads::quats},
+                                 {"opacities", &SplatParams::opacities, &SplatGrads::opacities},
+                                 {"sh0", &SplatParams::sh0, &SplatGrads::sh0}};
+      if (degree > 0) kinds.push_back({"shN", &SplatParams::shN, &SplatGrads::shN});
+      std::vector<std::vector<std::array<double, 2>>> est;
+      const auto loss = [&](const SplatParams& p) {
+        return loss_at(p, mc.view.camera, mc, mode, pool);
+      };
+      for (const Kind& k : kinds) est.push_back(test::fd_estimates(mc.params, k.field, loss));
 
-        // means2d: moving the principal point by h moves every projected mean by h (no
-        // Gaussian here is beyond the clamp limits, which also move with cx, cy), so dL/dcx =
-        // sum of the u components and dL/dcy of the v components.
+      // means2d: moving the principal point by h moves every projected mean by h (no Gaussian
+      // here is beyond the clamp limits, which also move with cx, cy), so dL/dcx = sum of the u
+      // components and dL/dcy of the v components.
+      double est2d[2][2];
+      for (int axis = 0; axis < 2; ++axis)
+        for (int k = 0; k < 2; ++k) {
+          const double h = k == 0 ? 1e-4 : 2.5e-5;
+          Camera cp = mc.view.camera, cm = mc.view.camera;
+          (axis == 0 ? cp.cx : cp.cy) += h;
+          (axis == 0 ? cm.cx : cm.cy) -= h;
+          est2d[axis][k] =
+              (loss_at(mc.params, cp, mc, mode, pool) - loss_at(mc.params, cm, mc, mode, pool)) /
+              (2 * h);
+        }
+
+      for (const auto& [path, isa] : paths) {
+        INFO("path " << path);
+        test::IsaGuard restore;
+        REQUIRE(set_isa(isa).is_ok());
+        const Precision precision = isa == Isa::kScalar ? Precision::kDouble : Precision::kFloat;
+        StepGradient sg(precision);
+        SplatGrads g;
+        REQUIRE(sg.compute(mc.params, mc.view.camera, mc.view.target.data(),
+                           options_for(mode, mc), &g, pool)
+                    .is_ok());
+        if (isa != Isa::kScalar) REQUIRE(std::string(sg.path_name()) == path);
+        double worst = 0;
+        for (size_t k = 0; k < kinds.size(); ++k)
+          worst = std::max(worst, test::check_fd(g.*(kinds[k].grad), est[k], kinds[k].name));
         double su = 0, sv = 0;
         for (size_t i = 0; i < g.size(); ++i) su += g.means2d[2 * i], sv += g.means2d[2 * i + 1];
         for (int axis = 0; axis < 2; ++axis) {
-          double est[2];
-          for (int k = 0; k < 2; ++k) {
-            const double h = k == 0 ? 1e-4 : 2.5e-5;
-            Camera cp = mc.view.camera, cm = mc.view.camera;
-            (axis == 0 ? cp.cx : cp.cy) += h;
-            (axis == 0 ? cm.cx : cm.cy) -= h;
-            est[k] =
-                (loss_at(mc.params, cp, mc, mode, pool) - loss_at(mc.params, cm, mc, mode, pool)) /
-                (2 * h);
-          }
-          const double an = axis == 0 ? su : sv, fd = est[1];
+          const double an = axis == 0 ? su : sv, fd = est2d[axis][1];
           INFO("means2d axis " << axis << ": sum " << an << ", central difference " << fd << " ("
-                               << est[0] << " at 4x the step)");
+                               << est2d[axis][0] << " at 4x the step)");
           // Moving every Gaussian at once can cross a pixel's 1/255 or T-stop discontinuity:
           // then the two step sizes disagree and the axis is skipped (at most 2 of the 8).
-          if (std::abs(est[0] - est[1]) > 2e-3 * std::max(std::abs(fd), 1e-6)) {
-            ++means2d_skipped;
+          if (std::abs(est2d[axis][0] - fd) > 2e-3 * std::max(std::abs(fd), 1e-6)) {
+            if (isa == Isa::kScalar) ++means2d_skipped;
             continue;
           }
           const double err = std::abs(fd - an) / std::max({std::abs(fd), std::abs(an), 1e-6});

@@ -9,6 +9,7 @@
 #include "gs/formats/splat_params.h"
 #include "gs/raster/raster_kernels.h"
 #include "gs/raster/rasterizer.h"
+#include "gs/train/train_kernels.h"
 
 namespace macro::gs::train {
 
@@ -55,6 +56,10 @@ struct ProjectSettings {
   RasterMode mode = RasterMode::kClassic;
   const float* filter_3d = nullptr;  // [N] (mip only); must outlive the backward
 };
+
+// The float projection kernels' view (train_kernels.h ProjectInput) of the same parameters, camera
+// and settings; the arrays must outlive it.
+ProjectInput project_input(const SplatParams& p, const CameraD& c, const ProjectSettings& ps);
 
 // Forward of Gaussian g; false when culled (depth, invalid, det <= 0, faint, off the image).
 bool project_forward(const SplatParams& p, size_t g, const CameraD& cam, const ProjectSettings& ps,

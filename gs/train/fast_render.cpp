@@ -99,31 +99,6 @@ inline uint32_t id_of(const TileSplat& s) {
 
 constexpr size_t kLanes = 16;  // Gaussians per projection kernel call
 
-// The projection kernels' view of the parameters, camera and settings (train_kernels.h).
-ProjectInput project_input(const SplatParams& p, const CameraD& c, const ProjectSettings& ps) {
-  ProjectInput in;
-  in.means = p.means.data();
-  in.quats = p.quats.data();
-  in.scales = p.scales.data();
-  in.opacities = p.opacities.data();
-  in.sh0 = p.sh0.data();
-  in.shN = p.shN.data();
-  in.sh_rest = size_t(p.sh_rest());
-  in.sh_degree = ps.sh_degree;
-  in.mode = ps.mode;
-  in.filter_3d = ps.filter_3d;
-  in.near_plane = float(ps.near_plane);
-  in.far_plane = float(std::min(ps.far_plane, 1e30));
-  ProjectCameraF& f = in.cam;
-  for (int i = 0; i < 9; ++i) f.R[i] = float(c.R[i]);
-  for (int i = 0; i < 3; ++i) f.t[i] = float(c.t[i]), f.center[i] = float(c.center[i]);
-  f.fx = float(c.fx), f.fy = float(c.fy), f.cx = float(c.cx), f.cy = float(c.cy);
-  f.lim_x_pos = float(c.lim_x_pos), f.lim_x_neg = float(c.lim_x_neg);
-  f.lim_y_pos = float(c.lim_y_pos), f.lim_y_neg = float(c.lim_y_neg);
-  f.width = float(c.width), f.height = float(c.height);
-  return in;
-}
-
 struct TileRect {
   int x0, y0, w, h;
 };

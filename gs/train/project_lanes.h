@@ -384,18 +384,25 @@ void project_backward_lanes(const ProjectInput& in, size_t g0, int n, const doub
   vf V00 = -(cg00 * ca + cg01 * cb);
   vf V01 = -(cg00 * cb + cg01 * cc);
   vf V11 = -(cg10 * cb + cg11 * cc);
+  // The compensation c2 = sqrt(r) (antialiased r = det0 / det; mip r = det0 / (det + 1e-6) +
+  // 1e-6): the twin's v_det0 d det0 + v_det d det (diff_project.cpp), with D the denominator,
+  // e2 = D - det and k = v_r / D^2, rearranged so that no difference of near-equal terms is left
+  // (for a Gaussian many pixels wide, det0 / D is 1 - O(eps / size^2) and float would lose it):
+  //   V00 += k (eps (syy0^2 + eps syy0 + sxy^2) + e2 syy0)
+  //   V11 += k (eps (sxx0^2 + eps sxx0 + sxy^2) + e2 sxx0)
+  //   V01 -= k sxy (eps (sxx0 + syy0 + eps) + e2)
   if (in.mode != RasterMode::kClassic) {
     const bool mip = in.mode == RasterMode::kMip;
     const vi act = f.c2_active & (v_c2 != 0.f);
     const float eps = mip ? raster::kMipKernelSize : raster::kEps2d;
-    const vf a0 = f.sxx - eps, c0 = f.syy - eps;
-    const vf den = mip ? f.det + raster::kMipDetEps : f.det;
+    const float e2 = mip ? raster::kMipDetEps : 0.f;
+    const vf sxx0 = f.sxx - eps, syy0 = f.syy - eps, sxy2 = f.sxy * f.sxy;
+    const vf D = f.det + e2;
     const vf v_r = v_c2 * 0.5f / sel(act, f.c2, splat(1.f));
-    const vf rden = 1.f / den;
-    const vf v_det0 = v_r * rden, v_det = -v_r * f.det0 * rden * rden;
-    V00 += pick(act, v_det0 * c0 + v_det * f.syy);
-    V11 += pick(act, v_det0 * a0 + v_det * f.sxx);
-    V01 += pick(act, 0.5f * (v_det0 + v_det) * (-2.f * f.sxy));
+    const vf k = v_r / (D * D);
+    V00 += pick(act, k * (eps * (syy0 * syy0 + eps * syy0 + sxy2) + e2 * syy0));
+    V11 += pick(act, k * (eps * (sxx0 * sxx0 + eps * sxx0 + sxy2) + e2 * sxx0));
+    V01 -= pick(act, k * f.sxy * (eps * (sxx0 + syy0 + eps) + e2));
   }
   vf vA[6];
   for (int k = 0; k < 3; ++k) {
