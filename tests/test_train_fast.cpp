@@ -18,10 +18,12 @@
 #include "gs/cameras/camera.h"
 #include "gs/formats/splat_params.h"
 #include "gs/image_io.h"
+#include "gs/train/adam.h"
 #include "gs/train/adam_kernels.h"
 #include "gs/train/diff_project.h"
 #include "gs/train/fast_render.h"
 #include "gs/train/step_gradient.h"
+#include "gs/train/train_memory.h"
 #include "gs/train/trainer.h"
 #include "test_support.h"
 #include "tests/cli_run.h"
@@ -481,5 +483,34 @@ TEST_CASE("train fast: the projection kernels match diff_project per Gaussian on
         }
       }
     }
+  }
+}
+
+TEST_CASE("train fast: the memory statement counts the arrays training holds", "[train]") {
+  for (int degree : {0, 3}) {
+    INFO("SH degree " << degree);
+    Scene s = random_scene(3, 500, degree, 64, 48);
+    SplatGrads g;
+    StepGradient sg(Precision::kFloat);
+    REQUIRE(sg.compute(s.params, s.view.camera, s.view.target.data(), {}, &g).is_ok());
+    SplatAdam adam(s.params, AdamOptions{});
+    const TrainMemory m = train_memory(s.params.size(), degree, 64 * 48, 2 * 64 * 48);
+    auto bytes = [](std::initializer_list<const std::vector<float>*> v) {
+      size_t b = 0;
+      for (const auto* x : v) b += x->size() * sizeof(float);
+      return b;
+    };
+    const SplatParams& p = s.params;
+    CHECK(m.parameters == bytes({&p.means, &p.scales, &p.quats, &p.opacities, &p.sh0, &p.shN}));
+    CHECK(m.gradients ==
+          bytes({&g.means, &g.scales, &g.quats, &g.opacities, &g.sh0, &g.shN, &g.means2d}));
+    size_t moments = 0;
+    for (const SplatAdam::GroupState& st : adam.state())
+      moments += (st.m->size() + st.v->size()) * sizeof(float);
+    CHECK(m.adam == moments);
+    CHECK(m.photos == 2 * 64 * 48 * 3 * sizeof(float));
+    CHECK(m.fixed() == 500 * m.per_gaussian + 64 * 48 * m.per_pixel + m.photos);
+    const std::string line = describe(m);
+    CHECK(line.find("500 Gaussians x " + std::to_string(m.per_gaussian) + " B") == 0);
   }
 }

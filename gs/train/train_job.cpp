@@ -1,6 +1,7 @@
 // `macro grad` and `macro train` as library calls (train_job.h).
 #include "gs/train/train_job.h"
 
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -18,6 +19,7 @@
 #include "gs/image_io.h"
 #include "gs/train/checkpoint.h"
 #include "gs/train/diff_project.h"
+#include "gs/train/train_memory.h"
 
 namespace macro::gs::train {
 namespace {
@@ -405,6 +407,25 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
   if (!job.log_path.empty() && !views_line.empty())
     MACRO_TRY(log.write(views_line).with_context("--log"));
   const bool show = job.progress && !quiet();
+  {
+    size_t largest = 0, photo_pixels = 0;
+    for (const auto* set : {&views, &test_views})
+      for (const TrainView& v : *set) {
+        const size_t px = size_t(v.camera.width) * size_t(v.camera.height);
+        largest = std::max(largest, px);
+        photo_pixels += px;
+      }
+    result.memory = train_memory(params->size(), params->sh_degree, largest, photo_pixels);
+    if (show) {
+      const size_t cap = job.limits.max_gaussians;
+      std::fprintf(stderr, "[train] memory: %s; at most %s before pairs (--max-gaussians %zu)\n",
+                   describe(result.memory).c_str(),
+                   format_bytes(uint64_t(cap) * result.memory.per_gaussian + result.memory.fixed() -
+                                uint64_t(result.memory.gaussians) * result.memory.per_gaussian)
+                       .c_str(),
+                   cap);
+    }
+  }
   auto last_draw = std::chrono::steady_clock::now() - std::chrono::seconds(1);
   auto on_step = [&](const StepRecord& r) -> Status {
     result.records.push_back(r);
@@ -463,6 +484,13 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
   MACRO_TRY(write_splat_params(*params, job.out_path).with_context("--out"));
   if (!job.log_path.empty()) MACRO_TRY(log.commit().with_context("--log"));
   result.seconds = result.records.empty() ? 0 : result.records.back().seconds;
+  rusage ru{};
+  if (getrusage(RUSAGE_SELF, &ru) == 0) result.peak_resident_bytes = size_t(ru.ru_maxrss) * 1024;
+  if (show)
+    std::fprintf(stderr, "[train] peak memory (resident): %s; %zu Gaussians x %zu B = %s\n",
+                 format_bytes(result.peak_resident_bytes).c_str(), result.gaussians,
+                 result.memory.per_gaussian,
+                 format_bytes(uint64_t(result.gaussians) * result.memory.per_gaussian).c_str());
   return result;
 }
 

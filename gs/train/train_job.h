@@ -23,6 +23,7 @@
 #include "gs/cameras/camera.h"
 #include "gs/formats/scene_io.h"
 #include "gs/train/scene_inputs.h"
+#include "gs/train/train_memory.h"
 #include "gs/train/trainer.h"
 
 namespace macro::gs::train {
@@ -83,6 +84,8 @@ struct TrainJobResult {
   double scene_scale = 1;
   std::vector<StepRecord> records;
   double seconds = 0;
+  TrainMemory memory;              // the estimate at the start (train_memory.h)
+  size_t peak_resident_bytes = 0;  // the process's peak resident set at the end
 };
 
 // The flags' values this milestone implements; anything else is "not implemented yet".
