@@ -16,7 +16,8 @@ constexpr const char* kUsage =
     "usage: macro train --images DIR --cameras C --init FILE.ply --out OUT.ply [--steps N]\n"
     "       macro train --scene-dir DIR [--data-factor F] [--test-every 8]\n"
     "         [--init sfm|random|FILE.ply] --out OUT.ply [--steps N]\n"
-    "         [--strategy default|mcmc|none] [--cap-max N] [--mode classic|antialiased|mip]\n"
+    "         [--strategy default|mcmc|none] [--cap-max N] [--absgrad] [--grow-grad2d G]\n"
+    "         [--mode classic|antialiased|mip]\n"
     "         [--lr-schedule gsplat|constant]\n"
     "         [--view-order shuffled|sequential] [--sh-degree-interval K] [--max-gaussians N]\n"
     "         [--scene-scale S] [--seed S] [--log LOG.jsonl] [--save-every N] [--resume CKPT]\n"
@@ -40,6 +41,9 @@ constexpr const char* kUsage =
     "              refinement up to --cap-max, position noise; opacity and scale regularisers\n"
     "              0.01; --scene-dir inits at opacity 0.5 and 0.1 x the 3-NN scale) or none\n"
     "  --cap-max   mcmc: the most Gaussians (default 1000000, at most --max-gaussians)\n"
+    "  --absgrad   default strategy: grow on the absolute 2D-mean gradients (AbsGS, gsplat\n"
+    "              absgrad; gsplat advises --grow-grad2d 0.0008 with it)\n"
+    "  --grow-grad2d  default strategy: the gradient above which Gaussians grow (default 0.0002)\n"
     "  --mode      classic (default), antialiased (gsplat: opacity x sqrt(det S / det(S+0.3I)))\n"
     "              or mip (Mip-Splatting: 3D filter from the training cameras, 2D filter 0.1)\n"
     "  --lr-schedule  gsplat (means' rate decays to 0.01x over the run; default) or constant\n"
@@ -82,6 +86,8 @@ int run_train(std::vector<std::string> argv) {
       args.int_or("--sh-degree-interval", job.sh_degree_interval, 0, 1000000000);
   job.mode = args.value_or("--mode", job.mode);
   job.cap_max = size_t(args.int_or("--cap-max", int(job.cap_max), 1, 2000000000));
+  job.absgrad = args.flag("--absgrad");
+  job.grow_grad2d = args.double_or("--grow-grad2d", job.grow_grad2d, 0, 1e6);
   job.save_every = args.int_or("--save-every", 0, 0, 1000000000);
   job.resume_path = args.value_or("--resume", "");
   job.precision = args.value_or("--precision", job.precision);

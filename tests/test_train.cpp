@@ -546,6 +546,10 @@ TEST_CASE("train: what is not implemented is refused by flag, bad inputs by name
       {" --strategy none --scene-scale -1 --lr-schedule constant --view-order sequential"
        " --sh-degree-interval 0",
        "--scene-scale"},
+      {" --strategy mcmc --absgrad" + ok_flags,
+       "--absgrad / --grow-grad2d: only with --strategy default, found --strategy mcmc"},
+      {" --strategy default --grow-grad2d 0" + ok_flags, "--grow-grad2d"},
+      {" --strategy default --grow-grad2d much" + ok_flags, "--grow-grad2d"},
   };
   for (const Case& c : cases) {
     INFO(c.flags);
@@ -642,5 +646,76 @@ TEST_CASE("train: macro grad on any SH degree and image size matches the library
       INFO(name);
       CHECK(golden(*got, "grad." + name) == *data);
     }
+  }
+}
+
+TEST_CASE("train: absgrad is the sum over pixels of the absolute per-pixel 2D-mean gradient",
+          "[train]") {
+  // The blend's dL/dmean2d is a sum of per-pixel terms, each linear in that pixel's dL/dcolor:
+  // with dL/dcolor one-hot at pixel p, means2d is pixel p's term alone. So absgrad must equal
+  // the sum over pixels of |means2d| of the one-hot backwards (per component).
+  ThreadPool pool(1);
+  RandomCase rc = random_case(13, 30, 1, 20, 14);
+  DiffRenderOptions o;
+  o.absgrad = true;
+  DiffRenderer r;
+  DiffImage img;
+  REQUIRE(r.forward(rc.params, rc.view.camera, o, &img, pool).is_ok());
+  std::vector<double> v_color;
+  REQUIRE(photometric_loss(img.color.data(), rc.view.target.data(), img.width, img.height,
+                           &v_color, pool)
+              .is_ok());
+  SplatGrads full;
+  r.backward(rc.params, v_color.data(), nullptr, &full, pool);
+  const size_t n = rc.params.size();
+  REQUIRE(full.means2d_abs.size() == 2 * n);
+  std::vector<double> want(2 * n, 0.0);
+  std::vector<double> one_hot(v_color.size(), 0.0);
+  for (size_t p = 0; p < size_t(img.width) * size_t(img.height); ++p) {
+    for (int c = 0; c < 3; ++c) one_hot[3 * p + size_t(c)] = v_color[3 * p + size_t(c)];
+    SplatGrads g;
+    r.backward(rc.params, one_hot.data(), nullptr, &g, pool);
+    for (size_t i = 0; i < 2 * n; ++i) want[i] += std::abs(double(g.means2d[i]));
+    for (int c = 0; c < 3; ++c) one_hot[3 * p + size_t(c)] = 0.0;
+  }
+  size_t nonzero = 0, differs = 0;
+  for (size_t i = 0; i < 2 * n; ++i) {
+    INFO("entry " << i << ": absgrad " << full.means2d_abs[i] << ", sum of |one-hot| " << want[i]);
+    CHECK(std::abs(full.means2d_abs[i] - want[i]) <= 1e-5 * std::max(1e-3, want[i]));
+    nonzero += want[i] > 0;
+    // |sum| <= sum |.|, and strictly below it where the pixels disagree in sign.
+    CHECK(std::abs(full.means2d[i]) <= full.means2d_abs[i] * (1 + 1e-6) + 1e-12);
+    differs += std::abs(full.means2d[i]) < 0.9 * full.means2d_abs[i];
+  }
+  CHECK(nonzero > n);
+  CHECK(differs > n / 2);
+  // Without the option there is no absgrad.
+  DiffRenderer plain;
+  REQUIRE(plain.forward(rc.params, rc.view.camera, {}, &img, pool).is_ok());
+  SplatGrads g;
+  plain.backward(rc.params, v_color.data(), nullptr, &g, pool);
+  CHECK(g.means2d_abs.empty());
+  CHECK(g.means2d == full.means2d);
+
+  // Every float path against this twin.
+  for (Isa isa : test::supported_isas()) {
+    if (train_kernels_for(isa) == nullptr) continue;
+    INFO("path " << isa_name(isa));
+    test::IsaGuard restore;
+    REQUIRE(set_isa(isa).is_ok());
+    StepGradient sg(Precision::kFloat);
+    SplatGrads fg;
+    REQUIRE(sg.compute(rc.params, rc.view.camera, rc.view.target.data(), o, &fg, pool).is_ok());
+    REQUIRE(fg.means2d_abs.size() == 2 * n);
+    const auto d = test::compare(fg.means2d_abs, full.means2d_abs);
+    INFO("means2d_abs rel L2 " << d.rel_l2);
+    CHECK(d.rel_l2 <= 1e-4);
+    StepGradient plain_sg(Precision::kFloat);
+    SplatGrads pg;
+    REQUIRE(plain_sg.compute(rc.params, rc.view.camera, rc.view.target.data(), {}, &pg, pool)
+                .is_ok());
+    CHECK(pg.means2d_abs.empty());
+    CHECK(pg.means2d == fg.means2d);  // absgrad changes nothing else
+    CHECK(pg.means == fg.means);
   }
 }

@@ -421,7 +421,7 @@ TEST_CASE("train fast: the projection kernels match diff_project per Gaussian on
         for (size_t g0 = 0; g0 < n; g0 += 16) {
           const int cnt = int(std::min<size_t>(16, n - g0));
           k.project_forward(in, g0, cnt, &got[g0], &got_visible[g0]);
-          k.project_backward(in, g0, cnt, &sums[g0 * kPairGrad], &has_pairs[g0], out);
+          k.project_backward(in, g0, cnt, &sums[g0 * kPairGrad], kPairGrad, &has_pairs[g0], out);
         }
         size_t differ = 0;
         double worst = 0;

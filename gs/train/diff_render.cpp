@@ -35,12 +35,14 @@ void SplatGrads::resize(size_t n, int degree) {
   sh0.assign(n * 3, 0.f);
   shN.assign(n * R * 3, 0.f);
   means2d.assign(n * 2, 0.f);
+  means2d_abs.clear();
 }
 
 struct DiffRenderer::State {
   CameraD cam{};
   ProjectSettings ps;
   std::array<double, 3> background{};
+  bool absgrad = false;
   size_t n = 0;
   std::vector<ProjectedD> proj;
   std::vector<uint8_t> visible;
@@ -113,6 +115,7 @@ Status DiffRenderer::forward(const SplatParams& params, const Camera& camera,
   s.cam = make_camera_d(camera);
   MACRO_ASSIGN_OR_RETURN(s.ps, project_settings(params, options));
   s.background = options.background;
+  s.absgrad = options.absgrad;
   const CameraD& cam = s.cam;
   const size_t n = s.n = params.size();
 
@@ -228,7 +231,7 @@ void DiffRenderer::backward(const SplatParams& params, const double* v_color, co
   const int W = cam.width, H = cam.height;
   const int tiles = cam.tiles_x * cam.tiles_y;
   const size_t P = s.pair_g.size();
-  constexpr int kG = 9;  // rgb 3, conic 3, xy 2, opacity 1
+  constexpr int kG = 11;  // rgb 3, conic 3, xy 2, opacity 1, |xy| 2 (absgrad)
   s.pair_grad.assign(P * kG, 0.0);
 
   // Blend backward per tile: each pixel from its last blended Gaussian back to the first.
@@ -270,9 +273,13 @@ void DiffRenderer::backward(const SplatParams& params, const double* v_color, co
                 pg[3] += 0.5 * dx * dx * v_sigma;
                 pg[4] += dx * dy * v_sigma;
                 pg[5] += 0.5 * dy * dy * v_sigma;
-                pg[6] += (g.a * dx + g.b * dy) * v_sigma;
-                pg[7] += (g.b * dx + g.c * dy) * v_sigma;
+                const double vx = (g.a * dx + g.b * dy) * v_sigma;
+                const double vy = (g.b * dx + g.c * dy) * v_sigma;
+                pg[6] += vx;
+                pg[7] += vy;
                 pg[8] += h.vis * v_alpha_k;
+                pg[9] += std::abs(vx);
+                pg[10] += std::abs(vy);
               }
             }
         }
@@ -292,13 +299,14 @@ void DiffRenderer::backward(const SplatParams& params, const double* v_color, co
 
   // Per Gaussian: sum its pairs in tile order, then the projection backward.
   grads->resize(n, params.sh_degree);
+  if (s.absgrad) grads->means2d_abs.assign(n * 2, 0.f);
   const size_t R = size_t(params.sh_rest());
   pool.parallel_for(
       n,
       [&](size_t b, size_t e, int) {
         for (size_t g = b; g < e; ++g) {
           if (!s.visible[g] || s.pairs_start[g] == s.pairs_start[g + 1]) continue;
-          double sum[kG] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+          double sum[kG] = {};
           for (uint32_t i = s.pairs_start[g]; i < s.pairs_start[g + 1]; ++i) {
             const double* pg = &s.pair_grad[size_t(s.pairs_of[i]) * kG];
             for (int c = 0; c < kG; ++c) sum[c] += pg[c];
@@ -311,6 +319,10 @@ void DiffRenderer::backward(const SplatParams& params, const double* v_color, co
           up.opacity = sum[8];
           grads->means2d[2 * g] = float(up.xy[0]);
           grads->means2d[2 * g + 1] = float(up.xy[1]);
+          if (s.absgrad) {
+            grads->means2d_abs[2 * g] = float(sum[9]);
+            grads->means2d_abs[2 * g + 1] = float(sum[10]);
+          }
           const GradRows rows{&grads->means[3 * g], &grads->scales[3 * g],
                               &grads->quats[4 * g], &grads->opacities[g],
                               &grads->sh0[3 * g],   grads->shN.data() + g * R * 3};

@@ -47,6 +47,8 @@ struct DiffRenderOptions {
   RasterMode mode = RasterMode::kClassic;
   // Mip only: the 3D filter [N] (compute_filter_3d), kept alive until the backward; null: none.
   const std::vector<float>* filter_3d = nullptr;
+  // Also SplatGrads::means2d_abs (gsplat's absgrad, for DefaultStrategy's absgrad mode).
+  bool absgrad = false;
 };
 
 // The per-Gaussian projection settings of a render of `params` with `options` (the SH degree
@@ -66,6 +68,9 @@ struct SplatGrads {
   std::vector<float> sh0;        // [N,1,3]
   std::vector<float> shN;        // [N,K-1,3]
   std::vector<float> means2d;    // [N,2] w.r.t. the projected pixel positions (u, v)
+  // [N,2] with DiffRenderOptions::absgrad (else empty): per component the sum over pixels of the
+  // absolute per-pixel gradient w.r.t. (u, v) (gsplat's means2d.absgrad, AbsGS).
+  std::vector<float> means2d_abs;
   size_t size() const { return opacities.size(); }
   void resize(size_t n, int degree);  // and zero
 };

@@ -8,7 +8,8 @@
 //                                       into bins.splats, grouped by tile), tile_start[TX*TY+1]
 //   final_T[H*W], last[H*W]             per pixel: T after its last blended Gaussian, 1 + its
 //                                       tile-list position (0: none)
-//   pair_grad[P][kPairGrad]             the tile's contribution to each pair's Gaussian
+//   pair_grad[P][width]                 the tile's contribution to each pair's Gaussian (width:
+//                                       kPairGrad, kPairGradAbs with absgrad)
 //   pairs_start[N+1], pairs_of[P]       the pairs of each Gaussian in pair (= tile) order
 #include "gs/train/fast_render.h"
 
@@ -45,7 +46,8 @@ struct FastRenderer::State {
   std::vector<float> pair_grad;
   std::vector<uint32_t> pairs_start, pairs_of;
   std::vector<uint32_t> record_id;    // [V] the Gaussian of each sorted record
-  std::vector<double> gaussian_grad;  // [N][kPairGrad] each Gaussian's pair sums
+  std::vector<double> gaussian_grad;  // [N][width] each Gaussian's pair sums
+  int width = kPairGrad;              // values per pair: kPairGrad, or kPairGradAbs (absgrad)
   const TrainKernels* kernels = nullptr;
   DiffRenderStats stats;
   FastRenderTimes times;
@@ -158,6 +160,7 @@ Status FastRenderer::forward(const SplatParams& params, const Camera& camera,
   s.camf = raster::make_camera_f(camera);
   MACRO_ASSIGN_OR_RETURN(s.ps, project_settings(params, options));
   s.background = options.background;
+  s.width = options.absgrad ? kPairGradAbs : kPairGrad;
   const size_t n = s.n = params.size();
 
   // Project.
@@ -291,7 +294,8 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
 
   // Blend backward per tile.
   Stopwatch t0;
-  s.pair_grad.resize(P * kPairGrad);  // each tile clears its own range
+  const size_t PW = size_t(s.width);
+  s.pair_grad.resize(P * PW);  // each tile clears its own range
   const raster::RasterKernels& rk = raster::raster_kernels();
   std::vector<std::unique_ptr<TileScratch>> scratch(size_t(pool.size()));
   for (auto& p : scratch) p = std::make_unique<TileScratch>();
@@ -324,8 +328,8 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
           }
           uint32_t walked = 0;  // pairs any pixel of the tile walked
           for (int r = 0; r < kTile; ++r) walked = std::max(walked, row_last[r]);
-          float* tile_grad = s.pair_grad.data() + size_t(begin) * kPairGrad;
-          std::fill(tile_grad, s.pair_grad.data() + size_t(s.bins.tile_start[t + 1]) * kPairGrad,
+          float* tile_grad = s.pair_grad.data() + size_t(begin) * PW;
+          std::fill(tile_grad, s.pair_grad.data() + size_t(s.bins.tile_start[t + 1]) * PW,
                     0.f);
           if (walked == 0) continue;
           const uint32_t batches = (walked + kBlendBatch - 1) / kBlendBatch;
@@ -341,9 +345,9 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
               if (!(live >> r & 1u) || sc.counts[r] == 0) continue;
               kernels.blend_backward_row(sc.batch, sc.rows[r], sc.counts[r], off,
                                          float(rect.x0) + 0.5f, float(rect.y0 + r) + 0.5f,
-                                         &sc.bwd[r], sc.acc, sc.touched);
+                                         &sc.bwd[r], sc.acc, sc.touched, s.width);
             }
-            kernels.flush_batch(sc.acc, sc.touched, nb, tile_grad + size_t(off) * kPairGrad);
+            kernels.flush_batch(sc.acc, sc.touched, nb, tile_grad + size_t(off) * PW, s.width);
           }
         }
       },
@@ -373,17 +377,17 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
 
   // Each Gaussian's pairs summed in tile order (double), Gaussians in index order (pairs_of and
   // the sums stream; pair_grad is read at random, once per pair).
-  s.gaussian_grad.resize(n * kPairGrad);
+  s.gaussian_grad.resize(n * PW);
   pool.parallel_for(
       n,
       [&](size_t b, size_t e, int) {
         for (size_t g = b; g < e; ++g) {
-          double sum[kPairGrad] = {};
+          double sum[kPairGradAbs] = {};
           for (uint32_t i = s.pairs_start[g]; i < s.pairs_start[g + 1]; ++i) {
-            const float* pg = &s.pair_grad[size_t(s.pairs_of[i]) * kPairGrad];
-            for (int c = 0; c < kPairGrad; ++c) sum[c] += double(pg[c]);
+            const float* pg = &s.pair_grad[size_t(s.pairs_of[i]) * PW];
+            for (size_t c = 0; c < PW; ++c) sum[c] += double(pg[c]);
           }
-          std::copy(sum, sum + kPairGrad, &s.gaussian_grad[g * kPairGrad]);
+          std::copy(sum, sum + PW, &s.gaussian_grad[g * PW]);
         }
       },
       1024);
@@ -402,6 +406,10 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
   grads->sh0.resize(s.n * 3);
   grads->shN.resize(s.n * R * 3);
   grads->means2d.resize(s.n * 2);
+  if (PW > size_t(kPairGrad))
+    grads->means2d_abs.resize(s.n * 2);
+  else
+    grads->means2d_abs.clear();
   const ProjectInput pin = project_input(params, s.cam, s.ps);
   const ProjectGradOut out{grads->means.data(),     grads->scales.data(), grads->quats.data(),
                            grads->opacities.data(), grads->sh0.data(),    grads->shN.data()};
@@ -415,11 +423,15 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
           for (int i = 0; i < cnt; ++i) {
             const size_t g = g0 + size_t(i);
             has_pairs[i] = s.pairs_start[g] != s.pairs_start[g + 1];
-            grads->means2d[2 * g] = has_pairs[i] ? float(s.gaussian_grad[g * kPairGrad + 6]) : 0.f;
-            grads->means2d[2 * g + 1] =
-                has_pairs[i] ? float(s.gaussian_grad[g * kPairGrad + 7]) : 0.f;
+            const double* sum = &s.gaussian_grad[g * PW];
+            grads->means2d[2 * g] = has_pairs[i] ? float(sum[6]) : 0.f;
+            grads->means2d[2 * g + 1] = has_pairs[i] ? float(sum[7]) : 0.f;
+            if (PW > size_t(kPairGrad)) {
+              grads->means2d_abs[2 * g] = has_pairs[i] ? float(sum[9]) : 0.f;
+              grads->means2d_abs[2 * g + 1] = has_pairs[i] ? float(sum[10]) : 0.f;
+            }
           }
-          kernels.project_backward(pin, g0, cnt, &s.gaussian_grad[g0 * kPairGrad], has_pairs, out);
+          kernels.project_backward(pin, g0, cnt, &s.gaussian_grad[g0 * PW], PW, has_pairs, out);
         }
       },
       16);

@@ -327,14 +327,14 @@ void project_forward_lanes(const ProjectInput& in, size_t g0, int n, raster::Til
 
 // train_kernels.h TrainProjectBackwardFn (diff_project.cpp project_backward per lane).
 void project_backward_lanes(const ProjectInput& in, size_t g0, int n, const double* sums,
-                            const uint8_t* has_pairs, const ProjectGradOut& out) {
+                            size_t stride, const uint8_t* has_pairs, const ProjectGradOut& out) {
   ForwardLanes f;
   const vi ok = forward_lanes(in, g0, n, false, &f);
   static_assert(sizeof(f.sh) / sizeof(f.sh[0]) == 15, "SH degree <= 3");
   uint32_t live = bits_of(ok);
   vf up[kPairGrad];
   for (int c = 0; c < kPairGrad; ++c)
-    for (int l = 0; l < L; ++l) up[c][l] = l < n ? float(sums[size_t(l) * kPairGrad + c]) : 0.f;
+    for (int l = 0; l < L; ++l) up[c][l] = l < n ? float(sums[size_t(l) * stride + size_t(c)]) : 0.f;
   for (int l = 0; l < n; ++l)
     if (!has_pairs[l]) live &= ~(1u << l);
   const vf* up_rgb = up;

@@ -47,6 +47,9 @@ struct DefaultStrategyOptions {
   int refine_every = 100;
   int pause_refine_after_reset = 0;
   size_t max_gaussians = 0;  // 0: no limit; else growing past it is an error
+  // AbsGS (gsplat absgrad=True): grad2d accumulates the norms of the absolute 2D-mean gradients
+  // (SplatGrads::means2d_abs) instead; gsplat advises grow_grad2d 0.0008 then.
+  bool absgrad = false;
 };
 
 struct DefaultStrategyState {

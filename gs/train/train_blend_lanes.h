@@ -170,7 +170,7 @@ void blend_forward_row_lanes(const raster::TileSplat* splats, const uint32_t* id
 
 void blend_backward_row_lanes(const raster::TileSplat* splats, const uint32_t* idx, int n,
                               uint32_t base, float px0, float py, TrainRowBackward* row,
-                              TrainEntryGrad* acc, uint8_t* touched) {
+                              TrainEntryGrad* acc, uint8_t* touched, int width) {
   vf T = load(row->T);
   vf br = load(row->behind_r), bg = load(row->behind_g), bb = load(row->behind_b);
   const vf vr = load(row->v_r), vg = load(row->v_g), vb = load(row->v_b), vaT = load(row->va_T);
@@ -197,7 +197,7 @@ void blend_backward_row_lanes(const raster::TileSplat* splats, const uint32_t* i
     const vf v_sigma = pick(live, -h.alpha * v_alpha);
     const float dy = s.y - py;
     const vf dxs = h.dx * v_sigma;
-    const vf g[kPairGrad] = {pick(ok, w * vr),
+    vf g[kPairGradAbs] = {pick(ok, w * vr),
                              pick(ok, w * vg),
                              pick(ok, w * vb),
                              0.5f * h.dx * dxs,
@@ -206,12 +206,21 @@ void blend_backward_row_lanes(const raster::TileSplat* splats, const uint32_t* i
                              s.a * dxs + (s.b * dy) * v_sigma,
                              s.b * dxs + (s.c * dy) * v_sigma,
                              pick(live, h.vis * v_alpha)};
+    if (width > kPairGrad) {  // absgrad: |per-pixel mean gradient| (sign bit cleared)
+      vi bx, by;
+      std::memcpy(&bx, &g[6], sizeof bx);
+      std::memcpy(&by, &g[7], sizeof by);
+      bx &= 0x7fffffff;
+      by &= 0x7fffffff;
+      std::memcpy(&g[9], &bx, sizeof bx);
+      std::memcpy(&g[10], &by, sizeof by);
+    }
     float(*a)[L] = acc[idx[i]].v;
     if (!touched[idx[i]]) {
       touched[idx[i]] = 1;
-      for (int c = 0; c < kPairGrad; ++c) store(a[c], g[c]);
+      for (int c = 0; c < width; ++c) store(a[c], g[c]);
     } else {
-      for (int c = 0; c < kPairGrad; ++c) store(a[c], load(a[c]) + g[c]);
+      for (int c = 0; c < width; ++c) store(a[c], load(a[c]) + g[c]);
     }
   }
   store(row->T, T);
@@ -220,11 +229,12 @@ void blend_backward_row_lanes(const raster::TileSplat* splats, const uint32_t* i
   store(row->behind_b, bb);
 }
 
-void flush_batch_lanes(const TrainEntryGrad* acc, const uint8_t* touched, int n, float* pair_grad) {
+void flush_batch_lanes(const TrainEntryGrad* acc, const uint8_t* touched, int n, float* pair_grad,
+                       int width) {
   for (int k = 0; k < n; ++k) {
     if (!touched[k]) continue;
-    float* pg = pair_grad + size_t(k) * kPairGrad;
-    for (int c = 0; c < kPairGrad; ++c) pg[c] += hsum(load(acc[k].v[c]));
+    float* pg = pair_grad + size_t(k) * size_t(width);
+    for (int c = 0; c < width; ++c) pg[c] += hsum(load(acc[k].v[c]));
   }
 }
 

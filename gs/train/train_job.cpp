@@ -230,6 +230,12 @@ Status check_train_settings(const TrainJob& job) {
     return Status::error("--strategy: expected default, mcmc or none, found '" + job.strategy +
                          "'");
   if (job.cap_max < 1) return Status::error("--cap-max: expected >= 1, found 0");
+  if ((job.absgrad || job.grow_grad2d != 0.0002) && job.strategy != "default")
+    return Status::error("--absgrad / --grow-grad2d: only with --strategy default, found --strategy " +
+                         job.strategy);
+  if (!(job.grow_grad2d > 0) || !std::isfinite(job.grow_grad2d))
+    return Status::error("--grow-grad2d: expected a positive number, found " +
+                         json_number(job.grow_grad2d));
   if (job.save_every < 0)
     return Status::error("--save-every: expected >= 0, found " + std::to_string(job.save_every));
   if (job.lr_schedule != "constant" && job.lr_schedule != "gsplat")
@@ -345,6 +351,8 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
                      : job.strategy == "mcmc"  ? Strategy::kMcmc
                                                : Strategy::kNone;
   options.default_strategy.max_gaussians = job.limits.max_gaussians;
+  options.default_strategy.absgrad = job.absgrad;
+  options.default_strategy.grow_grad2d = job.grow_grad2d;
   options.mcmc.cap_max = std::min(
       job.cap_max, job.limits.max_gaussians > 0 ? size_t(job.limits.max_gaussians) : job.cap_max);
   if (job.strategy == "mcmc") options.opacity_reg = options.scale_reg = 0.01;  // gsplat mcmc
@@ -366,7 +374,9 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
                "\nlr_schedule=" + job.lr_schedule + "\nview_order=" + job.view_order +
                "\nsh_degree_interval=" + std::to_string(job.sh_degree_interval) +
                "\nseed=" + std::to_string(job.seed) + "\nscene_scale=" + scale +
-               "\ncap_max=" + std::to_string(options.mcmc.cap_max) + "\nviews=";
+               "\ncap_max=" + std::to_string(options.mcmc.cap_max) +
+               "\nabsgrad=" + std::to_string(int(job.absgrad)) +
+               "\ngrow_grad2d=" + json_number(job.grow_grad2d) + "\nviews=";
     for (const TrainView& v : views)
       settings += v.camera.name + ":" + std::to_string(v.camera.width) + "x" +
                   std::to_string(v.camera.height) + ",";

@@ -66,6 +66,8 @@ struct TrainJob {
   int sh_degree_interval = 1000;        // --sh-degree-interval: 0 = every band from the start
   std::string mode = "classic";         // --mode: classic | antialiased | mip
   size_t cap_max = 1000000;             // --cap-max (mcmc)
+  bool absgrad = false;                 // --absgrad (default strategy: AbsGS gradients)
+  double grow_grad2d = 0.0002;          // --grow-grad2d (default strategy)
   int save_every = 0;                   // --save-every: a checkpoint every N steps (0: none)
   std::string resume_path;              // --resume CKPT
   std::string precision = "float";      // --precision: float (SIMD path) | double (reference)

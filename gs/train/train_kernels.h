@@ -57,11 +57,13 @@ struct alignas(64) TrainRowBackward {
 
 // Values of one pair's gradient (the tile's contribution to its Gaussian), in this order.
 inline constexpr int kPairGrad = 9;  // rgb 3, conic a b c, mean x y, opacity (d/d sigmoid)
+// With absgrad two more: per component the sum of the absolute per-pixel mean gradients.
+inline constexpr int kPairGradAbs = 11;
 
 // The backward's per-lane sums of one batch entry over the rows of a tile (rows in order), reduced
 // across lanes once per batch (flush_batch) instead of once per row.
 struct alignas(64) TrainEntryGrad {
-  float v[kPairGrad][raster::kTile];
+  float v[kPairGradAbs][raster::kTile];
 };
 
 // splats[idx[i]] for i < n are the row's entries in tile order; entry i is at tile-list position
@@ -69,13 +71,14 @@ struct alignas(64) TrainEntryGrad {
 // its first contribution, which stores instead of adding).
 using TrainBlendForwardFn = void (*)(const raster::TileSplat* splats, const uint32_t* idx, int n,
                                      uint32_t base, float px0, float py, TrainRowForward* row);
+// width: kPairGrad, or kPairGradAbs for absgrad (the values kept per entry and pair).
 using TrainBlendBackwardFn = void (*)(const raster::TileSplat* splats, const uint32_t* idx, int n,
                                       uint32_t base, float px0, float py, TrainRowBackward* row,
-                                      TrainEntryGrad* acc, uint8_t* touched);
+                                      TrainEntryGrad* acc, uint8_t* touched, int width);
 // pair_grad[k][c] += the lane sum of acc[k].v[c] for the n entries with touched[k] (pair_grad:
 // [n][kPairGrad], the batch's first pair).
 using TrainFlushBatchFn = void (*)(const TrainEntryGrad* acc, const uint8_t* touched, int n,
-                                   float* pair_grad);
+                                   float* pair_grad, int width);
 // x, y [H,W,3]; grad (optional) [H,W,3]; scratch holds loss_scratch_floats(W, H) floats.
 using TrainLossFn = Result<LossValue> (*)(const float* x, const float* y, int width, int height,
                                           float* grad, float* scratch, ThreadPool& pool);
@@ -104,12 +107,12 @@ struct ProjectGradOut {
 };
 // Gaussians g0 .. g0 + n - 1 (n <= 16). Forward: splats[i] and visible[i] for Gaussian g0 + i;
 // a visible record carries the Gaussian's index in its inv_z slot; an invisible one is left as
-// it was. Backward: sums [n][kPairGrad] (rgb 3, conic 3, mean2d 2, opacity), has_pairs[n].
+// it was. Backward: sums [n][stride] (rgb 3, conic 3, mean2d 2, opacity first), has_pairs[n].
 using TrainProjectForwardFn = void (*)(const ProjectInput& in, size_t g0, int n,
                                        raster::TileSplat* splats, uint8_t* visible);
 using TrainProjectBackwardFn = void (*)(const ProjectInput& in, size_t g0, int n,
-                                        const double* sums, const uint8_t* has_pairs,
-                                        const ProjectGradOut& out);
+                                        const double* sums, size_t stride,
+                                        const uint8_t* has_pairs, const ProjectGradOut& out);
 
 struct TrainKernels {
   const char* name;

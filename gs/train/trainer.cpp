@@ -146,6 +146,7 @@ Status train(SplatParams* params, const std::vector<TrainView>& views, const Tra
   StepGradient renderer(options.precision);
   DiffRenderOptions render = options.render;
   render.filter_3d = mip ? &filter_3d : nullptr;
+  render.absgrad = options.strategy == Strategy::kDefault && options.default_strategy.absgrad;
   DiffImage image;
   SplatGrads grads;
   const auto t0 = std::chrono::steady_clock::now();
@@ -168,7 +169,8 @@ Status train(SplatParams* params, const std::vector<TrainView>& views, const Tra
     const size_t rows_before = params->size();
     if (options.strategy == Strategy::kDefault) {
       auto rep = default_strategy_step(options.default_strategy, step, options.adam.scene_scale,
-                                       grads.means2d, renderer.visible(), renderer.width(),
+                                       render.absgrad ? grads.means2d_abs : grads.means2d,
+                                       renderer.visible(), renderer.width(),
                                        renderer.height(), normal, params, &adam, &strategy_state);
       if (!rep) return rep.status().with_context("step " + std::to_string(step));
       rec.refine = *rep;
