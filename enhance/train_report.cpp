@@ -317,7 +317,9 @@ Result<TrainReportResult> run_train_report(const TrainReportJob& job, ThreadPool
                          std::to_string(job.test_every) + " holds out [" + join(test_names) +
                          "]: pass the training run's --test-every and --data-factor");
 
-  auto trained = gs::read_splat_params(job.ply);
+  std::vector<float> file_filter;  // mip: recomputed from the training cameras (model_cloud)
+  auto trained =
+      gs::read_splat_params(job.ply, {}, mode == gs::RasterMode::kMip ? &file_filter : nullptr);
   if (!trained) return trained.status().with_context("--ply");
   TrainReportResult res;
   const TrainLogStep& last = log.steps.back();
@@ -330,7 +332,8 @@ Result<TrainReportResult> run_train_report(const TrainReportJob& job, ThreadPool
                          ") has " + std::to_string(last.num_gaussians) + ": not this run's model");
   std::optional<gs::SplatParams> init;
   if (!job.init_ply.empty()) {
-    auto p = gs::read_splat_params(job.init_ply);
+    auto p = gs::read_splat_params(job.init_ply, {},
+                                   mode == gs::RasterMode::kMip ? &file_filter : nullptr);
     if (!p) return p.status().with_context("--init-ply");
     init = std::move(*p);
   }

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <filesystem>
 #include <random>
 #include <string>
 
@@ -20,7 +21,9 @@
 #include "gs/train/step_gradient.h"
 #include "gs/train/train_kernels.h"
 #include "gs/train/trainer.h"
+#include "gs/formats/scene_io.h"
 #include "test_support.h"
+#include "tests/cli_run.h"
 #include "train_fd.h"
 
 using namespace macro;
@@ -264,4 +267,57 @@ TEST_CASE("train modes: the 3D filter is Mip-Splatting's compute_3D_filter", "[t
     INFO("Gaussian " << i);
     CHECK(f[size_t(i)] == Approx(depth[i] * k).epsilon(1e-6));
   }
+}
+
+TEST_CASE("train modes: a mip-mode run writes filter_3D, which loaders fold and --init accepts",
+          "[train]") {
+  const std::string g = test::golden_dir() + "/train";
+  if (!std::filesystem::is_regular_file(g + "/init.ply")) {
+    WARN("skipped: no golden train data at " << g);
+    return;
+  }
+  test::TempDir tmp("train-mip-ply");
+  const std::string base = "train --images " + g + "/images --cameras " + g +
+                           "/cameras.json --steps 3 --strategy none --lr-schedule constant"
+                           " --view-order sequential --sh-degree-interval 0 --scene-scale 1 --quiet";
+  REQUIRE(test::run_macro(base + " --init " + g + "/init.ply --mode mip --out " +
+                              tmp.file("mip.ply"),
+                          tmp)
+              .rc == 0);
+  // The filter is the trained Gaussians' 3D filter from the training cameras.
+  std::vector<float> filter;
+  auto p = read_splat_params(tmp.file("mip.ply"), {}, &filter);
+  REQUIRE(p.is_ok());
+  auto cams = load_cameras(g + "/cameras.json");
+  REQUIRE(cams.is_ok());
+  CHECK(filter == compute_filter_3d(*p, cams->cameras));
+  CHECK(filter.size() == p->size());
+  // Without a place for the filter the file is refused by name; a classic run writes none.
+  auto refused = read_splat_params(tmp.file("mip.ply"));
+  REQUIRE_FALSE(refused.is_ok());
+  CHECK(refused.status().message().find("filter_3D") != std::string::npos);
+  REQUIRE(test::run_macro(base + " --init " + g + "/init.ply --out " + tmp.file("classic.ply"),
+                          tmp)
+              .rc == 0);
+  std::vector<float> none = {1.f};
+  REQUIRE(read_splat_params(tmp.file("classic.ply"), {}, &none).is_ok());
+  CHECK(none.empty());
+  // The scene loader folds it: scales grow to sqrt(s^2 + f^2).
+  auto cloud = load_scene(tmp.file("mip.ply"));
+  REQUIRE(cloud.is_ok());
+  const GaussianCloud raw = to_cloud(*p);
+  for (size_t i = 0; i < p->size(); ++i)
+    CHECK(cloud->scale[3 * i] == Approx(std::sqrt(raw.scale[3 * i] * raw.scale[3 * i] +
+                                                  filter[i] * filter[i]))
+                                     .epsilon(1e-5));
+  // Fine-tuning from it: accepted in mip mode, refused (naming the property) otherwise.
+  CHECK(test::run_macro(base + " --init " + tmp.file("mip.ply") + " --mode mip --out " +
+                            tmp.file("again.ply"),
+                        tmp)
+            .rc == 0);
+  const auto bad =
+      test::run_macro(base + " --init " + tmp.file("mip.ply") + " --out " + tmp.file("x.ply"), tmp);
+  CHECK(bad.rc == 1);
+  CHECK(bad.err.find("filter_3D") != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(tmp.file("x.ply")));
 }

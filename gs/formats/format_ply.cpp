@@ -274,7 +274,7 @@ Result<GaussianCloud> decode_ply(const ply::Header& header, const uint8_t* data,
   return cloud;
 }
 
-std::string inria_ply_header(size_t N, size_t R, const std::string& comment) {
+std::string inria_ply_header(size_t N, size_t R, const std::string& comment, bool filter_3d) {
   std::string h = "ply\nformat binary_little_endian 1.0\n";
   if (!comment.empty()) h += "comment " + comment + "\n";
   h += "element vertex " + std::to_string(N) + "\n";
@@ -284,6 +284,7 @@ std::string inria_ply_header(size_t N, size_t R, const std::string& comment) {
   for (const char* name :
        {"opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"})
     h += std::string("property float ") + name + "\n";
+  if (filter_3d) h += "property float filter_3D\n";
   h += "end_header\n";
   return h;
 }

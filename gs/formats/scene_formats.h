@@ -29,7 +29,9 @@ Result<std::vector<uint8_t>> encode_ply(const GaussianCloud& cloud, const std::s
 // The header of an Inria-layout binary .ply with N vertices and R higher SH coefficients per
 // channel (x y z nx ny nz f_dc_0..2 f_rest_0..3R-1 opacity scale_0..2 rot_0..3, all float);
 // `comment` (e.g. "SplatRenderMode: mip") goes in a comment line when not empty.
-std::string inria_ply_header(size_t N, size_t R, const std::string& comment = "");
+// With filter_3d a last property filter_3D (Mip-Splatting).
+std::string inria_ply_header(size_t N, size_t R, const std::string& comment = "",
+                             bool filter_3d = false);
 
 // SuperSplat / splat-transform compressed .ply (elements chunk, vertex, optional sh).
 bool is_compressed_ply(const ply::Header& header);

@@ -41,7 +41,7 @@ Status SplatParams::check_shapes() const {
 }
 
 Result<SplatParams> decode_splat_params(const uint8_t* data, size_t size, const std::string& name,
-                                        const LoadLimits& limits) {
+                                        const LoadLimits& limits, std::vector<float>* filter_3d) {
   if (size == 0) return Status::error(name + ": empty file");
   if (!ply::looks_like_ply(data, size))
     return Status::error(name + ": expected an Inria-layout .ply (a PLY header), found none");
@@ -66,10 +66,12 @@ Result<SplatParams> decode_splat_params(const uint8_t* data, size_t size, const 
     return i;
   };
   MACRO_ASSIGN_OR_RETURN(int filter3d, ply::find_scalar(vertex, "filter_3D", name));
-  if (filter3d >= 0)
+  if (filter3d >= 0 && filter_3d == nullptr)
     return Status::error(name +
-                         ": element 'vertex' has 'filter_3D' (a Mip-Splatting file): its 3D "
-                         "filter is not a gsplat training parameter");
+                         ": element 'vertex' has 'filter_3D' (a Mip-Splatting file, e.g. from "
+                         "macro train --mode mip): its scales and opacities need that 3D filter; "
+                         "use it in mip mode (--mode mip)");
+  if (filter_3d) filter_3d->clear();
 
   // Columns in this order: x y z, f_dc_0..2, opacity, scale_0..2, rot_0..3, then shN in
   // coefficient-major order (file index c*R + k-1).
@@ -100,6 +102,8 @@ Result<SplatParams> decode_splat_params(const uint8_t* data, size_t size, const 
   const size_t R = size_t((degree + 1) * (degree + 1) - 1);
   for (size_t k = 0; k < R; ++k)
     for (size_t c = 0; c < 3; ++c) columns.push_back(rest[c * R + k]);
+  const size_t filter_column = columns.size();
+  if (filter3d >= 0) columns.push_back(filter3d);
   static const char* const kFixedNames[14] = {"x",      "y",       "z",       "f_dc_0",  "f_dc_1",
                                               "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
                                               "rot_0",  "rot_1",   "rot_2",   "rot_3"};
@@ -109,6 +113,7 @@ Result<SplatParams> decode_splat_params(const uint8_t* data, size_t size, const 
   SplatParams p;
   const size_t N = size_t(vertex.count);
   p.resize(N, degree);
+  if (filter3d >= 0) filter_3d->assign(N, 0.f);
   std::string error;
   MACRO_TRY(rows.for_each_block(columns, [&](size_t first, size_t n, const float* const* col) {
     for (size_t r = 0; r < n && error.empty(); ++r) {
@@ -116,7 +121,9 @@ Result<SplatParams> decode_splat_params(const uint8_t* data, size_t size, const 
       for (size_t c = 0; c < columns.size(); ++c) {
         if (std::isfinite(col[c][r])) continue;
         const std::string prop =
-            c < 14 ? kFixedNames[c] : "f_rest_" + std::to_string(((c - 14) % 3) * R + (c - 14) / 3);
+            c < 14               ? kFixedNames[c]
+            : c == filter_column ? "filter_3D"
+                                 : "f_rest_" + std::to_string(((c - 14) % 3) * R + (c - 14) / 3);
         error = name + ": vertex " + std::to_string(i) + ": property '" + prop +
                 "' is not finite (" + std::to_string(col[c][r]) + ")";
         return;
@@ -136,22 +143,33 @@ Result<SplatParams> decode_splat_params(const uint8_t* data, size_t size, const 
         return;
       }
       for (size_t j = 0; j < R * 3; ++j) p.shN[i * R * 3 + j] = col[14 + j][r];
+      if (filter3d >= 0) {
+        if (col[filter_column][r] < 0) {
+          error = name + ": vertex " + std::to_string(i) + ": property 'filter_3D' is negative (" +
+                  std::to_string(col[filter_column][r]) + ")";
+          return;
+        }
+        (*filter_3d)[i] = col[filter_column][r];
+      }
     }
   }));
   if (!error.empty()) return Status::error(error);
   return p;
 }
 
-Result<SplatParams> read_splat_params(const std::string& path, const LoadLimits& limits) {
+Result<SplatParams> read_splat_params(const std::string& path, const LoadLimits& limits,
+                                      std::vector<float>* filter_3d) {
   MACRO_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, read_file(path, limits.max_file_bytes));
-  return decode_splat_params(bytes.data(), bytes.size(), path, limits);
+  return decode_splat_params(bytes.data(), bytes.size(), path, limits, filter_3d);
 }
 
-std::vector<uint8_t> encode_splat_params(const SplatParams& p) {
+std::vector<uint8_t> encode_splat_params(const SplatParams& p, const std::vector<float>* filter_3d) {
   const size_t N = p.size();
   const size_t R = size_t(p.sh_rest());
-  const std::string h = formats::inria_ply_header(N, R);
-  const size_t floats = 9 + 3 * R + 8;
+  const bool with_filter = filter_3d != nullptr;
+  MACRO_CHECK(!with_filter || filter_3d->size() == N);
+  const std::string h = formats::inria_ply_header(N, R, "", with_filter);
+  const size_t floats = 9 + 3 * R + 8 + (with_filter ? 1 : 0);
   std::vector<uint8_t> out(h.size() + N * floats * 4);
   std::memcpy(out.data(), h.data(), h.size());
   std::vector<float> row(floats);
@@ -166,15 +184,20 @@ std::vector<uint8_t> encode_splat_params(const SplatParams& p) {
     *v++ = p.opacities[i];
     for (int a = 0; a < 3; ++a) *v++ = p.scales[i * 3 + a];
     for (int a = 0; a < 4; ++a) *v++ = p.quats[i * 4 + a];
+    if (with_filter) *v++ = (*filter_3d)[i];
     std::memcpy(dst, row.data(), floats * 4);  // little-endian host
     dst += floats * 4;
   }
   return out;
 }
 
-Status write_splat_params(const SplatParams& params, const std::string& path) {
+Status write_splat_params(const SplatParams& params, const std::string& path,
+                          const std::vector<float>* filter_3d) {
   MACRO_TRY(params.check_shapes().with_context(path));
-  const std::vector<uint8_t> bytes = encode_splat_params(params);
+  if (filter_3d && filter_3d->size() != params.size())
+    return Status::error(path + ": the 3D filter holds " + std::to_string(filter_3d->size()) +
+                         " values for " + std::to_string(params.size()) + " Gaussians");
+  const std::vector<uint8_t> bytes = encode_splat_params(params, filter_3d);
   return write_file_atomic(path, bytes.data(), bytes.size());
 }
 

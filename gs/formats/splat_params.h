@@ -47,16 +47,24 @@ struct SplatParams {
 
 // An Inria-layout .ply (any numeric type, either byte order or ascii; properties by name; extra
 // properties ignored). Required: x y z, f_dc_0..2, opacity, scale_0..2, rot_0..3; f_rest_* as for
-// load_scene (0, 9, 24 or 45 of them). A filter_3D property (Mip-Splatting) or a point cloud
-// without f_dc is refused: neither holds gsplat's trainable parameters.
-Result<SplatParams> read_splat_params(const std::string& path, const LoadLimits& limits = {});
+// load_scene (0, 9, 24 or 45 of them). A point cloud without f_dc is refused. A filter_3D property
+// (Mip-Splatting's 3D filter, written by `macro train --mode mip`) goes to *filter_3d [N]; without
+// filter_3d such a file is refused (its scales and opacities are the unfiltered ones, so using
+// them without the filter would be another model). *filter_3d is cleared when the file has none.
+Result<SplatParams> read_splat_params(const std::string& path, const LoadLimits& limits = {},
+                                      std::vector<float>* filter_3d = nullptr);
 Result<SplatParams> decode_splat_params(const uint8_t* data, size_t size, const std::string& name,
-                                        const LoadLimits& limits = {});
+                                        const LoadLimits& limits = {},
+                                        std::vector<float>* filter_3d = nullptr);
 
 // The Inria layout, binary little-endian, 62 floats per vertex at degree 3 (normals zero),
-// written atomically. The values go out as stored, with no activation.
-Status write_splat_params(const SplatParams& params, const std::string& path);
-std::vector<uint8_t> encode_splat_params(const SplatParams& params);
+// written atomically. The values go out as stored, with no activation. With filter_3d ([N]) a
+// last property filter_3D, as Mip-Splatting writes it (readers that fold it, ours included, then
+// render the filtered Gaussians).
+Status write_splat_params(const SplatParams& params, const std::string& path,
+                          const std::vector<float>* filter_3d = nullptr);
+std::vector<uint8_t> encode_splat_params(const SplatParams& params,
+                                         const std::vector<float>* filter_3d = nullptr);
 
 // The activated cloud the rasterizer draws: exp(scales), quats / |q| (computed in double),
 // sigmoid(opacities), sh = [sh0, shN]. Shapes must be consistent (check_shapes()).

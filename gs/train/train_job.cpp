@@ -167,7 +167,9 @@ Result<GradJobResult> run_grad_job(const GradJob& job, ThreadPool& pool) {
   if (job.cameras_path.empty()) return Status::error("--cameras: required");
   if (job.target_path.empty()) return Status::error("--target: required");
   MACRO_TRY(check_output("--out", job.out_path));
-  auto params = read_splat_params(job.scene_path, job.limits);
+  std::vector<float> file_filter;  // mip: recomputed from --cameras below
+  auto params = read_splat_params(job.scene_path, job.limits,
+                                  mode == RasterMode::kMip ? &file_filter : nullptr);
   if (!params) return params.status().with_context("--scene");
   auto cameras = load_cameras(job.cameras_path);
   if (!cameras) return cameras.status().with_context("--cameras");
@@ -291,7 +293,11 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
     if (job.strategy == "mcmc") so.init_opacity = 0.5, so.init_scale = 0.1;  // gsplat mcmc config
     MACRO_ASSIGN_OR_RETURN(SceneDirInputs in, load_scene_dir(job.scene_dir, so));
     if (ply) {
-      auto p = read_splat_params(job.init_path, job.limits);
+      // A mip-mode .ply (filter_3D) is accepted in mip mode; the filter is recomputed from the
+      // training cameras, as Mip-Splatting does when training starts.
+      std::vector<float> file_filter;
+      auto p = read_splat_params(job.init_path, job.limits,
+                                 job.mode == "mip" ? &file_filter : nullptr);
       if (!p) return p.status().with_context("--init");
       params = std::move(*p);
     } else {
@@ -313,7 +319,8 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
                  ", \"train_views\": " + names(views) + ", \"test_views\": " + names(test_views) +
                  "}\n";
   } else {
-    auto p = read_splat_params(job.init_path, job.limits);
+    std::vector<float> file_filter;  // recomputed from the cameras (as above)
+    auto p = read_splat_params(job.init_path, job.limits, job.mode == "mip" ? &file_filter : nullptr);
     if (!p) return p.status().with_context("--init");
     params = std::move(*p);
     auto cameras = load_cameras(job.cameras_path);
@@ -491,7 +498,17 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
       MACRO_TRY(log.write(line + "]}\n").with_context("--log"));
     }
   }
-  MACRO_TRY(write_splat_params(*params, job.out_path).with_context("--out"));
+  // Mip: the 3D filter of the trained Gaussians from the training cameras goes into the .ply
+  // (filter_3D, as Mip-Splatting saves it), so renderers apply it.
+  std::vector<float> out_filter;
+  if (options.render.mode == RasterMode::kMip) {
+    std::vector<Camera> cams;
+    for (const TrainView& v : views) cams.push_back(v.camera);
+    out_filter = compute_filter_3d(*params, cams);
+  }
+  MACRO_TRY(write_splat_params(*params, job.out_path,
+                               out_filter.empty() && params->size() > 0 ? nullptr : &out_filter)
+                .with_context("--out"));
   if (!job.log_path.empty()) MACRO_TRY(log.commit().with_context("--log"));
   result.seconds = result.records.empty() ? 0 : result.records.back().seconds;
   rusage ru{};
