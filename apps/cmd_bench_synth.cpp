@@ -14,11 +14,15 @@ namespace {
 
 constexpr const char* kUsage =
     "       macro bench synth --out DIR [--scenes N] [--seed S] [--size tiny|demo|full]\n"
+    "                         [--recon train|merge] [--train-steps N] [--sfm-points N]\n"
     "                         [--no-gt-ply] [--quiet]\n"
     "  synth   SynthClose: synthetic close-up scenes with exact GT (DIR/synthclose_NN; the demo\n"
-    "          size writes one scene folder into DIR). Photos from a dense GT splat (gt.ply),\n"
-    "          scene.ply the merged, blurrier reconstruction; full: 10 scenes, 50 pairs, "
-    "960x536.\n";
+    "          size writes one scene folder into DIR). Photos from a dense GT splat (gt.ply);\n"
+    "          SfM-like points in sparse/0/points3D.txt; scene.ply the reconstruction: train\n"
+    "          (default) = macro train on the training photos from those points (gsplat default\n"
+    "          recipe, --train-steps: tiny 300, else 3000; the merged cloud kept as\n"
+    "          scene_merged.ply), merge = the GT merged into fewer, larger Gaussians; full: 10\n"
+    "          scenes, 50 pairs, 960x536.\n";
 
 int run_synth(Args& args) {
   enhance::SynthCloseOptions o;
@@ -27,10 +31,16 @@ int run_synth(Args& args) {
   o.seed = uint64_t(args.int_or("--seed", 1, 0, 2147483647));
   const std::string size = args.value_or("--size", "full");
   o.write_gt_ply = !args.flag("--no-gt-ply");
+  const std::string recon = args.value_or("--recon", "train");
+  o.train_steps = args.int_or("--train-steps", 0, 1, 1000000000);
+  o.sfm_points = size_t(args.int_or("--sfm-points", 0, 1, 100000000));
   if (Status s = args.finish(); !s) return fail("bench synth", s);
   auto parsed = enhance::parse_synthclose_size(size);
   if (!parsed) return fail("bench synth", parsed.status());
   o.size = *parsed;
+  auto parsed_recon = enhance::parse_synthclose_recon(recon);
+  if (!parsed_recon) return fail("bench synth", parsed_recon.status());
+  o.recon = *parsed_recon;
   if (Status s = prepare_output_dir(out, "--out"); !s) return fail("bench synth", s);
   std::unique_ptr<Progress> progress;
   o.progress = [&](size_t done, size_t total) {
@@ -42,10 +52,13 @@ int run_synth(Args& args) {
   if (progress) progress->finish();
   if (!summary) return fail("bench synth", summary.status());
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::printf("bench synth: %s, %s, %zu GT / %zu reconstruction Gaussians, %.1f s -> %s\n",
-              count_noun(size_t(summary->scenes), "scene").c_str(),
-              count_noun(size_t(summary->pairs), "close-up pair").c_str(), summary->gt_gaussians,
-              summary->recon_gaussians, secs, out.c_str());
+  std::printf(
+      "bench synth: %s, %s, %zu GT / %zu reconstruction Gaussians (%s), %zu SfM points, %.1f s "
+      "(training %.1f s) -> %s\n",
+      count_noun(size_t(summary->scenes), "scene").c_str(),
+      count_noun(size_t(summary->pairs), "close-up pair").c_str(), summary->gt_gaussians,
+      summary->recon_gaussians, enhance::synthclose_recon_name(o.recon), summary->sfm_points, secs,
+      summary->train_seconds, out.c_str());
   return 0;
 }
 

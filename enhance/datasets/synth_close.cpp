@@ -12,6 +12,9 @@
 
 #include "attention/runtime/file_io.h"
 #include "enhance/datasets/synth_scene_folder.h"
+#include "enhance/datasets/synth_sfm.h"
+#include "gs/cameras/camera.h"
+#include "gs/train/train_job.h"
 #include "gs/formats/scene_io.h"
 #include "gs/synth/synth_random.h"
 
@@ -451,8 +454,16 @@ Result<SynthCloseScene> make_scene_retrying(SynthCloseParams& sp) {
 }
 
 // synthclose.json: the generator's parameters and the scene's counts.
+// What the trained reconstruction took (kTrain).
+struct TrainedRecon {
+  int steps = 0;
+  size_t gaussians = 0, sfm_points = 0;
+  double seconds = 0;
+};
+
 std::string synthclose_json(const SynthCloseOptions& o, int k, const SynthCloseParams& sp,
-                            const SynthCloseScene& s, const std::string& gt_ply_name) {
+                            const SynthCloseScene& s, const std::string& gt_ply_name,
+                            const TrainedRecon& trained) {
   nlohmann::ordered_json info;
   info["generator"] = "macro bench synth";
   info["size"] = synthclose_size_name(o.size);
@@ -480,11 +491,32 @@ std::string synthclose_json(const SynthCloseOptions& o, int k, const SynthCloseP
                                 {"recon_gaussians", s.recon_count[i]},
                                 {"recon_cell_m", s.recon_cell[i]}});
   info["gt_ply"] = gt_ply_name.empty() ? nlohmann::ordered_json() : "gt.ply";
+  info["recon"] = synthclose_recon_name(o.recon);
   info["recon_ply"] = "scene.ply";
+  info["sfm_points"] = trained.sfm_points;
+  if (o.recon == SynthCloseRecon::kTrain) {
+    info["merged_ply"] = "scene_merged.ply";
+    info["train"] = {{"command", "macro train --scene-dir <this folder> --init sfm --test-every 0 "
+                                 "--steps " +
+                                     std::to_string(trained.steps)},
+                     {"steps", trained.steps},
+                     {"strategy", "default"},
+                     {"gaussians", trained.gaussians},
+                     {"log", "train_log.jsonl (its seconds are the only bytes that vary)"}};
+  }
   return info.dump(1) + "\n";
 }
 
 }  // namespace
+
+Result<SynthCloseRecon> parse_synthclose_recon(const std::string& text) {
+  if (text == "train") return SynthCloseRecon::kTrain;
+  if (text == "merge") return SynthCloseRecon::kMerge;
+  return Status::error("--recon: expected train or merge, found '" + text + "'");
+}
+const char* synthclose_recon_name(SynthCloseRecon recon) {
+  return recon == SynthCloseRecon::kTrain ? "train" : "merge";
+}
 
 Result<SynthCloseSummary> write_synthclose(const std::string& dir, const SynthCloseOptions& o) {
   namespace fs = std::filesystem;
@@ -521,13 +553,50 @@ Result<SynthCloseSummary> write_synthclose(const std::string& dir, const SynthCl
     fo.scene_name = demo ? "synthclose_demo" : name;
     fo.on_photo = tick;
     MACRO_TRY(write_closeup_scene_folder(scene->layout, scene_dir, fo));
+    TrainedRecon trained;
+    {
+      // SfM-like points of the training cameras (as written to sparse/0, with their image ids).
+      const std::string sparse = (fs::path(scene_dir) / "sparse" / "0").string();
+      MACRO_ASSIGN_OR_RETURN(gs::CameraSet cams, gs::load_cameras(sparse));
+      SynthSfmOptions so;
+      so.points = o.sfm_points > 0 ? o.sfm_points
+                  : o.size == SynthCloseSize::kTiny ? 3000
+                  : demo                            ? 10000
+                                                    : 20000;
+      so.seed = sp.seed;
+      MACRO_ASSIGN_OR_RETURN(gs::ColmapPoints points,
+                             synth_sfm_points(scene->gt, cams.cameras, so));
+      MACRO_TRY(gs::save_colmap_points_text(points, sparse + "/points3D.txt"));
+      trained.sfm_points = points.size();
+    }
+    size_t recon_gaussians = scene->layout.cloud.size();
+    if (o.recon == SynthCloseRecon::kTrain) {
+      std::error_code ec;
+      fs::rename(fs::path(scene_dir) / "scene.ply", fs::path(scene_dir) / "scene_merged.ply", ec);
+      if (ec) return Status::error(scene_dir + "/scene.ply: cannot rename: " + ec.message());
+      gs::train::TrainJob job;
+      job.scene_dir = scene_dir;
+      job.init_path = "sfm";
+      job.test_every = 0;  // split.json names the training frames; close-ups are never trained on
+      job.steps = o.train_steps > 0 ? o.train_steps : o.size == SynthCloseSize::kTiny ? 300 : 3000;
+      job.out_path = (fs::path(scene_dir) / "scene.ply").string();
+      job.log_path = (fs::path(scene_dir) / "train_log.jsonl").string();
+      job.progress = o.train_progress;
+      MACRO_ASSIGN_OR_RETURN(gs::train::TrainJobResult tr, gs::train::run_train_job(job));
+      trained.steps = job.steps;
+      trained.gaussians = tr.gaussians;
+      trained.seconds = tr.seconds;
+      recon_gaussians = tr.gaussians;
+      summary.train_seconds += tr.seconds;
+    }
     MACRO_TRY(write_file_atomic((fs::path(scene_dir) / "synthclose.json").string(),
-                                synthclose_json(o, k, sp, *scene, fo.photo_ply_name)));
+                                synthclose_json(o, k, sp, *scene, fo.photo_ply_name, trained)));
     tick();
     summary.scenes += 1;
     summary.pairs += int(scene->layout.geometry.closeups.size());
     summary.gt_gaussians += scene->gt.size();
-    summary.recon_gaussians += scene->layout.cloud.size();
+    summary.recon_gaussians += recon_gaussians;
+    summary.sfm_points += trained.sfm_points;
     summary.scene_dirs.push_back(scene_dir);
   }
   return summary;

@@ -134,8 +134,21 @@ gs::GaussianCloud merge_clusters(const gs::GaussianCloud& cloud,
                                  const std::vector<uint32_t>& order,
                                  const std::vector<float>& cover);
 
+// The reconstruction a scene folder's scene.ply holds:
+//   kTrain  `macro train` (gs/train) on the training photos from the SfM-like points (synth_sfm.h),
+//           gsplat's default recipe (DefaultStrategy, SH degree 3, classic) for train_steps;
+//           the merged cloud is kept as scene_merged.ply
+//   kMerge  the GT merged per cluster (merge_synthclose_gt), blurry but never wrong
+enum class SynthCloseRecon { kTrain, kMerge };
+Result<SynthCloseRecon> parse_synthclose_recon(const std::string& text);  // train, merge
+const char* synthclose_recon_name(SynthCloseRecon recon);
+
 struct SynthCloseOptions {
   SynthCloseSize size = SynthCloseSize::kFull;
+  SynthCloseRecon recon = SynthCloseRecon::kTrain;
+  int train_steps = 0;     // 0 = the size's default: tiny 300, demo and full 3000
+  size_t sfm_points = 0;   // 0 = the size's default: tiny 3000, demo 10000, full 20000
+  bool train_progress = true;  // the trainer's progress line on stderr (also off when quiet())
   int scenes = 0;  // 0 = the size's default: full 10, demo 1, tiny 2
   uint64_t seed = 1;
   bool write_gt_ply = true;  // the demo size never writes it (folder size)
@@ -146,7 +159,9 @@ struct SynthCloseOptions {
 
 struct SynthCloseSummary {
   int scenes = 0, pairs = 0;
-  size_t gt_gaussians = 0, recon_gaussians = 0;  // totals
+  size_t gt_gaussians = 0, recon_gaussians = 0;  // totals (recon: scene.ply's)
+  size_t sfm_points = 0;                         // total
+  double train_seconds = 0;                      // total (kTrain)
   std::vector<std::string> scene_dirs;
 };
 
