@@ -11,7 +11,9 @@
 //  - a rectangle of the far band pushed onto the middle plane: the tokens moved are its latent
 //    cells, counted by hand; scales unchanged; the near plane's crops do not move;
 //  - the middle band merged into the far one (2 planes against 3): planes matched by disparity;
-//  - the rendered depth against D0, loose bounds, and the JSON.
+//  - the rendered depth against D0, loose bounds, and the JSON;
+//  - macro plan --true-scene on the demo SynthClose folder, the truth being its splat scaled by
+//    1 + e about the close-up's centre (every close-up depth x (1 + e), the image unchanged).
 #include <catch2/catch.hpp>
 
 #include <Eigen/Geometry>
@@ -20,6 +22,7 @@
 
 #include "attention/runtime/file_io.h"
 #include "enhance/macro/plan_stability.h"
+#include "gs/formats/scene_io.h"
 #include "test_support.h"
 
 using namespace macro;
@@ -129,7 +132,8 @@ Eigen::Vector2d centroid(const gs::Camera& cu, const std::vector<float>& z,
 
 // The reference depth of the close-up centre ray's point at depth d (crops.h, --scale axis).
 double ref_depth_of_centre(const gs::Camera& cu, const gs::Camera& ref, double d) {
-  const Eigen::Vector3d xc((kW / 2.0 - cu.cx) / cu.fx * d, (kH / 2.0 - cu.cy) / cu.fy * d, d);
+  const Eigen::Vector3d xc((cu.width / 2.0 - cu.cx) / cu.fx * d,
+                           (cu.height / 2.0 - cu.cy) / cu.fy * d, d);
   return ref.project(cu.R.transpose() * (xc - cu.t)).z();
 }
 
@@ -411,4 +415,85 @@ TEST_CASE("plan stability: the rendered depth against the exact one, and the JSO
   auto bad = compare_plans(*pa, *pb);
   REQUIRE_FALSE(bad.is_ok());
   CHECK_THAT(bad.status().message(), Catch::Contains("96x64") && Catch::Contains("88x64"));
+}
+
+TEST_CASE("macro plan --true-scene: the splat scaled about the close-up's centre",
+          "[plan_stability][cli]") {
+  // Positions p -> c + (1 + e)(p - c) and sizes x (1 + e) about the close-up's centre c: every
+  // Gaussian keeps its projection and footprint, so the close-up render is the same image with
+  // each depth x (1 + e). The reconstruction's plan (A) is then off by 1 / (1 + e): the labels
+  // stay, each crop's scale error is e |b| / d_ref,B (plan_stability.h with e' = 1 / (1 + e) - 1:
+  // |e'| / (1 + e') = e).
+  const std::string dir = test::source_dir() + "/data/scenes/synthclose";
+  SceneInputOptions io;
+  io.scene_dir = dir;
+  io.closeup = "closeup.png";
+  auto in = load_scene_inputs(io);
+  REQUIRE(in.is_ok());
+  const double e = 0.1;
+  const Eigen::Vector3d c = in->closeup.center();
+  gs::GaussianCloud truth = in->cloud;
+  for (size_t n = 0; n < truth.size(); ++n)
+    for (int a = 0; a < 3; ++a) {
+      float& x = truth.position[n * 3 + size_t(a)];
+      x = float(c[a] + (1 + e) * (double(x) - c[a]));
+      truth.scale[n * 3 + size_t(a)] *= float(1 + e);
+    }
+  test::TempDir tmp("plan-stability-cli");
+  REQUIRE(gs::save_scene(truth, tmp.file("gt.ply")).is_ok());
+  const std::string exe = test::macro_exe(), base = exe + " plan --quiet --scene-dir " + dir +
+                                                    " --closeup closeup.png --out " +
+                                                    tmp.file("plan.json");
+  REQUIRE(test::run_command(base + " --true-scene " + tmp.file("gt.ply") + " --stability-out " +
+                            tmp.file("s.json") + " 2>" + tmp.file("err.txt")) == 0);
+  auto text = read_text_file(tmp.file("s.json"));
+  REQUIRE(text.is_ok());
+  const auto j = nlohmann::json::parse(*text);
+
+  // The library on the same inputs: the numbers the command wrote.
+  auto gt = gs::load_scene(tmp.file("gt.ply"));
+  REQUIRE(gt.is_ok());
+  const PlanOptions o;
+  auto depth = render_closeup_depth(*gt, in->closeup, o);
+  REQUIRE(depth.is_ok());
+  auto s = plan_stability(*in, o, *depth);
+  REQUIRE(s.is_ok());
+  CHECK(j["tokens"]["moved"] == s->tokens_moved);
+  CHECK(j["crops"]["scale_error"]["max"].get<double>() == s->scale_error_max);
+  CHECK(j["crops"]["pairs"].size() == s->crops.size());
+  std::printf(
+      "plan stability, synthclose splat x %.2f: %lld / %lld tokens moved, scale error mean "
+      "%.4f max %.4f, centre error mean %.2f max %.2f px\n",
+      1 + e, (long long)s->tokens_moved, (long long)s->tokens, s->scale_error_mean,
+      s->scale_error_max, s->centre_error_mean, s->centre_error_max);
+  // The premise: every plane depth / (1 + e), the same planes and references.
+  REQUIRE(s->planes_by_index);
+  CHECK(s->same_references);
+  for (const PlaneStability& p : s->planes)
+    CHECK(p.depth_error == Approx(1 - 1 / (1 + e)).margin(1e-5));
+  CHECK(s->tokens_moved_fraction <= 0.01);
+  // The predicted scale error per pair.
+  REQUIRE(s->crops.size() >= 3);
+  for (const CropStability& cs : s->crops) {
+    const gs::Camera& ref = in->candidates[size_t(cs.candidate)];
+    const double d_b = s->planes[size_t(cs.plane_a)].depth_b;
+    const double b0 = ref_depth_of_centre(in->closeup, ref, 0.0);
+    INFO("plane " << cs.plane_a << " " << cs.reference << " b " << b0);
+    CHECK(cs.scale_error ==
+          Approx(e * std::abs(b0) / ref_depth_of_centre(in->closeup, ref, d_b)).margin(1e-5));
+  }
+  CHECK(s->scale_error_max > 0);
+
+  // Errors: one flag without the other; a missing splat named.
+  CHECK(test::run_command(base + " --true-scene " + tmp.file("gt.ply") + " 2>" +
+                          tmp.file("e1.txt")) == 1);
+  auto e1 = read_text_file(tmp.file("e1.txt"));
+  REQUIRE(e1.is_ok());
+  CHECK_THAT(*e1, Catch::Contains("--stability-out"));
+  CHECK(test::run_command(base + " --true-scene " + tmp.file("none.ply") + " --stability-out " +
+                          tmp.file("s2.json") + " 2>" + tmp.file("e2.txt")) == 1);
+  auto e2 = read_text_file(tmp.file("e2.txt"));
+  REQUIRE(e2.is_ok());
+  CHECK_THAT(*e2, Catch::Contains("none.ply"));
+  CHECK_FALSE(file_exists(tmp.file("s2.json")));
 }
