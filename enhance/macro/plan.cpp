@@ -2,6 +2,7 @@
 #include "enhance/macro/plan.h"
 
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <iterator>
 #include <nlohmann/json.hpp>
@@ -20,6 +21,23 @@ uint8_t png_u8(float v) {
   if (!(v > 0.f)) return 0;
   if (v >= 1.f) return 255;
   return static_cast<uint8_t>(v * 255.f + 0.5f);
+}
+
+// A given close-up depth: W x H values, each finite and >= 0 (0 = no surface).
+Status check_closeup_depth(const std::vector<float>& depth, const gs::Camera& closeup) {
+  const size_t want = size_t(closeup.width) * size_t(closeup.height);
+  if (depth.size() != want)
+    return Status::error("given close-up depth: expected " + std::to_string(closeup.width) + "x" +
+                         std::to_string(closeup.height) + " = " + std::to_string(want) +
+                         " values (close-up '" + closeup.name + "'), found " +
+                         std::to_string(depth.size()));
+  for (size_t k = 0; k < depth.size(); ++k)
+    if (!std::isfinite(depth[k]) || depth[k] < 0)
+      return Status::error("given close-up depth: expected finite values >= 0, found " +
+                           std::to_string(depth[k]) + " at pixel (row " +
+                           std::to_string(k / size_t(closeup.width)) + ", column " +
+                           std::to_string(k % size_t(closeup.width)) + ")");
+  return Status::ok();
 }
 
 }  // namespace
@@ -76,6 +94,7 @@ Result<MacroPlan> build_plan(const SceneInputs& in, const PlanOptions& o) {
     return Status::error("--refs: expected 1..64, found " + std::to_string(o.refs));
   MacroPlan plan;
   plan.options = o;
+  plan.options.closeup_depth = nullptr;  // not owned: the plan keeps its copy, closeup_depth
   plan.closeup = in.closeup;
   plan.closeup_pose_source = in.closeup_pose_source;
   gs::Rasterizer raster;
@@ -86,7 +105,13 @@ Result<MacroPlan> build_plan(const SceneInputs& in, const PlanOptions& o) {
                 .with_context("close-up '" + in.closeup.name + "'"));
   plan.closeup_color = r.color;
   plan.closeup_depth.camera = in.closeup;
-  plan.closeup_depth.depth = macro_depth(r);
+  if (o.closeup_depth) {
+    MACRO_TRY(check_closeup_depth(*o.closeup_depth, in.closeup));
+    plan.closeup_depth.depth = *o.closeup_depth;
+    plan.closeup_depth_given = true;
+  } else {
+    plan.closeup_depth.depth = macro_depth(r);
+  }
   plan.timings.ms_closeup = ms_since(t0);
   // 2. Candidate depths -> coverage (and the optional visibility test), one render at a time with
   // the same buffers.
@@ -262,6 +287,7 @@ std::string plan_to_json(const MacroPlan& p) {
                   {"padding_mask", padding_mask_size_name(p.options.padding_mask)},
                   {"closeup_resize", closeup_resize_name(p.options.closeup_resize)},
                   {"occlusion", p.options.occlusion}};
+  if (p.closeup_depth_given) j["options"]["closeup_depth"] = "given";  // absent: rendered
   j["model_size"] = {p.model.w, p.model.h};
   j["planes"] = json::array();
   for (const DepthPlane& d : p.planes.planes)

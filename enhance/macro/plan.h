@@ -54,6 +54,13 @@ struct PlanOptions {
   double occlusion_min_visible = kOcclusionMinVisible;
   gs::RenderOptions render;    // classic mode, black background (as the released renders)
   ThreadPool* pool = nullptr;  // nullptr = ThreadPool::global()
+  // A given close-up depth [H,W] (not owned; MACRO convention: z along the close-up's axis, 0 =
+  // no surface) used instead of the rendered one wherever the plan reads the close-up's depth:
+  // the depth planes, the crops' centres and scales (and tight boxes), the --occlusion test and
+  // MacroPlan::closeup_depth (so the warp method too). The colour is still rendered. It must
+  // have the close-up's W x H values, each finite and >= 0 (an error otherwise). nullptr = the
+  // render's depth, as released (plan_stability.h plans from the true depth with it).
+  const std::vector<float>* closeup_depth = nullptr;
 };
 
 struct PlanTimings {
@@ -67,6 +74,8 @@ struct MacroPlan {
   std::string closeup_pose_source;
   std::vector<float> closeup_color;  // [H,W,3]
   DepthView closeup_depth;
+  bool closeup_depth_given = false;  // closeup_depth is PlanOptions::closeup_depth's (copied; the
+                                     // pointer in `options` is reset to nullptr)
   ReferenceSelection selection;
   std::vector<gs::Camera> ref_cameras;  // [K] selected (repeats allowed)
   std::vector<int> ref_candidates;      // [K] index into SceneInputs::candidates
