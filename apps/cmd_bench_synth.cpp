@@ -14,15 +14,16 @@ namespace {
 
 constexpr const char* kUsage =
     "       macro bench synth --out DIR [--scenes N] [--seed S] [--size tiny|demo|full]\n"
-    "                         [--recon train|merge] [--train-steps N] [--sfm-points N]\n"
+    "                         [--recon train|merge] [--train-steps N] [--sfm-points N] [--mip]\n"
     "                         [--no-gt-ply] [--quiet]\n"
     "  synth   SynthClose: synthetic close-up scenes with exact GT (DIR/synthclose_NN; the demo\n"
     "          size writes one scene folder into DIR). Photos from a dense GT splat (gt.ply);\n"
     "          SfM-like points in sparse/0/points3D.txt; scene.ply the reconstruction: train\n"
     "          (default) = macro train on the training photos from those points (gsplat default\n"
     "          recipe, --train-steps: tiny 300, else 3000; the merged cloud kept as\n"
-    "          scene_merged.ply), merge = the GT merged into fewer, larger Gaussians; full: 10\n"
-    "          scenes, 50 pairs, 960x536.\n";
+    "          scene_merged.ply), merge = the GT merged into fewer, larger Gaussians; --mip also\n"
+    "          trains scene_mip.ply in mip mode (the mip-splatting method); full: 10 scenes, 50\n"
+    "          pairs, 960x536.\n";
 
 int run_synth(Args& args) {
   enhance::SynthCloseOptions o;
@@ -34,6 +35,7 @@ int run_synth(Args& args) {
   const std::string recon = args.value_or("--recon", "train");
   o.train_steps = args.int_or("--train-steps", 0, 1, 1000000000);
   o.sfm_points = size_t(args.int_or("--sfm-points", 0, 1, 100000000));
+  o.train_mip = args.flag("--mip");
   if (Status s = args.finish(); !s) return fail("bench synth", s);
   auto parsed = enhance::parse_synthclose_size(size);
   if (!parsed) return fail("bench synth", parsed.status());
@@ -41,6 +43,8 @@ int run_synth(Args& args) {
   auto parsed_recon = enhance::parse_synthclose_recon(recon);
   if (!parsed_recon) return fail("bench synth", parsed_recon.status());
   o.recon = *parsed_recon;
+  if (o.train_mip && o.recon != enhance::SynthCloseRecon::kTrain)
+    return fail("bench synth", Status::error("--mip: only with --recon train"));
   if (Status s = prepare_output_dir(out, "--out"); !s) return fail("bench synth", s);
   std::unique_ptr<Progress> progress;
   o.progress = [&](size_t done, size_t total) {

@@ -278,7 +278,7 @@ TEST_CASE("macro bench synth, run and report end to end on tiny SynthClose", "[s
         (exe + " bench " + args + " --quiet > " + tmp.file("out.txt") + " 2>&1").c_str());
   };
   // The reconstructions are trained (macro train from the SfM-like points, 300 steps).
-  REQUIRE(sh("synth --size tiny --recon train --out " + tmp.file("root")) == 0);
+  REQUIRE(sh("synth --size tiny --recon train --mip --out " + tmp.file("root")) == 0);
   const std::string synth_out = *read_text_file(tmp.file("out.txt"));
   CHECK(synth_out.find("2 scenes, 6 close-up pairs") != std::string::npos);
   CHECK(synth_out.find("(train), 6000 SfM points") != std::string::npos);
@@ -300,17 +300,45 @@ TEST_CASE("macro bench synth, run and report end to end on tiny SynthClose", "[s
     REQUIRE(trained.is_ok());
     CHECK(trained->sh_degree == 3);
     CHECK(trained->size() == info["train"]["gaussians"].get<size_t>());
+    // --mip: the same training in mip mode, with its 3D filter in the file.
+    std::vector<float> filter;
+    auto mip = gs::read_splat_params(dir + "/scene_mip.ply", {}, &filter);
+    REQUIRE(mip.is_ok());
+    CHECK(filter.size() == mip->size());
+    CHECK(info["train_mip"]["gaussians"].get<size_t>() == mip->size());
   }
-  REQUIRE(sh("run --root " + tmp.file("root") + " --methods 3dgs --results " +
+  REQUIRE(sh("run --root " + tmp.file("root") + " --methods 3dgs,mip-splatting --results " +
              tmp.file("r.jsonl")) == 0);
   auto records = read_records(tmp.file("r.jsonl"));
   REQUIRE(records.is_ok());
-  REQUIRE(records->size() == 6);
+  REQUIRE(records->size() == 12);
+  std::map<std::string, double> psnr_3dgs, psnr_mip;
   for (const BenchRecord& r : *records) {
     CHECK(r.ok);
     for (const MetricValue& m : r.metrics)
-      if (m.name == "psnr") CHECK((m.computed && std::isfinite(m.value) && m.value < 40));
+      if (m.name == "psnr") {
+        CHECK((m.computed && std::isfinite(m.value) && m.value < 40));
+        const std::string key = r.scene + "/" + std::to_string(r.pair_index);
+        (r.method == "mip-splatting" ? psnr_mip : psnr_3dgs)[key] = m.value;
+      }
   }
+  REQUIRE(psnr_mip.size() == 6);
+  size_t differ = 0;
+  for (const auto& [key, v] : psnr_mip) differ += std::abs(v - psnr_3dgs.at(key)) > 1e-3;
+  CHECK(differ >= 3);  // another reconstruction, another render mode
+  // A folder without scene_mip.ply: mip-splatting is skipped with the reason.
+  fs::remove(tmp.file("root") + "/synthclose_01/scene_mip.ply");
+  REQUIRE(sh("run --root " + tmp.file("root") + " --methods mip-splatting --results " +
+             tmp.file("r2.jsonl")) == 0);
+  auto skipped = read_records(tmp.file("r2.jsonl"));
+  REQUIRE(skipped.is_ok());
+  size_t n_skipped = 0;
+  for (const BenchRecord& r : *skipped)
+    if (!r.ok) {
+      ++n_skipped;
+      CHECK(r.reason.find("no Mip-Splatting reconstruction") != std::string::npos);
+    }
+  CHECK(n_skipped == 3);
   REQUIRE(sh("report --results " + tmp.file("r.jsonl") + " --out " + tmp.file("report")) == 0);
   const std::string md = *read_text_file(tmp.file("report/table.md"));
   CHECK(md.find("| 3dgs |") != std::string::npos);

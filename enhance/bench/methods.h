@@ -6,6 +6,9 @@
 // Methods of this build (default_method_registry):
 //   3dgs            the raw close-up render (classic rasteriser, black background), quantised to
 //                   8 bits as the released pipeline's PNG round trip
+//   mip-splatting   the same from the scene folder's scene_mip.ply (`macro train --mode mip`:
+//                   Mip-Splatting's 3D filter, folded in by the loader, and its 2D mip filter),
+//                   rendered in mip mode; a folder without it is skipped with the reason
 //   difix           Difix-ref, K = 1 whole reference, no planes, no mask        options precision
 //   macro           MACRO: scale-matched crops, depth-masked attention          K P mask precision
 //                                                                               crop upsampler
@@ -99,5 +102,6 @@ Status register_enhance_bench_methods(MethodRegistry& registry,
 
 // The 3dgs method on its own (tests and other methods reuse the render).
 Result<MethodOutput> run_3dgs_method(const MethodContext& context);
+Result<MethodOutput> run_mip_splatting_method(const MethodContext& context);
 
 }  // namespace macro::enhance

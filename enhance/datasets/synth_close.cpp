@@ -457,7 +457,7 @@ Result<SynthCloseScene> make_scene_retrying(SynthCloseParams& sp) {
 // What the trained reconstruction took (kTrain).
 struct TrainedRecon {
   int steps = 0;
-  size_t gaussians = 0, sfm_points = 0;
+  size_t gaussians = 0, sfm_points = 0, mip_gaussians = 0;
   double seconds = 0;
 };
 
@@ -503,6 +503,11 @@ std::string synthclose_json(const SynthCloseOptions& o, int k, const SynthCloseP
                      {"strategy", "default"},
                      {"gaussians", trained.gaussians},
                      {"log", "train_log.jsonl (its seconds are the only bytes that vary)"}};
+    if (o.train_mip)
+      info["train_mip"] = {{"command", "the same with --mode mip"},
+                           {"ply", "scene_mip.ply"},
+                           {"gaussians", trained.mip_gaussians},
+                           {"log", "train_mip_log.jsonl"}};
   }
   return info.dump(1) + "\n";
 }
@@ -583,6 +588,15 @@ Result<SynthCloseSummary> write_synthclose(const std::string& dir, const SynthCl
       job.log_path = (fs::path(scene_dir) / "train_log.jsonl").string();
       job.progress = o.train_progress;
       MACRO_ASSIGN_OR_RETURN(gs::train::TrainJobResult tr, gs::train::run_train_job(job));
+      if (o.train_mip) {
+        gs::train::TrainJob mip = job;
+        mip.mode = "mip";
+        mip.out_path = (fs::path(scene_dir) / "scene_mip.ply").string();
+        mip.log_path = (fs::path(scene_dir) / "train_mip_log.jsonl").string();
+        MACRO_ASSIGN_OR_RETURN(gs::train::TrainJobResult tm, gs::train::run_train_job(mip));
+        trained.mip_gaussians = tm.gaussians;
+        summary.train_seconds += tm.seconds;
+      }
       trained.steps = job.steps;
       trained.gaussians = tr.gaussians;
       trained.seconds = tr.seconds;

@@ -149,6 +149,9 @@ struct SynthCloseOptions {
   int train_steps = 0;     // 0 = the size's default: tiny 300, demo and full 3000
   size_t sfm_points = 0;   // 0 = the size's default: tiny 3000, demo 10000, full 20000
   bool train_progress = true;  // the trainer's progress line on stderr (also off when quiet())
+  // kTrain: also scene_mip.ply, the same training in mip mode (Mip-Splatting's 3D and 2D
+  // filters; the `mip-splatting` method of bench run renders it).
+  bool train_mip = false;
   int scenes = 0;  // 0 = the size's default: full 10, demo 1, tiny 2
   uint64_t seed = 1;
   bool write_gt_ply = true;  // the demo size never writes it (folder size)
