@@ -87,7 +87,8 @@ TEST_CASE("progressive cameras: nearest matching, snaps and rotation-only gaps",
   CHECK(yaw_deg(s) == Approx(60).margin(1e-9));
   CHECK(s.center().x() == Approx(4.0).margin(1e-12));
   // Two targets move independently; each is named after itself.
-  const auto two = progressive_schedule({a}, {posed("p", {0, 0, 2}, 0), posed("q", {0, 0, -2}, 0)}, 1);
+  const auto two =
+      progressive_schedule({a}, {posed("p", {0, 0, 2}, 0), posed("q", {0, 0, -2}, 0)}, 1);
   REQUIRE(two[0].size() == 2);
   CHECK(two[0][0].name == "p@1");
   CHECK(two[0][0].center().z() == Approx(0.5));

@@ -5,9 +5,9 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
-#include <algorithm>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -31,8 +31,12 @@ inline std::string golden_dir() {
   }
   return source_dir() + "/../shared/golden";
 }
-inline std::string shared_dir() { return golden_dir() + "/.."; }
-inline std::string macro_exe() { return binary_dir() + "/macro"; }
+inline std::string shared_dir() {
+  return golden_dir() + "/..";
+}
+inline std::string macro_exe() {
+  return binary_dir() + "/macro";
+}
 
 // A fresh empty folder under the build tree, removed when the object dies.
 struct TempDir {
@@ -40,8 +44,8 @@ struct TempDir {
   explicit TempDir(const std::string& tag) {
     namespace fs = std::filesystem;
     static int counter = 0;
-    path = binary_dir() + "/test-tmp/" + tag + "-" + std::to_string(::getpid()) +
-           "-" + std::to_string(counter++);
+    path = binary_dir() + "/test-tmp/" + tag + "-" + std::to_string(::getpid()) + "-" +
+           std::to_string(counter++);
     fs::remove_all(path);
     fs::create_directories(path);
   }

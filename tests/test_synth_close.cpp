@@ -1,6 +1,6 @@
-// SynthClose (enhance/datasets/synth_close.h): determinism, the merge, the reconstruction against the GT
-// photographs (close at the training views, blurrier up close), the folder as the harness reads
-// it, an end-to-end `macro bench synth | run | report`, and the committed demo scene.
+// SynthClose (enhance/datasets/synth_close.h): determinism, the merge, the reconstruction against
+// the GT photographs (close at the training views, blurrier up close), the folder as the harness
+// reads it, an end-to-end `macro bench synth | run | report`, and the committed demo scene.
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
@@ -10,18 +10,18 @@
 #include <set>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
 #include "attention/runtime/file_io.h"
 #include "enhance/bench/bench_harness.h"
-#include "enhance/metrics/metrics.h"
-#include "enhance/scene_input.h"
 #include "enhance/datasets/synth_close.h"
 #include "enhance/datasets/synth_sfm.h"
+#include "enhance/metrics/metrics.h"
+#include "enhance/scene_input.h"
 #include "gs/cameras/colmap_points.h"
-#include "gs/image_io.h"
-#include "gs/raster/rasterizer.h"
 #include "gs/formats/scene_io.h"
 #include "gs/formats/splat_params.h"
-#include <nlohmann/json.hpp>
+#include "gs/image_io.h"
+#include "gs/raster/rasterizer.h"
 #include "tests/test_support.h"
 
 namespace macro {
@@ -196,9 +196,10 @@ TEST_CASE("synthclose: moment-matched merge of a cluster", "[synthclose]") {
   CHECK(t[2] == Approx(0.03));
 }
 
-TEST_CASE("synthclose: the merged reconstruction matches the photos far away and is blurrier up "
-          "close",
-          "[synthclose]") {
+TEST_CASE(
+    "synthclose: the merged reconstruction matches the photos far away and is blurrier up "
+    "close",
+    "[synthclose]") {
   test::TempDir d("synthclose");
   SynthCloseOptions o;
   o.size = SynthCloseSize::kTiny;

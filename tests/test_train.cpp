@@ -333,33 +333,16 @@ double loss_of(const SplatParams& p, const TrainView& view, ThreadPool& pool) {
 
 TEST_CASE("train: gradients agree with central differences for every parameter kind", "[train]") {
   ThreadPool pool(1);
-  // The double reference ("scalar") and each float table this machine has (AVX512-BF16 and AMX
-  // machines run the AVX-512 one), against central differences of the double loss.
-  std::vector<std::pair<std::string, Isa>> paths = {{"scalar", Isa::kScalar}};
-  std::vector<const TrainKernels*> seen;
-  for (Isa isa : test::supported_isas()) {
-    const TrainKernels* k = train_kernels_for(isa);
-    if (k == nullptr || std::find(seen.begin(), seen.end(), k) != seen.end()) continue;
-    seen.push_back(k);
-    paths.push_back({k->name, isa});
-  }
+  // The double reference and every float table, against central differences of the double loss.
+  const auto paths = test::train_gradient_paths();
   for (int degree : {3, 0}) {
     INFO("SH degree " << degree);
     RandomCase rc = random_case(7 + uint32_t(degree), 14, degree, 32, 24);
-    struct Kind {
-      const char* name;
-      std::vector<float> SplatParams::*field;
-      std::vector<float> SplatGrads::*grad;
-    };
-    std::vector<Kind> kinds = {{"means", &SplatParams::means, &SplatGrads::means},
-                               {"scales", &SplatParams::scales, &SplatGrads::scales},
-                               {"quats", &SplatParams::quats, &SplatGrads::quats},
-                               {"opacities", &SplatParams::opacities, &SplatGrads::opacities},
-                               {"sh0", &SplatParams::sh0, &SplatGrads::sh0}};
-    if (degree > 0) kinds.push_back({"shN", &SplatParams::shN, &SplatGrads::shN});
+    const std::vector<test::ParamKind> kinds = test::param_kinds(degree);
     const auto loss = [&](const SplatParams& p) { return loss_of(p, rc.view, pool); };
     std::vector<std::vector<std::array<double, 2>>> est;
-    for (const Kind& k : kinds) est.push_back(test::fd_estimates(rc.params, k.field, loss));
+    for (const test::ParamKind& k : kinds)
+      est.push_back(test::fd_estimates(rc.params, k.field, loss));
     for (const auto& [path, isa] : paths) {
       INFO("path " << path);
       test::IsaGuard restore;
@@ -662,8 +645,8 @@ TEST_CASE("train: absgrad is the sum over pixels of the absolute per-pixel 2D-me
   DiffImage img;
   REQUIRE(r.forward(rc.params, rc.view.camera, o, &img, pool).is_ok());
   std::vector<double> v_color;
-  REQUIRE(photometric_loss(img.color.data(), rc.view.target.data(), img.width, img.height,
-                           &v_color, pool)
+  REQUIRE(photometric_loss(img.color.data(), rc.view.target.data(), img.width, img.height, &v_color,
+                           pool)
               .is_ok());
   SplatGrads full;
   r.backward(rc.params, v_color.data(), nullptr, &full, pool);
@@ -712,8 +695,8 @@ TEST_CASE("train: absgrad is the sum over pixels of the absolute per-pixel 2D-me
     CHECK(d.rel_l2 <= 1e-4);
     StepGradient plain_sg(Precision::kFloat);
     SplatGrads pg;
-    REQUIRE(plain_sg.compute(rc.params, rc.view.camera, rc.view.target.data(), {}, &pg, pool)
-                .is_ok());
+    REQUIRE(
+        plain_sg.compute(rc.params, rc.view.camera, rc.view.target.data(), {}, &pg, pool).is_ok());
     CHECK(pg.means2d_abs.empty());
     CHECK(pg.means2d == fg.means2d);  // absgrad changes nothing else
     CHECK(pg.means == fg.means);

@@ -229,8 +229,8 @@ TEST_CASE("train fast: every Adam path gives the scalar twin's bits", "[train][t
     g[i] = float(1e-3 * nd(rng));
     p[i] = float(nd(rng));
   }
-  const AdamCoefficients c{0.1f, 0.999f, 0.001f, float(1.6e-4 / 0.19),
-                           float(std::sqrt(1 - 0.999 * 0.999)), 1e-15f};
+  const AdamCoefficients c{
+      0.1f, 0.999f, 0.001f, float(1.6e-4 / 0.19), float(std::sqrt(1 - 0.999 * 0.999)), 1e-15f};
   std::vector<float> m0 = m, v0 = v;
   std::vector<float> p0 = p;
   adam_rows_scalar(m0.data(), v0.data(), g.data(), p0.data(), n, c);

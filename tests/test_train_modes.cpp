@@ -13,6 +13,7 @@
 #include <string>
 
 #include "gs/cameras/camera.h"
+#include "gs/formats/scene_io.h"
 #include "gs/formats/splat_params.h"
 #include "gs/raster/rasterizer.h"
 #include "gs/train/diff_project.h"
@@ -21,7 +22,6 @@
 #include "gs/train/step_gradient.h"
 #include "gs/train/train_kernels.h"
 #include "gs/train/trainer.h"
-#include "gs/formats/scene_io.h"
 #include "test_support.h"
 #include "tests/cli_run.h"
 #include "train_fd.h"
@@ -149,38 +149,20 @@ TEST_CASE("train modes: the forward is gs::render's in the same mode", "[train]"
 TEST_CASE("train modes: gradients agree with central differences for every parameter kind",
           "[train]") {
   ThreadPool pool(1);
-  // The double reference ("scalar") and every float path this machine has (its own projection,
-  // blend and loss kernels), each against the central differences of the double loss.
-  // (AVX512-BF16 and AMX machines run the AVX-512 table: each table once.)
-  std::vector<std::pair<std::string, Isa>> paths = {{"scalar", Isa::kScalar}};
-  std::vector<const TrainKernels*> seen;
-  for (Isa isa : test::supported_isas()) {
-    const TrainKernels* k = train_kernels_for(isa);
-    if (k == nullptr || std::find(seen.begin(), seen.end(), k) != seen.end()) continue;
-    seen.push_back(k);
-    paths.push_back({k->name, isa});
-  }
+  // The double reference and every float table, against central differences of the double loss.
+  const auto paths = test::train_gradient_paths();
   int means2d_skipped = 0;
   for (RasterMode mode : {RasterMode::kAntialiased, RasterMode::kMip}) {
     for (int degree : {3, 0}) {
       INFO(mode_name(mode) << ", SH degree " << degree);
       ModeCase mc = mode_case(31 + uint32_t(degree), 14, degree, 32, 24);
-      struct Kind {
-        const char* name;
-        std::vector<float> SplatParams::*field;
-        std::vector<float> SplatGrads::*grad;
-      };
-      std::vector<Kind> kinds = {{"means", &SplatParams::means, &SplatGrads::means},
-                                 {"scales", &SplatParams::scales, &SplatGrads::scales},
-                                 {"quats", &SplatParams::quats, &SplatGrads::quats},
-                                 {"opacities", &SplatParams::opacities, &SplatGrads::opacities},
-                                 {"sh0", &SplatParams::sh0, &SplatGrads::sh0}};
-      if (degree > 0) kinds.push_back({"shN", &SplatParams::shN, &SplatGrads::shN});
+      const std::vector<test::ParamKind> kinds = test::param_kinds(degree);
       std::vector<std::vector<std::array<double, 2>>> est;
       const auto loss = [&](const SplatParams& p) {
         return loss_at(p, mc.view.camera, mc, mode, pool);
       };
-      for (const Kind& k : kinds) est.push_back(test::fd_estimates(mc.params, k.field, loss));
+      for (const test::ParamKind& k : kinds)
+        est.push_back(test::fd_estimates(mc.params, k.field, loss));
 
       // means2d: moving the principal point by h moves every projected mean by h (no Gaussian
       // here is beyond the clamp limits, which also move with cx, cy), so dL/dcx = sum of the u
@@ -204,8 +186,8 @@ TEST_CASE("train modes: gradients agree with central differences for every param
         const Precision precision = isa == Isa::kScalar ? Precision::kDouble : Precision::kFloat;
         StepGradient sg(precision);
         SplatGrads g;
-        REQUIRE(sg.compute(mc.params, mc.view.camera, mc.view.target.data(),
-                           options_for(mode, mc), &g, pool)
+        REQUIRE(sg.compute(mc.params, mc.view.camera, mc.view.target.data(), options_for(mode, mc),
+                           &g, pool)
                     .is_ok());
         if (isa != Isa::kScalar) REQUIRE(std::string(sg.path_name()) == path);
         double worst = 0;
@@ -277,12 +259,12 @@ TEST_CASE("train modes: a mip-mode run writes filter_3D, which loaders fold and 
     return;
   }
   test::TempDir tmp("train-mip-ply");
-  const std::string base = "train --images " + g + "/images --cameras " + g +
-                           "/cameras.json --steps 3 --strategy none --lr-schedule constant"
-                           " --view-order sequential --sh-degree-interval 0 --scene-scale 1 --quiet";
-  REQUIRE(test::run_macro(base + " --init " + g + "/init.ply --mode mip --out " +
-                              tmp.file("mip.ply"),
-                          tmp)
+  const std::string base =
+      "train --images " + g + "/images --cameras " + g +
+      "/cameras.json --steps 3 --strategy none --lr-schedule constant"
+      " --view-order sequential --sh-degree-interval 0 --scene-scale 1 --quiet";
+  REQUIRE(test::run_macro(
+              base + " --init " + g + "/init.ply --mode mip --out " + tmp.file("mip.ply"), tmp)
               .rc == 0);
   // The filter is the trained Gaussians' 3D filter from the training cameras.
   std::vector<float> filter;
@@ -296,8 +278,7 @@ TEST_CASE("train modes: a mip-mode run writes filter_3D, which loaders fold and 
   auto refused = read_splat_params(tmp.file("mip.ply"));
   REQUIRE_FALSE(refused.is_ok());
   CHECK(refused.status().message().find("filter_3D") != std::string::npos);
-  REQUIRE(test::run_macro(base + " --init " + g + "/init.ply --out " + tmp.file("classic.ply"),
-                          tmp)
+  REQUIRE(test::run_macro(base + " --init " + g + "/init.ply --out " + tmp.file("classic.ply"), tmp)
               .rc == 0);
   std::vector<float> none = {1.f};
   REQUIRE(read_splat_params(tmp.file("classic.ply"), {}, &none).is_ok());
@@ -307,13 +288,13 @@ TEST_CASE("train modes: a mip-mode run writes filter_3D, which loaders fold and 
   REQUIRE(cloud.is_ok());
   const GaussianCloud raw = to_cloud(*p);
   for (size_t i = 0; i < p->size(); ++i)
-    CHECK(cloud->scale[3 * i] == Approx(std::sqrt(raw.scale[3 * i] * raw.scale[3 * i] +
-                                                  filter[i] * filter[i]))
-                                     .epsilon(1e-5));
+    CHECK(cloud->scale[3 * i] ==
+          Approx(std::sqrt(raw.scale[3 * i] * raw.scale[3 * i] + filter[i] * filter[i]))
+              .epsilon(1e-5));
   // Fine-tuning from it: accepted in mip mode, refused (naming the property) otherwise.
-  CHECK(test::run_macro(base + " --init " + tmp.file("mip.ply") + " --mode mip --out " +
-                            tmp.file("again.ply"),
-                        tmp)
+  CHECK(test::run_macro(
+            base + " --init " + tmp.file("mip.ply") + " --mode mip --out " + tmp.file("again.ply"),
+            tmp)
             .rc == 0);
   const auto bad =
       test::run_macro(base + " --init " + tmp.file("mip.ply") + " --out " + tmp.file("x.ply"), tmp);

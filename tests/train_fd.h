@@ -9,9 +9,15 @@
 #include <array>
 #include <cmath>
 #include <functional>
+#include <string>
+#include <utility>
 #include <vector>
 
+#include "attention/runtime/cpu.h"
 #include "gs/formats/splat_params.h"
+#include "gs/train/diff_render.h"
+#include "gs/train/train_kernels.h"
+#include "tests/test_support.h"
 
 namespace macro::test {
 
@@ -66,6 +72,38 @@ inline double check_fd(const std::vector<float>& analytic,
   CHECK(skipped * 10 <= est.size());
   CHECK(nonzero * 2 >= checked);
   return worst;
+}
+
+// The gradient paths to check: the double reference ("scalar") and each float table this
+// machine has (AVX512-BF16 and AMX machines run the AVX-512 one: each table once).
+inline std::vector<std::pair<std::string, Isa>> train_gradient_paths() {
+  std::vector<std::pair<std::string, Isa>> paths = {{"scalar", Isa::kScalar}};
+  std::vector<const gs::train::TrainKernels*> seen;
+  for (Isa isa : supported_isas()) {
+    const gs::train::TrainKernels* k = gs::train::train_kernels_for(isa);
+    if (k == nullptr || std::find(seen.begin(), seen.end(), k) != seen.end()) continue;
+    seen.push_back(k);
+    paths.push_back({k->name, isa});
+  }
+  return paths;
+}
+
+// Every parameter kind with its gradient (shN only above SH degree 0).
+struct ParamKind {
+  const char* name;
+  std::vector<float> gs::SplatParams::*field;
+  std::vector<float> gs::train::SplatGrads::*grad;
+};
+inline std::vector<ParamKind> param_kinds(int degree) {
+  using gs::SplatParams;
+  using gs::train::SplatGrads;
+  std::vector<ParamKind> kinds = {{"means", &SplatParams::means, &SplatGrads::means},
+                                  {"scales", &SplatParams::scales, &SplatGrads::scales},
+                                  {"quats", &SplatParams::quats, &SplatGrads::quats},
+                                  {"opacities", &SplatParams::opacities, &SplatGrads::opacities},
+                                  {"sh0", &SplatParams::sh0, &SplatGrads::sh0}};
+  if (degree > 0) kinds.push_back({"shN", &SplatParams::shN, &SplatGrads::shN});
+  return kinds;
 }
 
 }  // namespace macro::test

@@ -71,7 +71,8 @@ gs::Camera shift_pose(const gs::Camera& from, const gs::Camera& target, double s
   } else {
     c = cs + step * dt / gap;
     if ((c - ct).norm() <= step) c = ct;
-    const Eigen::Vector4d q = slerp(c2w_quaternion(from), c2w_quaternion(target), std::min(step / gap, 1.0));
+    const Eigen::Vector4d q =
+        slerp(c2w_quaternion(from), c2w_quaternion(target), std::min(step / gap, 1.0));
     Rc = Eigen::Quaterniond(q(0), q(1), q(2), q(3)).toRotationMatrix();
   }
   out.R = Rc.transpose();

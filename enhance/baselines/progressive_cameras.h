@@ -8,10 +8,10 @@
 //                    angle between the rotations (radians; metres and radians simply added)
 //   nearest(target, poses) = argmin distance (first on ties), each target on its own
 //   shift(S, T, step): if distance(S, T) <= step, T itself. Else the centre moves `step` along the
-//                    straight line to T's (to T's if at most `step` would be left, or if the centres
-//                    coincide within 1e-6); the rotation is slerp(q_S, q_T, min(step / |c_T - c_S|,
-//                    1)) (q_T itself when the centres coincide) - so the rotation advances with the
-//                    translation, and a rotation-only gap snaps at once.
+//                    straight line to T's (to T's if at most `step` would be left, or if the
+//                    centres coincide within 1e-6); the rotation is slerp(q_S, q_T, min(step / |c_T
+//                    - c_S|, 1)) (q_T itself when the centres coincide) - so the rotation advances
+//                    with the translation, and a rotation-only gap snaps at once.
 // Intrinsics and size of the novel camera: `intrinsics` (Difix3D: the first training camera's).
 //
 // A round: targets[i] moves from current[nearest(targets[i], current)], where current is every

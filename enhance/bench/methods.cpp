@@ -63,8 +63,9 @@ Result<MethodOutput> run_mip_splatting_method(const MethodContext& context) {
   namespace fs = std::filesystem;
   const std::string path = (fs::path(context.pair.scene_dir) / "scene_mip.ply").string();
   if (!fs::is_regular_file(path))
-    return Status::error(path + ": no Mip-Splatting reconstruction (train one with macro train "
-                                "--mode mip, or macro bench synth --mip)");
+    return Status::error(path +
+                         ": no Mip-Splatting reconstruction (train one with macro train "
+                         "--mode mip, or macro bench synth --mip)");
   const auto t0 = std::chrono::steady_clock::now();
   MACRO_ASSIGN_OR_RETURN(gs::GaussianCloud cloud, gs::load_scene(path));
   if (!cloud.mip_filter_3d_applied)
@@ -205,8 +206,10 @@ Status register_enhance_bench_methods(MethodRegistry& registry,
 MethodRegistry default_method_registry(const BenchMethodSettings& settings) {
   MethodRegistry r;
   MACRO_CHECK(r.add({"3dgs", "the raw 3DGS close-up render", {}, run_3dgs_method}).is_ok());
-  MACRO_CHECK(r.add({"mip-splatting", "the close-up render of the Mip-Splatting reconstruction",
-                     {}, run_mip_splatting_method})
+  MACRO_CHECK(r.add({"mip-splatting",
+                     "the close-up render of the Mip-Splatting reconstruction",
+                     {},
+                     run_mip_splatting_method})
                   .is_ok());
   const Status s = register_enhance_bench_methods(r, settings);
   MACRO_CHECK(s.is_ok());

@@ -14,9 +14,9 @@
 #include "enhance/datasets/synth_scene_folder.h"
 #include "enhance/datasets/synth_sfm.h"
 #include "gs/cameras/camera.h"
-#include "gs/train/train_job.h"
 #include "gs/formats/scene_io.h"
 #include "gs/synth/synth_random.h"
+#include "gs/train/train_job.h"
 
 namespace macro::enhance {
 namespace {
@@ -496,9 +496,10 @@ std::string synthclose_json(const SynthCloseOptions& o, int k, const SynthCloseP
   info["sfm_points"] = trained.sfm_points;
   if (o.recon == SynthCloseRecon::kTrain) {
     info["merged_ply"] = "scene_merged.ply";
-    info["train"] = {{"command", "macro train --scene-dir <this folder> --init sfm --test-every 0 "
-                                 "--steps " +
-                                     std::to_string(trained.steps)},
+    info["train"] = {{"command",
+                      "macro train --scene-dir <this folder> --init sfm --test-every 0 "
+                      "--steps " +
+                          std::to_string(trained.steps)},
                      {"steps", trained.steps},
                      {"strategy", "default"},
                      {"gaussians", trained.gaussians},
@@ -564,7 +565,7 @@ Result<SynthCloseSummary> write_synthclose(const std::string& dir, const SynthCl
       const std::string sparse = (fs::path(scene_dir) / "sparse" / "0").string();
       MACRO_ASSIGN_OR_RETURN(gs::CameraSet cams, gs::load_cameras(sparse));
       SynthSfmOptions so;
-      so.points = o.sfm_points > 0 ? o.sfm_points
+      so.points = o.sfm_points > 0                  ? o.sfm_points
                   : o.size == SynthCloseSize::kTiny ? 3000
                   : demo                            ? 10000
                                                     : 20000;

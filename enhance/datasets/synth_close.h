@@ -1,8 +1,8 @@
 // SynthClose: a synthetic close-up benchmark with exact ground truth (`macro bench synth`).
 //
-// Each scene is a gs/synth/synth.h layout (textured planes at three depths, a background plane, spheres
-// and rods on even scenes, a training rig and close-ups zoomed 1.5x-6x onto the planes) with two
-// Gaussian clouds:
+// Each scene is a gs/synth/synth.h layout (textured planes at three depths, a background plane,
+// spheres and rods on even scenes, a training rig and close-ups zoomed 1.5x-6x onto the planes)
+// with two Gaussian clouds:
 //   - the ground truth (GT): the planes re-sampled densely, with a fine texture layer (grain,
 //     hatching, scratches, specks at 0.1-1 training pixel) on top of gs/synth's texture. The
 //     sampling spacing of each 2 cm tile follows the finest view that sees it (train_spacing_px
@@ -17,8 +17,8 @@
 //     in the plane's (u, v); spheres and rods: cubic voxels), each moment-matched (merge_clusters).
 //     It renders close to the photos at the training views and blurry up close.
 //
-// Scene folder (the DL3DV-Closeup layout enhance/datasets/synth_scene_folder.h writes; `macro bench run`
-// renders scene.ply, which enhance/scene_input.h find_scene_ply takes before any other .ply):
+// Scene folder (the DL3DV-Closeup layout enhance/datasets/synth_scene_folder.h writes; `macro bench
+// run` renders scene.ply, which enhance/scene_input.h find_scene_ply takes before any other .ply):
 //   images/, closeup_gt/, sparse/0/, split.json (depth_ratio = the zoom), geometry.json (Gaussian
 //   ranges in scene.ply order), scene.ply (reconstruction), gt.ply (GT; omitted for the demo size),
 //   synthclose.json (generator parameters and counts).
@@ -146,8 +146,8 @@ const char* synthclose_recon_name(SynthCloseRecon recon);
 struct SynthCloseOptions {
   SynthCloseSize size = SynthCloseSize::kFull;
   SynthCloseRecon recon = SynthCloseRecon::kTrain;
-  int train_steps = 0;     // 0 = the size's default: tiny 300, demo and full 3000
-  size_t sfm_points = 0;   // 0 = the size's default: tiny 3000, demo 10000, full 20000
+  int train_steps = 0;         // 0 = the size's default: tiny 300, demo and full 3000
+  size_t sfm_points = 0;       // 0 = the size's default: tiny 3000, demo 10000, full 20000
   bool train_progress = true;  // the trainer's progress line on stderr (also off when quiet())
   // kTrain: also scene_mip.ply, the same training in mip mode (Mip-Splatting's 3D and 2D
   // filters; the `mip-splatting` method of bench run renders it).

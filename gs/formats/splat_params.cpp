@@ -163,7 +163,8 @@ Result<SplatParams> read_splat_params(const std::string& path, const LoadLimits&
   return decode_splat_params(bytes.data(), bytes.size(), path, limits, filter_3d);
 }
 
-std::vector<uint8_t> encode_splat_params(const SplatParams& p, const std::vector<float>* filter_3d) {
+std::vector<uint8_t> encode_splat_params(const SplatParams& p,
+                                         const std::vector<float>* filter_3d) {
   const size_t N = p.size();
   const size_t R = size_t(p.sh_rest());
   const bool with_filter = filter_3d != nullptr;

@@ -33,7 +33,7 @@ void adam_update(std::vector<float>& m, std::vector<float>& v, const std::vector
                  std::vector<float>& p, double lr, const AdamOptions& o, int t, ThreadPool& pool) {
   MACRO_CHECK(g.size() == p.size() && m.size() == p.size() && v.size() == p.size());
   const double bias1 = 1 - std::pow(o.beta1, t), bias2 = 1 - std::pow(o.beta2, t);
-  const AdamCoefficients c{float(1 - o.beta1), float(o.beta2),           float(1 - o.beta2),
+  const AdamCoefficients c{float(1 - o.beta1), float(o.beta2),          float(1 - o.beta2),
                            float(lr / bias1),  float(std::sqrt(bias2)), float(o.eps)};
   const AdamRowsFn rows = adam_rows_for(active_isa());
   pool.parallel_for(

@@ -41,8 +41,8 @@ void adam_rows_avx512(float* m, float* v, const float* g, float* p, size_t n,
     _mm512_storeu_ps(v + i, vi);
     const __m512 denom =
         add(_mm512_div_round_ps(_mm512_sqrt_round_ps(vi, kRound), bs, kRound), eps);
-    const __m512 out = add(_mm512_loadu_ps(p + i),
-                           _mm512_div_round_ps(mul(neg_step, mi), denom, kRound));
+    const __m512 out =
+        add(_mm512_loadu_ps(p + i), _mm512_div_round_ps(mul(neg_step, mi), denom, kRound));
     _mm512_storeu_ps(p + i, out);
   }
   if (i < n) adam_rows_scalar(m + i, v + i, g + i, p + i, n - i, c);

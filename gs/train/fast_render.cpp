@@ -170,25 +170,25 @@ Status FastRenderer::forward(const SplatParams& params, const Camera& camera,
   s.depth_key.assign(n, 0);
   s.visible.assign(n, 0);
   const ProjectInput pin = project_input(params, s.cam, s.ps);
-  pool.parallel_for(
-      (n + kLanes - 1) / kLanes,
-      [&](size_t b, size_t e, int) {
-        for (size_t blk = b; blk < e; ++blk) {
-          const size_t g0 = blk * kLanes;
-          const int cnt = int(std::min<size_t>(kLanes, n - g0));
-          kernels.project_forward(pin, g0, cnt, &s.splats[g0], &s.visible[g0]);
-          for (int i = 0; i < cnt; ++i) {
-            if (!s.visible[g0 + size_t(i)]) continue;
-            const TileSplat& t = s.splats[g0 + size_t(i)];
-            uint32_t c = 0;
-            raster::for_each_tile(t, s.camf, raster::TileRule::kEllipse, [&](int, int) { ++c; });
-            if (c == 0) continue;
-            std::memcpy(&s.depth_key[g0 + size_t(i)], &t.z, sizeof t.z);
-            s.tiles[g0 + size_t(i)] = c;
-          }
-        }
-      },
-      16);
+  pool.parallel_for((n + kLanes - 1) / kLanes,
+                    [&](size_t b, size_t e, int) {
+                      for (size_t blk = b; blk < e; ++blk) {
+                        const size_t g0 = blk * kLanes;
+                        const int cnt = int(std::min<size_t>(kLanes, n - g0));
+                        kernels.project_forward(pin, g0, cnt, &s.splats[g0], &s.visible[g0]);
+                        for (int i = 0; i < cnt; ++i) {
+                          if (!s.visible[g0 + size_t(i)]) continue;
+                          const TileSplat& t = s.splats[g0 + size_t(i)];
+                          uint32_t c = 0;
+                          raster::for_each_tile(t, s.camf, raster::TileRule::kEllipse,
+                                                [&](int, int) { ++c; });
+                          if (c == 0) continue;
+                          std::memcpy(&s.depth_key[g0 + size_t(i)], &t.z, sizeof t.z);
+                          s.tiles[g0 + size_t(i)] = c;
+                        }
+                      }
+                    },
+                    16);
   uint64_t pairs = 0;
   size_t visible = 0, binned = 0;
   for (size_t g = 0; g < n; ++g) {
@@ -329,8 +329,7 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
           uint32_t walked = 0;  // pairs any pixel of the tile walked
           for (int r = 0; r < kTile; ++r) walked = std::max(walked, row_last[r]);
           float* tile_grad = s.pair_grad.data() + size_t(begin) * PW;
-          std::fill(tile_grad, s.pair_grad.data() + size_t(s.bins.tile_start[t + 1]) * PW,
-                    0.f);
+          std::fill(tile_grad, s.pair_grad.data() + size_t(s.bins.tile_start[t + 1]) * PW, 0.f);
           if (walked == 0) continue;
           const uint32_t batches = (walked + kBlendBatch - 1) / kBlendBatch;
           for (uint32_t bi = batches; bi-- > 0;) {
@@ -413,28 +412,28 @@ void FastRenderer::backward(const SplatParams& params, const float* v_color, con
   const ProjectInput pin = project_input(params, s.cam, s.ps);
   const ProjectGradOut out{grads->means.data(),     grads->scales.data(), grads->quats.data(),
                            grads->opacities.data(), grads->sh0.data(),    grads->shN.data()};
-  pool.parallel_for(
-      (s.n + kLanes - 1) / kLanes,
-      [&](size_t b, size_t e, int) {
-        for (size_t blk = b; blk < e; ++blk) {
-          const size_t g0 = blk * kLanes;
-          const int cnt = int(std::min<size_t>(kLanes, s.n - g0));
-          uint8_t has_pairs[kLanes];
-          for (int i = 0; i < cnt; ++i) {
-            const size_t g = g0 + size_t(i);
-            has_pairs[i] = s.pairs_start[g] != s.pairs_start[g + 1];
-            const double* sum = &s.gaussian_grad[g * PW];
-            grads->means2d[2 * g] = has_pairs[i] ? float(sum[6]) : 0.f;
-            grads->means2d[2 * g + 1] = has_pairs[i] ? float(sum[7]) : 0.f;
-            if (PW > size_t(kPairGrad)) {
-              grads->means2d_abs[2 * g] = has_pairs[i] ? float(sum[9]) : 0.f;
-              grads->means2d_abs[2 * g + 1] = has_pairs[i] ? float(sum[10]) : 0.f;
-            }
-          }
-          kernels.project_backward(pin, g0, cnt, &s.gaussian_grad[g0 * PW], PW, has_pairs, out);
-        }
-      },
-      16);
+  pool.parallel_for((s.n + kLanes - 1) / kLanes,
+                    [&](size_t b, size_t e, int) {
+                      for (size_t blk = b; blk < e; ++blk) {
+                        const size_t g0 = blk * kLanes;
+                        const int cnt = int(std::min<size_t>(kLanes, s.n - g0));
+                        uint8_t has_pairs[kLanes];
+                        for (int i = 0; i < cnt; ++i) {
+                          const size_t g = g0 + size_t(i);
+                          has_pairs[i] = s.pairs_start[g] != s.pairs_start[g + 1];
+                          const double* sum = &s.gaussian_grad[g * PW];
+                          grads->means2d[2 * g] = has_pairs[i] ? float(sum[6]) : 0.f;
+                          grads->means2d[2 * g + 1] = has_pairs[i] ? float(sum[7]) : 0.f;
+                          if (PW > size_t(kPairGrad)) {
+                            grads->means2d_abs[2 * g] = has_pairs[i] ? float(sum[9]) : 0.f;
+                            grads->means2d_abs[2 * g + 1] = has_pairs[i] ? float(sum[10]) : 0.f;
+                          }
+                        }
+                        kernels.project_backward(pin, g0, cnt, &s.gaussian_grad[g0 * PW], PW,
+                                                 has_pairs, out);
+                      }
+                    },
+                    16);
   s.times.project_backward = t0.lap();
 }
 

@@ -21,6 +21,8 @@
 #include <algorithm>
 #include <cstring>
 
+#include "gs/train/train_blend_lanes.h"  // the 16-lane vectors and their helpers
+
 namespace macro::gs::train {
 namespace {
 
@@ -334,7 +336,8 @@ void project_backward_lanes(const ProjectInput& in, size_t g0, int n, const doub
   uint32_t live = bits_of(ok);
   vf up[kPairGrad];
   for (int c = 0; c < kPairGrad; ++c)
-    for (int l = 0; l < L; ++l) up[c][l] = l < n ? float(sums[size_t(l) * stride + size_t(c)]) : 0.f;
+    for (int l = 0; l < L; ++l)
+      up[c][l] = l < n ? float(sums[size_t(l) * stride + size_t(c)]) : 0.f;
   for (int l = 0; l < n; ++l)
     if (!has_pairs[l]) live &= ~(1u << l);
   const vf* up_rgb = up;
@@ -362,7 +365,8 @@ void project_backward_lanes(const ProjectInput& in, size_t g0, int n, const doub
     sh_basis_lanes(in.sh_degree, f.dir[0], f.dir[1], f.dir[2], b, db);
     vf v_d[3] = {};
     for (int k = 1; k < f.K; ++k) {
-      const vf vb = v_raw[0] * f.sh[k - 1][0] + v_raw[1] * f.sh[k - 1][1] + v_raw[2] * f.sh[k - 1][2];
+      const vf vb =
+          v_raw[0] * f.sh[k - 1][0] + v_raw[1] * f.sh[k - 1][1] + v_raw[2] * f.sh[k - 1][2];
       for (int a = 0; a < 3; ++a) v_d[a] += vb * db[k][a];
     }
     const vi has_dir = f.dir_norm > 0.f;

@@ -198,14 +198,14 @@ void blend_backward_row_lanes(const raster::TileSplat* splats, const uint32_t* i
     const float dy = s.y - py;
     const vf dxs = h.dx * v_sigma;
     vf g[kPairGradAbs] = {pick(ok, w * vr),
-                             pick(ok, w * vg),
-                             pick(ok, w * vb),
-                             0.5f * h.dx * dxs,
-                             dy * dxs,
-                             (0.5f * dy * dy) * v_sigma,
-                             s.a * dxs + (s.b * dy) * v_sigma,
-                             s.b * dxs + (s.c * dy) * v_sigma,
-                             pick(live, h.vis * v_alpha)};
+                          pick(ok, w * vg),
+                          pick(ok, w * vb),
+                          0.5f * h.dx * dxs,
+                          dy * dxs,
+                          (0.5f * dy * dy) * v_sigma,
+                          s.a * dxs + (s.b * dy) * v_sigma,
+                          s.b * dxs + (s.c * dy) * v_sigma,
+                          pick(live, h.vis * v_alpha)};
     if (width > kPairGrad) {  // absgrad: |per-pixel mean gradient| (sign bit cleared)
       vi bx, by;
       std::memcpy(&bx, &g[6], sizeof bx);

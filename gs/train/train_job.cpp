@@ -233,8 +233,9 @@ Status check_train_settings(const TrainJob& job) {
                          "'");
   if (job.cap_max < 1) return Status::error("--cap-max: expected >= 1, found 0");
   if ((job.absgrad || job.grow_grad2d != 0.0002) && job.strategy != "default")
-    return Status::error("--absgrad / --grow-grad2d: only with --strategy default, found --strategy " +
-                         job.strategy);
+    return Status::error(
+        "--absgrad / --grow-grad2d: only with --strategy default, found --strategy " +
+        job.strategy);
   if (!(job.grow_grad2d > 0) || !std::isfinite(job.grow_grad2d))
     return Status::error("--grow-grad2d: expected a positive number, found " +
                          json_number(job.grow_grad2d));
@@ -296,8 +297,8 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
       // A mip-mode .ply (filter_3D) is accepted in mip mode; the filter is recomputed from the
       // training cameras, as Mip-Splatting does when training starts.
       std::vector<float> file_filter;
-      auto p = read_splat_params(job.init_path, job.limits,
-                                 job.mode == "mip" ? &file_filter : nullptr);
+      auto p =
+          read_splat_params(job.init_path, job.limits, job.mode == "mip" ? &file_filter : nullptr);
       if (!p) return p.status().with_context("--init");
       params = std::move(*p);
     } else {
@@ -320,7 +321,8 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
                  "}\n";
   } else {
     std::vector<float> file_filter;  // recomputed from the cameras (as above)
-    auto p = read_splat_params(job.init_path, job.limits, job.mode == "mip" ? &file_filter : nullptr);
+    auto p =
+        read_splat_params(job.init_path, job.limits, job.mode == "mip" ? &file_filter : nullptr);
     if (!p) return p.status().with_context("--init");
     params = std::move(*p);
     auto cameras = load_cameras(job.cameras_path);

@@ -111,8 +111,8 @@ struct ProjectGradOut {
 using TrainProjectForwardFn = void (*)(const ProjectInput& in, size_t g0, int n,
                                        raster::TileSplat* splats, uint8_t* visible);
 using TrainProjectBackwardFn = void (*)(const ProjectInput& in, size_t g0, int n,
-                                        const double* sums, size_t stride,
-                                        const uint8_t* has_pairs, const ProjectGradOut& out);
+                                        const double* sums, size_t stride, const uint8_t* has_pairs,
+                                        const ProjectGradOut& out);
 
 struct TrainKernels {
   const char* name;

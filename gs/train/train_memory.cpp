@@ -12,7 +12,7 @@ TrainMemory train_memory(size_t gaussians, int sh_degree, size_t largest_view_pi
   TrainMemory m;
   m.gaussians = gaussians;
   const size_t p = param_floats * 4, g = (param_floats + 2) * 4, a = 2 * param_floats * 4;
-  const size_t s = 8 + 4;                   // grad2d (double), count (int32)
+  const size_t s = 8 + 4;  // grad2d (double), count (int32)
   const size_t r = (64 + 4 + 4 + 1 + 4 + 4 + 72) + (64 + 16 + 8 + 4);
   m.parameters = p * gaussians;
   m.gradients = g * gaussians;
@@ -33,9 +33,8 @@ std::string describe(const TrainMemory& m) {
          each(m.adam) + ", strategy " + each(m.strategy) + ", render " + each(m.render) +
          ") = " + format_bytes(uint64_t(m.gaussians) * m.per_gaussian) + ", photos " +
          format_bytes(m.photos) + ", " + std::to_string(m.per_pixel) + " B x " +
-         std::to_string(m.pixels) + " pixels = " +
-         format_bytes(uint64_t(m.pixels) * m.per_pixel) + ", + " +
-         std::to_string(m.per_pair) + " B per (Gaussian, tile) pair";
+         std::to_string(m.pixels) + " pixels = " + format_bytes(uint64_t(m.pixels) * m.per_pixel) +
+         ", + " + std::to_string(m.per_pair) + " B per (Gaussian, tile) pair";
 }
 
 }  // namespace macro::gs::train

@@ -170,8 +170,8 @@ Status train(SplatParams* params, const std::vector<TrainView>& views, const Tra
     if (options.strategy == Strategy::kDefault) {
       auto rep = default_strategy_step(options.default_strategy, step, options.adam.scene_scale,
                                        render.absgrad ? grads.means2d_abs : grads.means2d,
-                                       renderer.visible(), renderer.width(),
-                                       renderer.height(), normal, params, &adam, &strategy_state);
+                                       renderer.visible(), renderer.width(), renderer.height(),
+                                       normal, params, &adam, &strategy_state);
       if (!rep) return rep.status().with_context("step " + std::to_string(step));
       rec.refine = *rep;
     } else if (options.strategy == Strategy::kMcmc) {
