@@ -8,26 +8,39 @@
 #      a captioned side-by-side figure: render | enhanced | ground truth, each with its PSNR/SSIM
 #      against the GT, and two framed regions magnified under each panel (--zoom-inset).
 # Usage: ./demo.sh [close-up]   (closeup.png 1.5x, closeup_01.png 4.5x (default), closeup_02.png 6x)
+#        ./demo.sh buddha [close-up]   the same on real photos (data/scenes/buddha: a 3DGS trained
+#        by macro train from 3 far photos, scored against the real close-up photo; 00006.png
+#        (default), 00049.png, 00055.png)
 # Environment: BUILD_DIR (default build), OUT_DIR (default out).
 set -euo pipefail
 cd "$(dirname "$0")"
 bash .ci/install-deps.sh
 BUILD=${BUILD_DIR:-build}
 OUT=${OUT_DIR:-out}
-FRAME=${1:-closeup_01.png}
+if [ "${1:-}" = buddha ]; then
+  SCENE=data/scenes/buddha
+  SPLAT="$SCENE/scene.spz"
+  FRAME=${2:-00006.png}
+  INSETS=(--zoom-inset 220,20,90,60 --zoom-inset 330,200,80,60)
+  KIND="real photos (AliceVision Buddha, CC BY 4.0), see $SCENE/README.md"
+else
+  SCENE=data/scenes/synthclose
+  SPLAT="$SCENE/scene.ply"
+  FRAME=${1:-closeup_01.png}
+  INSETS=(--zoom-inset 300,150,60,40 --zoom-inset 480,240,50,40)
+  KIND="synthetic SynthClose scene, see $SCENE/README.md"
+fi
 NAME=${FRAME%.png}
-SCENE=data/scenes/synthclose
 cmake -S . -B "$BUILD" -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build "$BUILD" -j"$(nproc)" --target macro
 mkdir -p "$OUT"
 M="$BUILD/macro"
-"$M" render --scene "$SCENE/scene.ply" --cameras "$SCENE/split.json" --camera "$FRAME" \
+"$M" render --scene "$SPLAT" --cameras "$SCENE/split.json" --camera "$FRAME" \
   --out-png "$OUT/$NAME-render.png" --out-exr "$OUT/$NAME-render.exr" \
   --out-depth-png "$OUT/$NAME-invdepth.png"
 "$M" plan --scene-dir "$SCENE" --closeup "$FRAME" --out "$OUT/$NAME-plan.json"
 "$M" enhance --scene-dir "$SCENE" --closeup "$FRAME" --enhancer transfer \
-  --out "$OUT/$NAME-enhanced.png" --side-by-side "$OUT/$NAME-side-by-side.png" \
-  --zoom-inset 300,150,60,40 --zoom-inset 480,240,50,40
+  --out "$OUT/$NAME-enhanced.png" --side-by-side "$OUT/$NAME-side-by-side.png" "${INSETS[@]}"
 echo
 echo "against the ground truth ($SCENE/closeup_gt/$FRAME):"
 for f in render enhanced; do
@@ -36,7 +49,7 @@ for f in render enhanced; do
     --quiet | grep -E '^(psnr|ssim):' | tr '\n' ' ')"
 done
 echo
-echo "scene:        $SCENE (synthetic SynthClose scene, see $SCENE/README.md)"
+echo "scene:        $SCENE ($KIND)"
 echo "render:       $OUT/$NAME-render.png, $OUT/$NAME-render.exr, $OUT/$NAME-invdepth.png"
 echo "plan:         $OUT/$NAME-plan.json"
 echo "enhanced:     $OUT/$NAME-enhanced.png"

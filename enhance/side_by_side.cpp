@@ -75,9 +75,13 @@ Status write_side_by_side(const std::string& path, const std::string& scene_dir,
     MACRO_ASSIGN_OR_RETURN(std::vector<std::string> lines, caption(r.image));
     panels.push_back({&r.image, "enhanced: " + name, lines});
   }
+  // A synthetic scene folder (gs/synth, SynthClose: geometry.json) has an exact, rendered ground
+  // truth; any other folder's closeup_gt/ holds real photos.
+  const bool synthetic = fs::exists(fs::path(scene_dir) / "geometry.json", ec);
   if (have_gt)
-    panels.push_back(
-        {&gt, "ground truth", {"closeup_gt/" + fs::path(closeup).filename().string()}});
+    panels.push_back({&gt,
+                      synthetic ? "ground truth" : "real close-up photo",
+                      {"closeup_gt/" + fs::path(closeup).filename().string()}});
   MACRO_ASSIGN_OR_RETURN(SideBySide fig, compose_side_by_side(panels, o.insets));
   return gs::write_png(path, fig.image).with_context("--side-by-side");
 }

@@ -22,8 +22,10 @@ struct CloseupFigureOptions {
 };
 
 // Writes the figure as an atomic PNG. The GT is SCENE_DIR/closeup_gt/<closeup file name> when
-// it exists (Lanczos-resized to the render size if its size differs); without it the figure has
-// the render and enhanced panels and no metrics. --method 3dgs (nothing enhanced): render | GT.
+// it exists (Lanczos-resized to the render size if its size differs), titled "ground truth" in a
+// synthetic folder (it holds geometry.json) and "real close-up photo" otherwise; without it the
+// figure has the render and enhanced panels and no metrics. --method 3dgs (nothing enhanced):
+// render | GT.
 Status write_side_by_side(const std::string& path, const std::string& scene_dir,
                           const std::string& closeup, const EnhanceResult& result,
                           const CloseupFigureOptions& options = {});
