@@ -17,7 +17,8 @@
 # attention (fp32 and bf16 kernels and their scalar twins), [winograd] the Winograd bf16 conv,
 # [pth] PyTorch checkpoints, [pft] the PFT-SR network, [zip] the zip writer, [undistort] lens
 # undistortion of camera files and images, [view] the viewer's HTTP API (bad requests; the
-# browser test, [browser], stays in the normal run). The networks' golden
+# browser test, [browser], stays in the normal run), [train_fast] the trainer's float kernels (the
+# 16-lane projection and blend with their hand-indexed buffers) against their twin. The networks' golden
 # tests and the end-to-end enhance/bench/render tests stay in the normal run (minutes each under
 # ASan).
 set -euo pipefail
@@ -25,7 +26,7 @@ cd "$(dirname "$0")/.."
 bash .ci/install-deps.sh
 BUILD=${BUILD_DIR:-build-sanitize}
 JOBS=${JOBS:-$(nproc)}
-SUBSET=${SANITIZE_TESTS:-"[formats],[cameras],[image_io],[runtime],[tokenizer],[config],[weights],[fuzz],[bad_inputs],[nn-run],[kernels],[ops],[vit],[mem],[pairs],[composite],[attention],[winograd],[pth],[pft],[zip],[undistort],[view]~[browser]"}
+SUBSET=${SANITIZE_TESTS:-"[formats],[cameras],[image_io],[runtime],[tokenizer],[config],[weights],[fuzz],[bad_inputs],[nn-run],[kernels],[ops],[vit],[mem],[pairs],[composite],[attention],[winograd],[pth],[pft],[zip],[undistort],[view]~[browser],[train_fast]"}
 t0=$(date +%s)
 cmake -S . -B "$BUILD" -DCMAKE_BUILD_TYPE=Release -DMACRO_SANITIZE=ON >/dev/null
 cmake --build "$BUILD" -j"$JOBS" --target macro macro_tests
