@@ -41,20 +41,30 @@ std::vector<std::string> MethodRegistry::names() const {
   return out;
 }
 
+namespace {
+
+// A render as a method's prediction. The released pipeline saves the render as an 8-bit PNG and
+// scores the file: quantise exactly as gs::write_png + gs::read_image would (round half up, then
+// level * (1 / 255)).
+MethodOutput png_round_trip(gs::RenderResult r) {
+  MethodOutput out;
+  out.image = gs::Image(r.width, r.height, 3);
+  out.image.data = std::move(r.color);
+  for (float& v : out.image.data) {
+    const int level = !(v > 0.f) ? 0 : v >= 1.f ? 255 : int(v * 255.f + 0.5f);
+    v = float(level) * (1.f / 255.f);
+  }
+  return out;
+}
+
+}  // namespace
+
 Result<MethodOutput> run_3dgs_method(const MethodContext& context) {
   const auto t0 = std::chrono::steady_clock::now();
   gs::RenderOptions ro;  // classic, black background, SH degree 3 (gsplat's render defaults)
   MACRO_ASSIGN_OR_RETURN(gs::RenderResult r,
                          gs::render(context.inputs.cloud, context.inputs.closeup, ro));
-  MethodOutput out;
-  out.image = gs::Image(r.width, r.height, 3);
-  out.image.data = std::move(r.color);
-  // The released pipeline saves the render as an 8-bit PNG and scores the file: quantise exactly
-  // as gs::write_png + gs::read_image would (round half up, then level * (1 / 255)).
-  for (float& v : out.image.data) {
-    const int level = !(v > 0.f) ? 0 : v >= 1.f ? 255 : int(v * 255.f + 0.5f);
-    v = float(level) * (1.f / 255.f);
-  }
+  MethodOutput out = png_round_trip(std::move(r));
   out.stages.push_back({"render", seconds_since(t0)});
   return out;
 }
@@ -75,13 +85,7 @@ Result<MethodOutput> run_mip_splatting_method(const MethodContext& context) {
   gs::RenderOptions ro;
   ro.mode = gs::RasterMode::kMip;
   MACRO_ASSIGN_OR_RETURN(gs::RenderResult r, gs::render(cloud, context.inputs.closeup, ro));
-  MethodOutput out;
-  out.image = gs::Image(r.width, r.height, 3);
-  out.image.data = std::move(r.color);
-  for (float& v : out.image.data) {  // the PNG round trip, as 3dgs
-    const int level = !(v > 0.f) ? 0 : v >= 1.f ? 255 : int(v * 255.f + 0.5f);
-    v = float(level) * (1.f / 255.f);
-  }
+  MethodOutput out = png_round_trip(std::move(r));
   out.stages.push_back({"load", load_s, false});
   out.stages.push_back({"render", seconds_since(t1)});
   return out;

@@ -10,16 +10,6 @@
 
 namespace macro::enhance {
 
-namespace {
-
-// A standard normal from two uniforms (Box-Muller), from the generator's own stream.
-double normal(gs::synth_random::Rng& rng) {
-  const double u1 = std::max(rng.uniform(), 1e-300), u2 = rng.uniform();
-  return std::sqrt(-2 * std::log(u1)) * std::cos(2 * M_PI * u2);
-}
-
-}  // namespace
-
 Result<gs::ColmapPoints> synth_sfm_points(const gs::GaussianCloud& gt,
                                           const std::vector<gs::Camera>& cameras,
                                           const SynthSfmOptions& o, ThreadPool& pool) {
@@ -73,7 +63,7 @@ Result<gs::ColmapPoints> synth_sfm_points(const gs::GaussianCloud& gt,
     gs::synth_random::Rng noise{(o.seed + 1) * 0x9E3779B97F4A7C15ull ^ (uint64_t(g) << 1)};
     const double sigma = o.noise_px * z_near / fx_near;
     Eigen::Vector3d p = x;
-    for (int a = 0; a < 3; ++a) p(a) += sigma * normal(noise);
+    for (int a = 0; a < 3; ++a) p(a) += sigma * noise.normal();
     out.ids.push_back(int64_t(out.size()) + 1);
     out.xyz.push_back(p);
     for (int c = 0; c < 3; ++c) {

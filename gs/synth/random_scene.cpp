@@ -1,29 +1,18 @@
 // Seeded random splat scenes (see gs/synth/random_scene.h).
 #include "gs/synth/random_scene.h"
 
+#include "gs/synth/synth_random.h"
+
 #include <cmath>
 
 namespace macro::gs {
 namespace {
 
-class Rng {
- public:
-  explicit Rng(uint64_t seed) : state_(seed) {}
-  uint64_t next() {  // splitmix64
-    uint64_t z = (state_ += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-  }
-  double uniform() { return double(next() >> 11) * (1.0 / 9007199254740992.0); }  // [0, 1)
-  double uniform(double lo, double hi) { return lo + (hi - lo) * uniform(); }
-  double normal() {  // Box-Muller
-    const double u1 = 1.0 - uniform(), u2 = uniform();
-    return std::sqrt(-2.0 * std::log(u1)) * std::cos(6.283185307179586 * u2);
-  }
-
- private:
-  uint64_t state_;
+// The synthetic generators' SplitMix64 stream (gs/synth/synth_random.h).
+struct Rng : synth_random::Rng {
+  explicit Rng(uint64_t seed) : synth_random::Rng{seed} {}
+  using synth_random::Rng::uniform;
+  double uniform(double lo, double hi) { return range(lo, hi); }
 };
 
 }  // namespace

@@ -1,6 +1,7 @@
-// Randomness of the synthetic generators (gs/synth/synth.cpp, enhance/datasets/synth_close.cpp): one SplitMix64
-// stream and integer hashes, never <random> distributions (whose output differs between standard
-// libraries), so the bytes are the same on every build. Also the value noise built on the hashes.
+// Randomness of the synthetic generators (gs/synth/synth.cpp, enhance/datasets/synth_close.cpp):
+// one SplitMix64 stream and integer hashes, never <random> distributions (whose output differs
+// between standard libraries), so the bytes are the same on every build. Also the value noise built
+// on the hashes.
 #pragma once
 
 #include <cmath>
@@ -19,6 +20,10 @@ struct Rng {
   }
   double uniform() { return double(next() >> 11) * 0x1.0p-53; }  // [0, 1)
   double range(double lo, double hi) { return lo + (hi - lo) * uniform(); }
+  double normal() {  // standard normal, Box-Muller (u1 in (0, 1])
+    const double u1 = 1.0 - uniform(), u2 = uniform();
+    return std::sqrt(-2.0 * std::log(u1)) * std::cos(6.283185307179586 * u2);
+  }
 };
 
 // Integer hash of a lattice point (x, y) and a seed.

@@ -439,10 +439,7 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
       const size_t cap = job.limits.max_gaussians;
       std::fprintf(stderr, "[train] memory: %s; at most %s before pairs (--max-gaussians %zu)\n",
                    describe(result.memory).c_str(),
-                   format_bytes(uint64_t(cap) * result.memory.per_gaussian + result.memory.fixed() -
-                                uint64_t(result.memory.gaussians) * result.memory.per_gaussian)
-                       .c_str(),
-                   cap);
+                   format_bytes(result.memory.fixed_at(cap)).c_str(), cap);
     }
   }
   auto last_draw = std::chrono::steady_clock::now() - std::chrono::seconds(1);
@@ -502,15 +499,15 @@ Result<TrainJobResult> run_train_job(const TrainJob& job, ThreadPool& pool) {
   }
   // Mip: the 3D filter of the trained Gaussians from the training cameras goes into the .ply
   // (filter_3D, as Mip-Splatting saves it), so renderers apply it.
+  const bool mip = options.render.mode == RasterMode::kMip;
   std::vector<float> out_filter;
-  if (options.render.mode == RasterMode::kMip) {
+  if (mip) {
     std::vector<Camera> cams;
     for (const TrainView& v : views) cams.push_back(v.camera);
     out_filter = compute_filter_3d(*params, cams);
   }
-  MACRO_TRY(write_splat_params(*params, job.out_path,
-                               out_filter.empty() && params->size() > 0 ? nullptr : &out_filter)
-                .with_context("--out"));
+  MACRO_TRY(
+      write_splat_params(*params, job.out_path, mip ? &out_filter : nullptr).with_context("--out"));
   if (!job.log_path.empty()) MACRO_TRY(log.commit().with_context("--log"));
   result.seconds = result.records.empty() ? 0 : result.records.back().seconds;
   rusage ru{};

@@ -26,7 +26,9 @@ struct TrainMemory {
   size_t pixels = 0;  // the largest view's
   size_t photos = 0;  // bytes
   // Everything but the pairs: N per_gaussian + pixels per_pixel + photos.
-  size_t fixed() const { return gaussians * per_gaussian + pixels * per_pixel + photos; }
+  size_t fixed() const { return fixed_at(gaussians); }
+  // The same at another Gaussian count (e.g. the --max-gaussians bound).
+  size_t fixed_at(size_t n) const { return n * per_gaussian + pixels * per_pixel + photos; }
 };
 
 TrainMemory train_memory(size_t gaussians, int sh_degree, size_t largest_view_pixels,

@@ -5,7 +5,8 @@
 // (DefaultStrategy's per-step accumulate_grad2d); then the buddha scene (--scene-dir) through the
 // trainer's step. Baseline measured in the same run: the double-precision scalar reference
 // (--precision double: diff_render.h + loss.h, Adam's scalar loop), whose forward and backward
-// are timed whole.
+// are timed whole. Also measured in the same run, per thread count: the fp32 FMA peak and a
+// streaming-copy memory bandwidth.
 //
 //   bench train [--sizes 100000,300000,1000000] [--threads 1,2] [--reps 3] [--baseline-reps 3]
 //               [--no-baseline] [--width 960] [--height 540] [--focal 600] [--seed 1]
@@ -18,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "attention/runtime/kernels.h"
 #include "bench_registry.h"
 #include "gs/synth/random_scene.h"
 #include "gs/train/adam.h"
@@ -263,6 +265,24 @@ int run(int argc, char** argv) {
       s = s * 6364136223846793005ull + 1442695040888963407ull;
       t = float((s >> 40) & 0xffff) / 65535.f;
     }
+  }
+  // The machine's peaks in this run, per thread count: fp32 FMA (kernels().probe_fma) and a
+  // streaming copy (2 x 256 MiB, read + write bytes per wall-second), the stages being bound by
+  // memory and gathers as much as by arithmetic.
+  for (long th : threads) {
+    ThreadPool pool(int(std::max(1L, th)));
+    const bench::Rate fma =
+        bench::probe_rate(macro::kernels().probe_fma, th > 1 ? &pool : nullptr, 2000000, 3);
+    const size_t bytes = size_t(256) << 20;
+    std::vector<char> src(bytes, 1), dst(bytes, 0);
+    const bench::Timing copy = bench::median_timing(3, [&] {
+      pool.parallel_for(
+          bytes,
+          [&](size_t b, size_t e, int) { std::memcpy(dst.data() + b, src.data() + b, e - b); },
+          bytes / size_t(pool.size()) + 1);
+    });
+    std::printf("peaks   %2ld threads: fp32 FMA %.0f GFLOP/s, memory copy %.1f GB/s (same run)\n",
+                th, fma.wall, 2.0 * double(bytes) / copy.wall * 1e-9);
   }
   for (long n : sizes) {
     RandomSceneParams rp;
