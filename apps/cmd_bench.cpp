@@ -30,6 +30,7 @@ constexpr const char* kUsage =
     "usage: macro bench run --root DIR --results FILE.jsonl [--methods 3dgs,...]\n"
     "                       [--K 1,3] [--P 4] [--mask on,off] [--precision bf16,f32]\n"
     "                       [--crop full,tight,composite] [--upsampler lanczos,pft-sr]\n"
+    "                       [--rounds 15] [--round-steps 2000]\n"
     "                       [--shard i/N] [--limit N] [--weights DIFIX_DIR] [--ctx "
     "CTX.safetensors]\n"
     "                       [--lpips-backbone F] [--lpips-heads F]\n"
@@ -39,7 +40,10 @@ constexpr const char* kUsage =
     "                       [--scene-failure released|pair]\n"
     "  methods: 3dgs, mip-splatting (DIR/scene_mip.ply), transfer, transfer-whole (weight-free,\n"
     "           docs/transfer.md), difix, macro,\n"
-    "           macro-unmasked (the Difix network methods need --weights).\n"
+    "           macro-unmasked (the Difix network methods need --weights),\n"
+    "           difix3d, difix3d+, pr-difix3d, pr-difix3d+ (progressive fine-tuning of the\n"
+    "           3DGS, docs/baselines.md: --rounds fixes --round-steps apart; released 15 x\n"
+    "           2000; Difix with --weights, else the weight-free transfer, named per record).\n"
     "  run     scores every (close-up pair, method, option set) of the scene folders under DIR\n"
     "          against closeup_gt/<frame>, appending one JSON line per record; a rerun resumes.\n"
     "          Option lists form a grid; each method records only the options it uses.\n"
@@ -66,6 +70,8 @@ int run_run(Args& args) {
   std::map<std::string, std::vector<std::string>> grid;
   for (const char* key : {"K", "P", "mask", "precision", "crop", "upsampler"})
     if (auto v = args.value(std::string("--") + key)) grid[key] = split_list(*v);
+  if (auto v = args.value("--rounds")) grid["rounds"] = split_list(*v);
+  if (auto v = args.value("--round-steps")) grid["round_steps"] = split_list(*v);
   o.option_sets = enhance::expand_option_grid(grid);
   const std::string shard = args.value_or("--shard", "0/1");
   o.limit = args.int_or("--limit", 0, 0, 1 << 30);

@@ -321,8 +321,62 @@ TEST_CASE("bench report: scene means then the mean of scene means, n/c never ave
   CHECK(md.find("DreamSim") == std::string::npos);  // never computed: no column
   const std::string csv = table_csv(configs);
   CHECK(csv.find("method,options,psnr,ssim,lpips_alex,dinov2,seconds_per_closeup") == 0);
-  CHECK(csv.find("m,,22.5,0.75,0.2,n/c,4,2,3,1") != std::string::npos);
+  CHECK(csv.find("m,,22.5,0.75,0.2,n/c,4,n/a,2,3,1") != std::string::npos);
   CHECK(format_metric("psnr", std::nullopt) == "n/c");
+  CHECK(md.find("full s / close-up") == std::string::npos);  // no record has a training log
+}
+
+TEST_CASE("bench report: the full cost adds the reconstruction's training to each close-up",
+          "[harness]") {
+  test::TempDir tmp("bench-full-cost");
+  // The log's last step line gives the cost, wherever the final evaluation line is.
+  REQUIRE(write_file_atomic(tmp.file("log.jsonl"),
+                            "{\"scene_dir\": \"x\"}\n{\"step\": 0, \"seconds\": 0.5}\n"
+                            "{\"step\": 1, \"seconds\": 100.25}\n{\"eval\": \"test\", "
+                            "\"psnr\": 20}\n")
+              .is_ok());
+  REQUIRE(training_log_seconds(tmp.file("log.jsonl")).has_value());
+  CHECK(*training_log_seconds(tmp.file("log.jsonl")) == 100.25);
+  CHECK(!training_log_seconds(tmp.file("missing.jsonl")).has_value());
+  REQUIRE(write_file_atomic(tmp.file("empty.jsonl"), "{\"scene_dir\": \"x\"}\n").is_ok());
+  CHECK(!training_log_seconds(tmp.file("empty.jsonl")).has_value());
+
+  std::vector<BenchRecord> recs = {
+      hand_record("A", 0, "m", {{"psnr", 10}}, 1.0), hand_record("A", 1, "m", {{"psnr", 20}}, 3.0),
+      hand_record("B", 0, "m", {{"psnr", 30}}, 6.0), hand_record("A", 0, "x", {{"psnr", 12}}, 2.0),
+      hand_record("B", 0, "x", {{"psnr", 12}}, 2.0)};
+  recs[0].reconstruction_seconds = recs[1].reconstruction_seconds = 100;
+  recs[2].reconstruction_seconds = 50;
+  recs[3].reconstruction_seconds = 100;  // x: scene B has no log, so no full cost for x
+  for (BenchRecord& r : recs) {
+    const std::string line = record_to_json_line(r);
+    if (r.reconstruction_seconds)
+      CHECK(line.find("\"full_seconds_per_closeup\":") != std::string::npos);
+    else
+      CHECK(line.find("reconstruction_seconds") == std::string::npos);
+    auto back = record_from_json(line, "test");
+    REQUIRE(back.is_ok());
+    CHECK(back->reconstruction_seconds == r.reconstruction_seconds);
+    r = *back;
+  }
+  const auto configs = aggregate_records(recs);
+  REQUIRE(configs.size() == 2);
+  REQUIRE(configs[0].full_seconds_per_closeup.has_value());
+  // Scene means (102 and 56), then their mean.
+  CHECK(*configs[0].full_seconds_per_closeup == Approx((102.0 + 56.0) / 2));
+  CHECK(!configs[1].full_seconds_per_closeup.has_value());
+  const std::string md = table_markdown(configs);
+  CHECK(md.find("| s / close-up | full s / close-up |") != std::string::npos);
+  CHECK(md.find("| 4.00 | 79.00 |") != std::string::npos);
+  CHECK(md.find("| 2.00 | n/a |") != std::string::npos);
+  std::vector<std::string> written;
+  REQUIRE(write_report(recs, tmp.file("rep"), &written, SceneFailureRule::kReleased).is_ok());
+  CHECK(file_exists(tmp.file("rep/cost_vs_psnr.svg")));
+  // Without any full cost there is no such chart.
+  recs[0].reconstruction_seconds.reset();
+  REQUIRE(write_report(recs, tmp.file("rep2"), &written, SceneFailureRule::kReleased).is_ok());
+  CHECK(file_exists(tmp.file("rep2/time_vs_psnr.svg")));
+  CHECK(!file_exists(tmp.file("rep2/cost_vs_psnr.svg")));
 }
 
 TEST_CASE(

@@ -28,13 +28,17 @@ struct IncludeRule {
 // the files directly in gs/ (the vocabulary), not its subfolders.
 const std::vector<IncludeRule>& include_rules() {
   static const std::vector<IncludeRule> rules = {
-      {"attention/", {"gs/", "enhance/", "apps/"}, "the runtime and the networks know nothing of splats"},
+      {"attention/",
+       {"gs/", "enhance/", "apps/"},
+       "the runtime and the networks know nothing of splats"},
       {"attention/runtime/", {"attention/nets/"}, "the runtime sits below the networks"},
       {"gs/", {"enhance/", "attention/nets/", "apps/"}, "splats sit below the method and networks"},
-      {"gs/*", {"gs/formats/", "gs/cameras/", "gs/raster/", "gs/synth/", "gs/train/"},
+      {"gs/*",
+       {"gs/formats/", "gs/cameras/", "gs/raster/", "gs/synth/", "gs/train/"},
        "the vocabulary (cloud, constants, images) needs none of its users"},
       {"gs/formats/", {"gs/raster/", "gs/train/", "gs/synth/"}, "reading a file renders nothing"},
-      {"gs/cameras/", {"gs/raster/", "gs/train/", "gs/synth/", "gs/formats/"},
+      {"gs/cameras/",
+       {"gs/raster/", "gs/train/", "gs/synth/", "gs/formats/"},
        "camera files are read without the rasterizer"},
       {"gs/raster/", {"gs/train/", "gs/synth/"}, "the renderer does not depend on its users"},
       {"enhance/datasets/",
@@ -52,6 +56,9 @@ const std::vector<IncludeRule>& include_rules() {
       {"enhance/transfer/",
        {"enhance/bench/", "enhance/datasets/", "enhance/metrics/", "enhance/enhance.h"},
        "an enhancer is below the entry point and the evaluation"},
+      {"enhance/baselines/",
+       {"enhance/bench/", "enhance/datasets/", "enhance/metrics/"},
+       "a baseline is a method like MACRO: the benchmark runs it, it never scores itself"},
       {"enhance/figures/",
        {"enhance/macro/", "enhance/transfer/", "enhance/bench/", "enhance/metrics/",
         "enhance/datasets/", "enhance/enhance.h", "enhance/side_by_side.h"},
@@ -63,6 +70,7 @@ const std::vector<IncludeRule>& include_rules() {
       {"enhance/transfer/", {"enhance/view/"}, "the viewer is used by apps/ and tests/ only"},
       {"enhance/metrics/", {"enhance/view/"}, "the viewer is used by apps/ and tests/ only"},
       {"enhance/bench/", {"enhance/view/"}, "the viewer is used by apps/ and tests/ only"},
+      {"enhance/baselines/", {"enhance/view/"}, "the viewer is used by apps/ and tests/ only"},
       {"enhance/datasets/", {"enhance/view/"}, "the viewer is used by apps/ and tests/ only"},
   };
   return rules;
@@ -151,7 +159,8 @@ std::vector<Citation> citations(const std::string& comment) {
     const std::smatch& m = *it;
     if (m[1].matched) {
       current = m[1];
-      const bool doc = current.compare(0, 5, "docs/") == 0 || current.find("shared/") != std::string::npos ||
+      const bool doc = current.compare(0, 5, "docs/") == 0 ||
+                       current.find("shared/") != std::string::npos ||
                        current.find("macro-method.md") != std::string::npos ||
                        current.find("gs-rasterizer.md") != std::string::npos ||
                        current.find("difix-spec.md") != std::string::npos ||
@@ -179,7 +188,8 @@ std::string comment_text(const std::string& line) {
 // What is wrong with one citation; "" when it points at a document and section in the repository.
 std::string citation_problem(const Citation& c) {
   const fs::path root = macro::test::source_dir();
-  if (c.doc.find("shared/") != std::string::npos && c.doc.find("shared/golden/") == std::string::npos)
+  if (c.doc.find("shared/") != std::string::npos &&
+      c.doc.find("shared/golden/") == std::string::npos)
     return c.doc + " is outside the repository (cite the project's own docs/)";
   if (c.doc.find("shared/golden/") != std::string::npos) return "";  // test data, not a spec
   if (c.doc.compare(0, 5, "docs/") != 0)
@@ -194,7 +204,8 @@ std::string citation_problem(const Citation& c) {
 
 TEST_CASE("layout: the include rules catch a forbidden include", "[layout]") {
   CHECK(rule_violations("enhance/datasets/synth_close.cpp", "enhance/macro/plan.h").size() == 1);
-  CHECK(rule_violations("enhance/metrics/metrics.cpp", "enhance/bench/bench_harness.h").size() == 1);
+  CHECK(rule_violations("enhance/metrics/metrics.cpp", "enhance/bench/bench_harness.h").size() ==
+        1);
   CHECK(rule_violations("enhance/figures/plot.cpp", "enhance/bench/bench_report.h").size() == 1);
   CHECK(rule_violations("enhance/bench/report_charts.cpp", "enhance/figures/plot.h").empty());
   CHECK(rule_violations("gs/formats/scene_io.cpp", "gs/raster/rasterizer.h").size() == 1);
@@ -225,7 +236,8 @@ TEST_CASE("layout: every include follows the rules and resolves", "[layout]") {
       ++includes;
       const std::string resolved = resolve_include(f.rel, m[1]);
       if (resolved.empty()) {
-        problems.push_back(f.rel + " includes \"" + std::string(m[1]) + "\", which is not in the repository");
+        problems.push_back(f.rel + " includes \"" + std::string(m[1]) +
+                           "\", which is not in the repository");
         continue;
       }
       for (std::string& v : rule_violations(f.rel, resolved)) problems.push_back(std::move(v));
@@ -260,8 +272,7 @@ TEST_CASE("layout: every cited document and section is in the repository", "[lay
       for (const Citation& c : citations(comment_text(f.lines[i]))) {
         ++cited;
         std::string p = citation_problem(c);
-        if (!p.empty())
-          problems.push_back(f.rel + ":" + std::to_string(i + 1) + ": " + p);
+        if (!p.empty()) problems.push_back(f.rel + ":" + std::to_string(i + 1) + ": " + p);
       }
     }
   }

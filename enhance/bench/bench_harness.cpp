@@ -218,6 +218,10 @@ std::string record_to_json_line(const BenchRecord& r) {
   for (const MethodStage& s : r.seconds) secs[s.name] = s.seconds;
   j["seconds"] = secs;
   j["seconds_per_closeup"] = r.seconds_per_closeup;
+  if (r.reconstruction_seconds) {
+    j["reconstruction_seconds"] = *r.reconstruction_seconds;
+    j["full_seconds_per_closeup"] = *r.reconstruction_seconds + r.seconds_per_closeup;
+  }
   j["width"] = r.width;
   j["height"] = r.height;
   if (!r.enhancer.empty()) j["enhancer"] = r.enhancer;
@@ -297,6 +301,11 @@ Result<BenchRecord> record_from_json(const std::string& line, const std::string&
     }
   if (j.contains("seconds_per_closeup"))
     MACRO_TRY(num(j["seconds_per_closeup"], "seconds_per_closeup", r.seconds_per_closeup));
+  if (j.contains("reconstruction_seconds")) {
+    double v = 0;
+    MACRO_TRY(num(j["reconstruction_seconds"], "reconstruction_seconds", v));
+    r.reconstruction_seconds = v;
+  }
   if (j.contains("width") && j["width"].is_number_integer()) r.width = j["width"].get<int>();
   if (j.contains("height") && j["height"].is_number_integer()) r.height = j["height"].get<int>();
   return r;
@@ -394,6 +403,34 @@ Status write_records_atomic(const std::string& path, const std::vector<BenchReco
 }
 
 // ---- Running -----------------------------------------------------------------------------------
+std::optional<double> training_log_seconds(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return std::nullopt;
+  // The last lines: a step line is a few hundred bytes; the final evaluation line can list many
+  // views, so read up to 64 KiB from the end.
+  std::string tail;
+  if (std::fseek(f, 0, SEEK_END) == 0) {
+    const long size = std::ftell(f);
+    const long from = std::max(0L, size - 65536L);
+    if (size > 0 && std::fseek(f, from, SEEK_SET) == 0) {
+      tail.resize(size_t(size - from));
+      tail.resize(std::fread(tail.data(), 1, tail.size(), f));
+    }
+  }
+  std::fclose(f);
+  std::optional<double> seconds;
+  size_t start = 0;
+  while (start < tail.size()) {
+    size_t end = tail.find('\n', start);
+    if (end == std::string::npos) end = tail.size();
+    const Json j = Json::parse(tail.substr(start, end - start), nullptr, false);
+    if (j.is_object() && j.contains("step") && j.contains("seconds") && j["seconds"].is_number())
+      seconds = j["seconds"].get<double>();
+    start = end + 1;
+  }
+  return seconds;
+}
+
 BenchRecord run_work_item(const BenchWorkItem& item, const MethodRegistry& registry,
                           const MetricOptions& metric_options, PairInputsCache* cache) {
   BenchRecord r;
@@ -449,6 +486,9 @@ BenchRecord run_work_item(const BenchWorkItem& item, const MethodRegistry& regis
     r.seconds.push_back(s);
     if (s.per_closeup) r.seconds_per_closeup += s.seconds;
   }
+  if (!method->reconstruction_log.empty())
+    r.reconstruction_seconds =
+        training_log_seconds((fs::path(item.pair.scene_dir) / method->reconstruction_log).string());
 
   t0 = std::chrono::steady_clock::now();
   Result<std::vector<MetricValue>> metrics = compute_metrics(out->image, *gt, metric_options);

@@ -23,7 +23,11 @@
 //    "metrics": {"psnr": 26.2, "ssim": ..., "lpips_alex": ...}  (computed ones only; +inf as
 //    "inf"), "not_computed": {"dinov2": "<reason>", ...}, "seconds": {"load": ..., "render": ...,
 //    <method stages>..., "metrics": ...}, "seconds_per_closeup": the method's stages only (render +
-//    enhance), not load or metrics, "width", "height": the GT size}
+//    enhance), not load or metrics, "reconstruction_seconds": the training time of the
+//    reconstruction the method starts from (the last step's "seconds" of its training log in the
+//    scene folder, BenchMethod::reconstruction_log; absent when the folder has no log),
+//    "full_seconds_per_closeup": reconstruction_seconds + seconds_per_closeup, what a user pays
+//    for one close-up of a new scene (absent with it), "width", "height": the GT size}
 // Key of a record: scene, closeup_frame, method, options_hash.
 //
 // Appending: each record is one write(2) of the whole line (newline included) on a descriptor
@@ -99,6 +103,7 @@ struct BenchRecord {
   std::vector<MetricValue> metrics;  // computed and not-computed entries
   std::vector<MethodStage> seconds;  // load, method stages, metrics
   double seconds_per_closeup = 0;
+  std::optional<double> reconstruction_seconds;  // and full = it + seconds_per_closeup
   int width = 0, height = 0;
   std::string enhancer;    // JSON "enhancer", absent when empty
   int planes_dropped = 0;  // JSON "planes_dropped" (0 when absent)
@@ -163,6 +168,10 @@ struct PairInputsCache {
   std::string key;  // scene_dir \t closeup_frame
   std::optional<SceneInputs> inputs;
 };
+
+// The last step's "seconds" of a `macro train` JSONL log (read from its end); nullopt when the
+// file is missing or holds no step line.
+std::optional<double> training_log_seconds(const std::string& path);
 
 // One item, scored (never an error for a skip: the record says why). `cache` may be null.
 BenchRecord run_work_item(const BenchWorkItem& item, const MethodRegistry& registry,

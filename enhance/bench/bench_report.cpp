@@ -25,6 +25,7 @@ const std::vector<MetricColumn>& metric_columns() {
 
 namespace {
 constexpr const char* kSeconds = "seconds_per_closeup";
+constexpr const char* kFullSeconds = "full_seconds_per_closeup";
 
 struct Accum {
   double sum = 0;
@@ -55,6 +56,7 @@ std::vector<ConfigResult> aggregate_records(const std::vector<BenchRecord>& reco
   std::map<std::pair<std::string, std::string>, ConfigResult> configs;
   std::map<std::pair<std::string, std::string>, std::map<std::string, std::map<std::string, Accum>>>
       per_scene;
+  std::map<std::pair<std::string, std::string>, size_t> full_pairs;  // ok pairs with a full cost
   for (const BenchRecord& r : records) {
     const auto key = std::make_pair(r.method, canonical_options(r.options));
     ConfigResult& c = configs[key];
@@ -85,6 +87,10 @@ std::vector<ConfigResult> aggregate_records(const std::vector<BenchRecord>& reco
       pair_values[m.name] = m.value;
     }
     scene[kSeconds].add(r.seconds_per_closeup);
+    if (r.reconstruction_seconds) {
+      scene[kFullSeconds].add(*r.reconstruction_seconds + r.seconds_per_closeup);
+      ++full_pairs[key];
+    }
     c.pairs.push_back({r.scene, r.depth_ratio, pair_values});
   }
   std::vector<ConfigResult> out;
@@ -104,6 +110,8 @@ std::vector<ConfigResult> aggregate_records(const std::vector<BenchRecord>& reco
     for (auto& [name, acc] : of_means) {
       if (name == kSeconds) {
         c.seconds_per_closeup = acc.mean();
+      } else if (name == kFullSeconds) {
+        if (full_pairs[key] == c.pairs_ok) c.full_seconds_per_closeup = acc.mean();
       } else {
         c.metric[name] = acc.mean();
       }
@@ -117,7 +125,7 @@ std::string format_metric(const std::string& name, std::optional<double> value) 
   if (!value) return "n/c";
   if (std::isinf(*value)) return *value > 0 ? "inf" : "-inf";
   char buf[64];
-  const int decimals = (name == "psnr" || name == kSeconds) ? 2 : 3;
+  const int decimals = (name == "psnr" || name == kSeconds || name == kFullSeconds) ? 2 : 3;
   std::snprintf(buf, sizeof buf, "%.*f", decimals, *value);
   return buf;
 }
@@ -156,8 +164,11 @@ std::string table_markdown(const std::vector<ConfigResult>& configs) {
     s += m.target_one ? " →1 |" : m.higher_better ? " ↑ |" : " ↓ |";
     rule += "---:|";
   }
-  s += " s / close-up | scenes | pairs ok | skipped |\n";
-  rule += "---:|---:|---:|---:|\n";
+  bool any_full = false;
+  for (const ConfigResult& c : configs) any_full = any_full || c.full_seconds_per_closeup;
+  s += any_full ? " s / close-up | full s / close-up | scenes | pairs ok | skipped |\n"
+                : " s / close-up | scenes | pairs ok | skipped |\n";
+  rule += any_full ? "---:|---:|---:|---:|---:|\n" : "---:|---:|---:|---:|\n";
   s += rule;
   for (const ConfigResult& c : configs) {
     const auto cell = [&s](const std::string& text) {
@@ -169,12 +180,19 @@ std::string table_markdown(const std::vector<ConfigResult>& configs) {
     cell(c.label);
     for (const MetricColumn& m : cols) cell(format_metric(m.name, metric_of(c, m.name)));
     cell(format_metric(kSeconds, c.seconds_per_closeup));
+    if (any_full)
+      cell(c.full_seconds_per_closeup ? format_metric(kFullSeconds, c.full_seconds_per_closeup)
+                                      : "n/a");
     cell(std::to_string(c.scenes));
     cell(std::to_string(c.pairs_ok));
     cell(std::to_string(c.pairs_skipped));
     s += '\n';
   }
   s += "\nMean over scenes of the per-scene mean over pairs; n/c = not computed.\n";
+  if (any_full)
+    s += "Full s / close-up: the reconstruction's training (its log in the scene folder) plus the "
+         "method's seconds, what one close-up of a new scene costs; n/a where a record has no "
+         "training log.\n";
   size_t dropped = 0;
   for (const ConfigResult& c : configs) dropped += c.scenes_failed;
   if (configs.empty() || configs.front().rule == SceneFailureRule::kReleased) {
@@ -195,7 +213,7 @@ std::string table_csv(const std::vector<ConfigResult>& configs) {
     s += ',';
     s += m.name;
   }
-  s += ",seconds_per_closeup,scenes,pairs_ok,pairs_skipped\n";
+  s += ",seconds_per_closeup,full_seconds_per_closeup,scenes,pairs_ok,pairs_skipped\n";
   for (const ConfigResult& c : configs) {
     s += csv_field(c.method) + "," + csv_field(c.options_text);
     for (const MetricColumn& m : cols) {
@@ -207,7 +225,10 @@ std::string table_csv(const std::vector<ConfigResult>& configs) {
     }
     char buf[64] = "n/c";
     if (c.seconds_per_closeup) std::snprintf(buf, sizeof buf, "%.6g", *c.seconds_per_closeup);
-    s += std::string(",") + buf + "," + std::to_string(c.scenes) + "," +
+    char full[64] = "n/a";
+    if (c.full_seconds_per_closeup)
+      std::snprintf(full, sizeof full, "%.6g", *c.full_seconds_per_closeup);
+    s += std::string(",") + buf + "," + full + "," + std::to_string(c.scenes) + "," +
          std::to_string(c.pairs_ok) + "," + std::to_string(c.pairs_skipped) + "\n";
   }
   return s;
@@ -231,8 +252,13 @@ Status write_report(const std::vector<BenchRecord>& records, const std::string& 
   };
   MACRO_TRY(put("table.md", table_markdown(configs)));
   MACRO_TRY(put("table.csv", table_csv(configs)));
+  bool any_full = false;
+  for (const ConfigResult& c : configs) any_full = any_full || c.full_seconds_per_closeup;
   for (const MetricColumn& m : shown_columns(configs)) {
     MACRO_TRY(put_chart(std::string("time_vs_") + m.name, chart_time_vs_metric(configs, m)));
+    if (any_full)
+      MACRO_TRY(
+          put_chart(std::string("cost_vs_") + m.name, chart_time_vs_metric(configs, m, true)));
     MACRO_TRY(put_chart(std::string("zoom_") + m.name, chart_metric_vs_zoom(configs, m)));
     MACRO_TRY(put_chart(std::string("scenes_") + m.name, chart_scene_bars(configs, m)));
   }

@@ -14,9 +14,15 @@
 // Outputs of write_report(DIR):
 //   table.md, table.csv          methods as rows; PSNR (up), SSIM (up), LPIPS (down), DINOv2 and
 //                                DreamSim (down; columns only when some configuration computed
-//                                them), seconds per close-up, scenes, pairs ok / skipped
+//                                them), seconds per close-up, full seconds per close-up
+//                                (reconstruction training included; a configuration has it when
+//                                every ok pair's record does, else n/a), scenes, pairs ok /
+//                                skipped
 //   time_vs_<metric>.png/.svg/.pdf  seconds per close-up (x) vs the metric (y), one labelled
 //                                point per configuration, +-1 s.d. of the scene means
+//   cost_vs_<metric>.png/.svg/.pdf  the same with the full cost per close-up (x): the
+//                                reconstruction's training + the method's seconds (records'
+//                                full_seconds_per_closeup); only when some configuration has it
 //   zoom_<metric>.png/.svg/.pdf  the metric vs the pair's zoom factor (depth_ratio): faint
 //                                per-pair dots and a line per configuration through zoom-bin
 //                                means over scenes, +-1 s.d. over scenes
@@ -57,7 +63,9 @@ struct ConfigResult {
   // metric name -> mean of scene means (absent = not computed anywhere)
   std::map<std::string, double> metric;
   std::optional<double> seconds_per_closeup;
-  // scene -> metric name -> scene mean ("seconds_per_closeup" included)
+  std::optional<double> full_seconds_per_closeup;  // when every ok pair's record has it
+  // scene -> metric name -> scene mean ("seconds_per_closeup" and "full_seconds_per_closeup"
+  // included)
   std::map<std::string, std::map<std::string, double>> scene_means;
   size_t scenes = 0;  // scenes with at least one ok pair
   size_t pairs_ok = 0, pairs_skipped = 0;

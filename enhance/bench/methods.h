@@ -9,6 +9,14 @@
 //   mip-splatting   the same from the scene folder's scene_mip.ply (`macro train --mode mip`:
 //                   Mip-Splatting's 3D filter, folded in by the loader, and its 2D mip filter),
 //                   rendered in mip mode; a folder without it is skipped with the reason
+//                   (its reconstruction cost: train_mip_log.jsonl)
+//   difix3d         Difix3D's progressive fine-tuning (enhance/baselines/difix3d.h), the close-up
+//                   rendered from the fine-tuned 3DGS                    rounds round_steps
+//                   precision
+//   difix3d+        the same, the final render enhanced once more          (as difix3d)
+//   pr-difix3d(+)   the progressive-reference variants                      (as difix3d)
+//                   (Difix with --weights, else the weight-free transfer, named in each record;
+//                   a method and its "+" share one fine-tuning, counted in both records' cost)
 //   difix           Difix-ref, K = 1 whole reference, no planes, no mask        options precision
 //   macro           MACRO: scale-matched crops, depth-masked attention          K P mask precision
 //                                                                               crop upsampler
@@ -16,8 +24,9 @@
 //                                                                               upsampler
 //   transfer        weight-free detail transfer from the plan's crops          K P
 //   transfer-whole  the same from the K references whole (the ablation)       K P
-// Option values: K an integer in [1, 64]; P an integer in [1, 64] or "auto" (up to 5 planes); mask
-// released|paper|none (also on = released, off = none); precision fp32|bf16; crop
+// Option values: rounds an integer in [1, 1000] (released 15), round_steps in [1, 1000000]
+// (released 2000); K an integer in [1, 64]; P an integer in [1, 64] or "auto" (up to 5 planes);
+// mask released|paper|none (also on = released, off = none); precision fp32|bf16; crop
 // full|tight|composite; upsampler a name make_upsampler knows. A bad value is the method's error
 // (the harness records the pair as skipped with it).
 // A new method is one more MethodRegistry::add (register_enhance_bench_methods for the enhancers).
@@ -71,6 +80,9 @@ struct BenchMethod {
   std::string summary;
   std::vector<std::string> option_keys;  // which BenchOptions keys change the output
   MethodFn run;
+  // The training log of the reconstruction the method starts from, in the scene folder (`macro
+  // train --log`): its last step's "seconds" is the record's reconstruction cost.
+  std::string reconstruction_log = "train_log.jsonl";
 };
 
 class MethodRegistry {

@@ -77,8 +77,13 @@ std::string metric_axis_label(const MetricColumn& m) {
 }
 
 // ---- Speed vs accuracy -------------------------------------------------------------------------
-Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const MetricColumn& m) {
-  const std::string title = std::string("Seconds per close-up vs ") + m.title;
+Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const MetricColumn& m,
+                           bool full_cost) {
+  const std::string title =
+      std::string(full_cost ? "Full cost per close-up vs " : "Seconds per close-up vs ") + m.title;
+  const auto cost = [full_cost](const ConfigResult& c) {
+    return full_cost ? c.full_seconds_per_closeup : c.seconds_per_closeup;
+  };
   struct Point {
     size_t config;
     double x, y;
@@ -87,13 +92,13 @@ Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const Metri
   std::vector<Point> pts;
   for (size_t i = 0; i < configs.size(); ++i) {
     auto v = finite_metric(configs[i], m.name);
-    if (!v || !configs[i].seconds_per_closeup) continue;
+    if (!v || !cost(configs[i])) continue;
     std::vector<double> means;
     for (const auto& [scene, values] : configs[i].scene_means) {
       auto it = values.find(m.name);
       if (it != values.end() && std::isfinite(it->second)) means.push_back(it->second);
     }
-    pts.push_back({i, *configs[i].seconds_per_closeup, *v, stats_of(means)});
+    pts.push_back({i, *cost(configs[i]), *v, stats_of(means)});
   }
   if (pts.empty()) return not_computed_chart(title, not_computed_reason(configs, m));
   double xhi = 0, ylo = 1e300, yhi = -1e300;
@@ -113,7 +118,10 @@ Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const Metri
                 "points: mean of the scene means over " + std::to_string(max_scenes) +
                     (max_scenes == 1 ? " scene" : " scenes") +
                     (any_sd ? "; bars: \u00b11 s.d. of the scene means" : ""),
-                "seconds per close-up (s, render + plan + enhance)", metric_axis_label(m)};
+                full_cost ? "seconds per close-up of a new scene (s, reconstruction training + "
+                            "fine-tuning + render + enhance)"
+                          : "seconds per close-up (s, render + plan + enhance)",
+                metric_axis_label(m)};
   Chart c;
   draw_axes(c, f, &xt, yt, text);
   Points occupied;

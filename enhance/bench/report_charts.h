@@ -2,7 +2,8 @@
 // configurations on the shared plot pieces (enhance/figures/plot.h):
 //   chart_time_vs_metric  the paper's speed-vs-accuracy scatter: seconds per close-up (x) against
 //                         the metric (y, the mean of scene means), one labelled point per
-//                         configuration, vertical bars +-1 s.d. of the scene means (2+ scenes)
+//                         configuration, vertical bars +-1 s.d. of the scene means (2+ scenes);
+//                         with full_cost the x axis is the full cost (training included)
 //   chart_metric_vs_zoom  per zoom bin (the distinct zoom factors when there are at most 12, else
 //                         8 equal-width bins), the mean over scenes of each scene's mean over its
 //                         pairs in the bin, a line per configuration, bars +-1 s.d. over scenes
@@ -21,7 +22,9 @@
 
 namespace macro::enhance {
 
-Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const MetricColumn& metric);
+// full_cost: the x axis is full_seconds_per_closeup (cost_vs_<metric>), else seconds_per_closeup.
+Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const MetricColumn& metric,
+                           bool full_cost = false);
 Chart chart_metric_vs_zoom(const std::vector<ConfigResult>& configs, const MetricColumn& metric);
 Chart chart_scene_bars(const std::vector<ConfigResult>& configs, const MetricColumn& metric);
 

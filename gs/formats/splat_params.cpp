@@ -1,6 +1,7 @@
 // Pre-activation splat parameters <-> Inria .ply, and their activation (splat_params.h).
 #include "gs/formats/splat_params.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 
@@ -221,6 +222,37 @@ GaussianCloud to_cloud(const SplatParams& p) {
     std::copy_n(&p.shN[i * (K - 1) * 3], (K - 1) * 3, &c.sh[i * K * 3 + 3]);
   }
   return c;
+}
+
+Result<SplatParams> from_cloud(const GaussianCloud& c, const std::string& name) {
+  if (c.mip_filter_3d_applied)
+    return Status::error(name +
+                         ": its Mip-Splatting 3D filter is folded in; train from the .ply with "
+                         "its filter_3D property in mip mode instead");
+  if (c.sh_degree < 0 || c.sh_degree > 3)
+    return Status::error(name + ": SH degree " + std::to_string(c.sh_degree) + ", expected 0..3");
+  const size_t N = c.size();
+  const size_t K = size_t(c.sh_coeffs());
+  if (c.position.size() != 3 * N || c.scale.size() != 3 * N || c.rotation.size() != 4 * N ||
+      c.sh.size() != K * 3 * N)
+    return Status::error(name + ": inconsistent Gaussian arrays");
+  SplatParams p;
+  p.resize(N, c.sh_degree);
+  for (size_t i = 0; i < N; ++i) {
+    for (int a = 0; a < 3; ++a) {
+      p.means[i * 3 + a] = c.position[i * 3 + a];
+      p.scales[i * 3 + a] = float(std::log(std::max(double(c.scale[i * 3 + a]), 1e-12)));
+      p.sh0[i * 3 + a] = c.sh[i * K * 3 + a];
+    }
+    for (int a = 0; a < 4; ++a) p.quats[i * 4 + a] = c.rotation[i * 4 + a];
+    if (p.quats[i * 4] == 0 && p.quats[i * 4 + 1] == 0 && p.quats[i * 4 + 2] == 0 &&
+        p.quats[i * 4 + 3] == 0)
+      p.quats[i * 4] = 1;
+    const double o = std::clamp(double(c.opacity[i]), 1e-6, 1 - 1e-6);
+    p.opacities[i] = float(std::log(o / (1 - o)));
+    std::copy_n(&c.sh[i * K * 3 + 3], (K - 1) * 3, &p.shN[i * (K - 1) * 3]);
+  }
+  return p;
 }
 
 }  // namespace macro::gs

@@ -69,5 +69,12 @@ std::vector<uint8_t> encode_splat_params(const SplatParams& params,
 // The activated cloud the rasterizer draws: exp(scales), quats / |q| (computed in double),
 // sigmoid(opacities), sh = [sh0, shN]. Shapes must be consistent (check_shapes()).
 GaussianCloud to_cloud(const SplatParams& params);
+// The inverse, for a scene any loader read (.spz, .splat, SOG: only activated values): log
+// scales, the unit quaternion, logit opacities, the SH split into sh0 and shN. A scale below 1e-12
+// is taken as 1e-12 and an opacity outside [1e-6, 1 - 1e-6] is clamped into it (a quantised
+// format can store 0 or 1 exactly), so every parameter is finite; to_cloud(from_cloud(c)) gives c
+// back up to float rounding where nothing was clamped. A mip-filtered cloud is refused: its
+// filter cannot be taken back out.
+Result<SplatParams> from_cloud(const GaussianCloud& cloud, const std::string& name);
 
 }  // namespace macro::gs

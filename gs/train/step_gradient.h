@@ -24,10 +24,13 @@ Result<Precision> parse_precision(const std::string& name);
 class StepGradient {
  public:
   explicit StepGradient(Precision precision);
-  // Render `camera`, the loss against target [H,W,3] (linear, float) and every gradient.
+  // Render `camera`, the loss against target [H,W,3] (linear, float) and every gradient. With
+  // `mask` ([H,W], optional) the loss is that of render x mask against target x mask (its
+  // gradient masked the same way); `weight` multiplies the loss and every gradient.
   Result<LossValue> compute(const SplatParams& params, const Camera& camera, const float* target,
                             const DiffRenderOptions& options, SplatGrads* grads,
-                            ThreadPool& pool = ThreadPool::global());
+                            ThreadPool& pool = ThreadPool::global(), const float* mask = nullptr,
+                            double weight = 1);
   // The last render in double (DiffImage): converted from float on the float path.
   void image(DiffImage* out) const;
   // [N] of the last render (DiffRenderer::visible()).
@@ -45,6 +48,8 @@ class StepGradient {
   FastImage fimage_;
   std::vector<double> dgrad_;
   std::vector<float> fgrad_, scratch_;
+  std::vector<float> masked_target_, masked_render_;  // with a mask
+  std::vector<double> masked_drender_;
   int width_ = 0, height_ = 0;
 };
 

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <string>
 
+#include "gs/synth/synth_random.h"
 #include "gs/train/diff_project.h"
 #include "gs/train/schedule.h"
 
@@ -13,12 +14,20 @@ namespace macro::gs::train {
 namespace {
 
 Status check_view(const TrainView& view) {
-  const size_t want = size_t(view.camera.width) * size_t(view.camera.height) * 3;
+  const size_t pixels = size_t(view.camera.width) * size_t(view.camera.height);
+  const size_t want = pixels * 3;
   if (view.target.size() != want)
     return Status::error("view '" + view.camera.name + "': target holds " +
                          std::to_string(view.target.size()) + " values, expected " +
                          std::to_string(want) + " (" + std::to_string(view.camera.width) + "x" +
                          std::to_string(view.camera.height) + "x3)");
+  if (!view.mask.empty() && view.mask.size() != pixels)
+    return Status::error("view '" + view.camera.name + "': mask holds " +
+                         std::to_string(view.mask.size()) + " values, expected " +
+                         std::to_string(pixels));
+  if (!(view.loss_weight >= 0) || !std::isfinite(view.loss_weight))
+    return Status::error("view '" + view.camera.name + "': loss weight " +
+                         std::to_string(view.loss_weight) + ", expected a finite value >= 0");
   return Status::ok();
 }
 
@@ -31,7 +40,8 @@ Result<ViewGradient> view_gradient(const SplatParams& params, const TrainView& v
   ViewGradient out;
   StepGradient step(precision);
   MACRO_ASSIGN_OR_RETURN(
-      out.loss, step.compute(params, view.camera, view.target.data(), options, &out.grads, pool));
+      out.loss, step.compute(params, view.camera, view.target.data(), options, &out.grads, pool,
+                             view.mask.empty() ? nullptr : view.mask.data(), view.loss_weight));
   step.image(&out.image);
   return out;
 }
@@ -82,6 +92,17 @@ Status train(SplatParams* params, const std::vector<TrainView>& views, const Tra
   if (options.steps < 0)
     return Status::error("train: steps " + std::to_string(options.steps) + ", expected >= 0");
   for (const TrainView& v : views) MACRO_TRY(check_view(v));
+  const NovelViewHook& novel_hook = hooks.novel;
+  const bool with_novel = novel_hook.every > 0 && novel_hook.refresh;
+  if (with_novel && hooks.resume)
+    return Status::error("train: novel views cannot resume from a checkpoint");
+  if (with_novel && !(novel_hook.real_probability >= 0 && novel_hook.real_probability <= 1))
+    return Status::error("train: real-view probability " +
+                         std::to_string(novel_hook.real_probability) + ", expected [0, 1]");
+  std::vector<TrainView> novel;
+  ViewOrder novel_order(0, true, options.seed ^ 0x9E3779B97F4A7C15ull);
+  synth_random::Rng mix_rng{options.seed ^ 0xD1B54A32D192ED03ull};
+  uint64_t novel_sets = 0;
   SplatAdam adam(*params, options.adam);
   const double means_lr0 = adam.means_lr();
   ViewOrder order(views.size(), options.shuffled_views, options.seed);
@@ -151,12 +172,23 @@ Status train(SplatParams* params, const std::vector<TrainView>& views, const Tra
   SplatGrads grads;
   const auto t0 = std::chrono::steady_clock::now();
   for (int step = first; step < options.steps; ++step) {
-    const size_t view_index = order.next();
-    const TrainView& view = views[view_index];
+    if (with_novel && step % novel_hook.every == 0) {
+      MACRO_TRY(novel_hook.refresh(step, *params, &novel)
+                    .with_context("novel views at step " + std::to_string(step)));
+      for (const TrainView& v : novel) MACRO_TRY(check_view(v));
+      novel_order =
+          ViewOrder(novel.size(), true, options.seed ^ (0x9E3779B97F4A7C15ull + ++novel_sets));
+    }
+    // A photo with probability real_probability (53-bit uniform), else a novel view.
+    const bool draw_novel =
+        with_novel && !novel.empty() && mix_rng.uniform() >= novel_hook.real_probability;
+    const size_t view_index = draw_novel ? novel_order.next() : order.next();
+    const TrainView& view = draw_novel ? novel[view_index] : views[view_index];
     render.sh_degree =
         std::min(options.render.sh_degree,
                  active_sh_degree(step, options.sh_degree_interval, params->sh_degree));
-    auto loss = renderer.compute(*params, view.camera, view.target.data(), render, &grads, pool);
+    auto loss = renderer.compute(*params, view.camera, view.target.data(), render, &grads, pool,
+                                 view.mask.empty() ? nullptr : view.mask.data(), view.loss_weight);
     if (!loss) return loss.status().with_context("step " + std::to_string(step));
     renderer.image(&image);
     const double reg = add_regularisers(options, *params, &grads);
@@ -165,7 +197,9 @@ Status train(SplatParams* params, const std::vector<TrainView>& views, const Tra
     rec.means_lr = adam.means_lr();
     adam.step(grads, params, pool);
     if (options.exponential_lr)
-      adam.set_means_lr(means_lr0 * means_lr_factor(step + 1, options.steps));
+      adam.set_means_lr(means_lr0 * means_lr_factor(step + 1, options.lr_schedule_steps > 0
+                                                                  ? options.lr_schedule_steps
+                                                                  : options.steps));
     const size_t rows_before = params->size();
     if (options.strategy == Strategy::kDefault) {
       auto rep = default_strategy_step(options.default_strategy, step, options.adam.scene_scale,
@@ -182,6 +216,7 @@ Status train(SplatParams* params, const std::vector<TrainView>& views, const Tra
       filter_3d = compute_filter_3d(*params, cameras);
     rec.step = step;
     rec.view = view_index;
+    rec.novel_view = draw_novel;
     rec.sh_degree = render.sh_degree;
     rec.loss = loss->loss + reg;
     rec.l1 = loss->l1;

@@ -32,6 +32,12 @@ namespace macro::gs::train {
 struct TrainView {
   Camera camera;
   std::vector<float> target;  // [H,W,3] in the camera's size, linear values (8-bit: byte / 255)
+  // The view's share of the loss (Difix3D's fine-tuning: 1.5 for a photo, 0.3 for a novel view):
+  // the loss and every gradient are multiplied by it.
+  double loss_weight = 1;
+  // Optional [H,W] pixel mask (Difix3D: the novel view's opacity > 0.5 at the time it was made):
+  // render and target are both multiplied by it before the loss, so nothing outside it trains.
+  std::vector<float> mask;
 };
 
 enum class Strategy { kNone, kDefault, kMcmc };
@@ -40,7 +46,8 @@ struct TrainOptions {
   int steps = 30000;
   AdamOptions adam;
   DiffRenderOptions render;     // render.sh_degree is replaced by the active degree per step
-  bool exponential_lr = false;  // gsplat: means lr x 0.01^(s / steps)
+  bool exponential_lr = false;  // gsplat: means lr x 0.01^(s / schedule steps)
+  int lr_schedule_steps = 0;    // the schedule's max_steps (0: steps)
   bool shuffled_views = false;  // false: step s uses view s % V
   int sh_degree_interval = 0;   // 0: every band from the first step
   Strategy strategy = Strategy::kNone;
@@ -77,6 +84,18 @@ struct TrainState {
   std::vector<float> filter_3d;  // mip mode, else empty
 };
 
+// Difix3D's progressive fine-tuning: besides the views passed to train() (the photos), a set of
+// novel views that a callback replaces every `every` steps, starting at the first step (s % every
+// == 0, before that step's view is drawn). Each step then draws a photo with probability
+// real_probability (from the photos' own order, TrainOptions::shuffled_views), else a novel view
+// (each novel set in a fresh shuffled order); with no novel view yet, always a photo.
+struct NovelViewHook {
+  int every = 0;  // 0: no novel views
+  double real_probability = 0.7;
+  // Called with the step and the current parameters; replaces *novel.
+  std::function<Status(int step, const SplatParams&, std::vector<TrainView>* novel)> refresh;
+};
+
 struct TrainHooks {
   // Continue from this state (the parameters passed to train() are the checkpoint's).
   const TrainState* resume = nullptr;
@@ -84,6 +103,7 @@ struct TrainHooks {
   // s + 1 < steps, with the state that continues at s + 1.
   int checkpoint_every = 0;
   std::function<Status(const SplatParams&, const TrainState&)> checkpoint;
+  NovelViewHook novel;  // not with resume: the draws are not part of a checkpoint
 };
 
 // One step's record (the JSONL log's fields).
@@ -93,7 +113,8 @@ struct StepRecord {
   double psnr = 0;                    // of this step's render ([0,1]-clamped) against its photo
   size_t num_gaussians = 0;           // after this step's strategy
   int sh_degree = 0;                  // the active degree of this step
-  size_t view = 0;                    // index into the views
+  size_t view = 0;                    // index into the views (a novel view: into the novel set)
+  bool novel_view = false;            // the step drew a novel view (NovelViewHook)
   double means_lr = 0;                // the means' rate this step used
   RefineReport refine;                // what the strategy did after this step
   McmcReport mcmc;                    // the same for --strategy mcmc
