@@ -395,7 +395,8 @@ Status difix_step(EnhanceWork& work) {
   };
   MACRO_ASSIGN_OR_RETURN(
       nets::DifixOutputs step_out,
-      work.pipe->step(work.batch, work.ctx, work.masks, work.pool, o.timestep, on_stage));
+      work.pipe->step(work.batch, work.ctx, work.masks, work.pool, o.timestep, on_stage,
+                      /*all_views=*/false));  // only the close-up's output is decoded
   work.image = std::move(step_out.image);
   return Status::ok();
 }

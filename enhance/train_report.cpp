@@ -15,6 +15,7 @@
 #include "enhance/figures/side_by_side.h"
 #include "enhance/metrics/metrics.h"
 #include "gs/formats/splat_params.h"
+#include "gs/image_io.h"
 #include "gs/raster/rasterizer.h"
 #include "gs/raster/render_job.h"
 #include "gs/train/diff_project.h"
@@ -66,11 +67,8 @@ std::string join(const std::vector<std::string>& v) {
 // and byte x (1 / 255)): what the figure shows and the metrics are computed on.
 gs::Image quantized(const std::vector<float>& color, int w, int h) {
   gs::Image img(w, h, 3);
-  for (size_t i = 0; i < img.data.size(); ++i) {
-    const float v = color[i];
-    const uint8_t b = !(v > 0.f) ? 0 : v >= 1.f ? 255 : uint8_t(v * 255.f + 0.5f);
-    img.data[i] = float(b) * (1.f / 255.f);
-  }
+  img.data.assign(color.begin(), color.begin() + ptrdiff_t(img.data.size()));
+  gs::round_to_png_levels(&img.data);
   return img;
 }
 

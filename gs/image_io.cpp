@@ -277,11 +277,19 @@ Result<Image> read_image(const std::string& path, const ImageLimits& limits) {
 // ---- PNG write
 // -----------------------------------------------------------------------------------
 
-namespace {
-uint8_t to_u8(float v) {
+uint8_t png_byte(float v) {
   if (!(v > 0.f)) return 0;  // also NaN
   if (v >= 1.f) return 255;
   return static_cast<uint8_t>(v * 255.f + 0.5f);
+}
+
+void round_to_png_levels(std::vector<float>* values) {
+  for (float& v : *values) v = float(png_byte(v)) * (1.f / 255.f);
+}
+
+namespace {
+uint8_t to_u8(float v) {
+  return png_byte(v);
 }
 void append_bytes(void* context, void* data, int size) {
   auto* out = static_cast<std::vector<uint8_t>*>(context);

@@ -52,6 +52,11 @@ Result<Image> decode_image(const uint8_t* bytes, size_t size, const std::string&
 // 8-bit PNG from a float image with 1 (gray), 3 (RGB) or 4 (RGBA) channels; values clamped to
 // [0, 1] and rounded. Non-finite values are written as 0.
 Status write_png(const std::string& path, const Image& image);
+// The 8-bit level write_png writes for v (round half up; v <= 0 or NaN: 0; v >= 1: 255).
+uint8_t png_byte(float v);
+// The values an image takes through write_png and read_image (each value its level / 255), in
+// place: what a pipeline that saves its output as 8-bit PNG is scored on.
+void round_to_png_levels(std::vector<float>* values);
 // The bytes write_png would write (for tests and for callers that bundle files).
 Result<std::vector<uint8_t>> encode_png(const Image& image);
 // Baseline JPEG (stb: 4:2:0 up to quality 90, 4:4:4 above) from a 1- or 3-channel float image,

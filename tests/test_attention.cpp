@@ -435,8 +435,8 @@ void check_bf16_paths(const Problem& p, const BlockSparseMask* mask, const uint8
     const size_t n = ref.size();
     CHECK(out[n] == -7.0f);
     REQUIRE(attention_with_isa(args_for(p, out32, mask, causal), isa).is_ok());
-    const bool has_bf16 = isa == Isa::kScalar ? p.d % 2 == 0
-                                              : isa == Isa::kAvx512Bf16 && p.d % 32 == 0;
+    const bool has_bf16 =
+        isa == Isa::kScalar ? p.d % 2 == 0 : isa == Isa::kAvx512Bf16 && p.d % 32 == 0;
     if (!has_bf16) {
       CHECK(std::memcmp(out.data(), out32.data(), n * sizeof(float)) == 0);
       continue;
@@ -458,20 +458,22 @@ void check_bf16_paths(const Problem& p, const BlockSparseMask* mask, const uint8
 
 }  // namespace
 
-TEST_CASE("bf16 attention matches the rounded-operand reference on every path", "[attention][bf16]") {
+TEST_CASE("bf16 attention matches the rounded-operand reference on every path",
+          "[attention][bf16]") {
   struct Case {
     int nq, nk, heads, d;
   };
   // Odd key counts leave a key without a pair partner; D 16 has no bf16 kernel on SIMD paths.
-  const Case cases[] = {{1, 1, 1, 32},   {37, 53, 2, 32},  {130, 77, 3, 64}, {64, 64, 1, 64},
-                        {200, 129, 2, 128}, {20, 150, 1, 512}, {70, 45, 2, 16}, {9, 5, 1, 96}};
+  const Case cases[] = {{1, 1, 1, 32},      {37, 53, 2, 32},   {130, 77, 3, 64}, {64, 64, 1, 64},
+                        {200, 129, 2, 128}, {20, 150, 1, 512}, {70, 45, 2, 16},  {9, 5, 1, 96}};
   uint32_t seed = 101;
   for (const Case& c : cases)
     check_bf16_paths(make_problem(c.nq, c.nk, c.heads, c.d, seed++), nullptr, nullptr, false);
   check_bf16_paths(make_problem(150, 200, 2, 64, 199, 3.0f), nullptr, nullptr, false);
 }
 
-TEST_CASE("bf16 attention with block-sparse, reordered and causal masks", "[attention][bf16][mask]") {
+TEST_CASE("bf16 attention with block-sparse, reordered and causal masks",
+          "[attention][bf16][mask]") {
   uint32_t seed = 120;
   for (double density : {0.05, 0.5}) {
     for (bool group : {false, true}) {
@@ -485,4 +487,61 @@ TEST_CASE("bf16 attention with block-sparse, reordered and causal masks", "[atte
     }
   }
   check_bf16_paths(make_problem(77, 77, 2, 32, seed++), nullptr, nullptr, true);
+}
+
+TEST_CASE("a mask restricted to the first query tokens keeps their rows and their bits",
+          "[attention][mask]") {
+  // The MACRO mask of a close-up and 5 crops (as above), restricted to the close-up's tokens (and
+  // to other limits, one that cuts a view): the same rows of the dense mask, and attention over
+  // the kept queries gives the full attention's first rows bit for bit, on every path.
+  const int gh = 20, gw = 30, n = gh * gw, planes = 3;
+  std::vector<int32_t> closeup_plane(n), crop_plane = {0, 1, 2, 0, 1};
+  const int crops = int(crop_plane.size());
+  std::vector<uint8_t> valid(size_t(crops) * n);
+  for (int y = 0; y < gh; ++y)
+    for (int x = 0; x < gw; ++x) closeup_plane[size_t(y * gw + x)] = ((x / 4) + (y / 3)) % planes;
+  for (int c = 0; c < crops; ++c)
+    for (int t = 0; t < n; ++t) valid[size_t(c) * n + t] = c != 4 && (t % gw) > 2 + c;
+  const int total = n * (1 + crops);
+  std::vector<std::pair<std::string, BlockSparseMask>> masks;
+  {
+    auto m = macro_closeup_mask(n, planes, closeup_plane, crop_plane, valid);
+    REQUIRE(m.is_ok());
+    masks.push_back({"macro (grouped, permuted rows)", *m});
+    std::vector<uint8_t> dense = random_dense(total, total, 0.3, 77);
+    auto d = mask_from_dense(dense.data(), total, total, 0, false);
+    REQUIRE(d.is_ok());
+    masks.push_back({"random dense (identity order)", *d});
+  }
+  Problem p = make_problem(total, total, 2, 16, 91);
+  for (const auto& [name, mask] : masks) {
+    const std::vector<uint8_t> dense = mask.to_dense();
+    for (int limit : {n, n + 37, 1, total}) {
+      INFO(name << ", first " << limit << " queries");
+      auto r = restrict_queries(mask, limit);
+      REQUIRE(r.is_ok());
+      REQUIRE(r->validate().is_ok());
+      CHECK(r->nq == limit);
+      CHECK(r->to_dense() ==
+            std::vector<uint8_t>(dense.begin(), dense.begin() + ptrdiff_t(limit) * total));
+      for (bool bf16 : {false, true})
+        for (Isa isa : supported_isas()) {
+          INFO(isa_name(isa) << (bf16 ? " bf16" : " fp32"));
+          std::vector<float> full, part;
+          AttentionArgs a = args_for(p, full, &mask);
+          a.bf16 = bf16;
+          REQUIRE(attention_with_isa(a, isa).is_ok());
+          Problem pq = p;
+          pq.nq = limit;
+          AttentionArgs b = args_for(pq, part, &*r);
+          b.bf16 = bf16;
+          REQUIRE(attention_with_isa(b, isa).is_ok());
+          const size_t row = size_t(p.heads) * p.d;
+          CHECK(std::memcmp(full.data(), part.data(), size_t(limit) * row * sizeof(float)) == 0);
+        }
+    }
+  }
+  auto bad = restrict_queries(masks[0].second, total + 1);
+  REQUIRE(!bad.is_ok());
+  CHECK(bad.status().message().find("limit") != std::string::npos);
 }

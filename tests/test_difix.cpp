@@ -162,6 +162,48 @@ TEST_CASE("difix: consecutive steps on the reused arena are bit-identical",
   }
 }
 
+TEST_CASE("difix: the close-up-only step gives the same image bit for bit", "[nets][difix]") {
+  // step(all_views = false) computes eps and z0 of view 0 only (what the decode needs) and skips
+  // the other views' dead work in the U-Net: the decoded image must not change by one bit.
+  test::TempDir dir("difix-live");
+  const std::string root = make_pipeline(dir);
+  for (Precision p : {Precision::kF32, Precision::kBf16}) {
+    auto pipe = DifixPipeline::load(root, p);
+    REQUIRE(pipe.is_ok());
+    for (const char* name : {"case-ref2", "case-macro"}) {
+      INFO(name << " " << precision_name(p));
+      auto g = SafeTensors::open(test::golden_dir() + "/difix-tiny/" + name + ".safetensors");
+      REQUIRE(g.is_ok());
+      Tensor images = read_tensor(*g, "input.images"), ctx = read_tensor(*g, "input.ctx");
+      std::vector<BlockSparseMask> store;
+      store.reserve(8);
+      UNetMasks masks;
+      for (int l = 0; l < 8; ++l) {
+        const TensorEntry* e = g->find("mask.level" + std::to_string(l));
+        if (!e) break;
+        auto m = mask_from_dense(e->data, int(e->shape[0]), int(e->shape[1]), 0, true);
+        REQUIRE(m.is_ok());
+        store.push_back(std::move(*m));
+        masks.level.push_back(&store.back());
+      }
+      auto all = (*pipe)->step(images, ctx, masks, &ThreadPool::global());
+      REQUIRE(all.is_ok());
+      auto one = (*pipe)->step(images, ctx, masks, &ThreadPool::global(),
+                               DifixPipeline::kDefaultTimestep, {},
+                               /*all_views=*/false);
+      REQUIRE(one.is_ok());
+      CHECK(one->eps.dim(0) == 1);
+      CHECK(one->z0.dim(0) == 1);
+      const size_t per_view = size_t(all->eps.numel() / all->eps.dim(0));
+      CHECK(std::memcmp(one->eps.f32(), all->eps.f32(), per_view * sizeof(float)) == 0);
+      CHECK(std::memcmp(one->z0.f32(), all->z0.f32(), per_view * sizeof(float)) == 0);
+      REQUIRE(one->image.numel() == all->image.numel());
+      CHECK(std::memcmp(one->image.f32(), all->image.f32(),
+                        size_t(all->image.numel()) * sizeof(float)) == 0);
+    }
+  }
+}
+
 TEST_CASE("difix: bad scheduler configs and inputs are refused by name", "[nets][difix]") {
   test::TempDir dir("difix-bad");
   const std::string root = make_pipeline(dir);

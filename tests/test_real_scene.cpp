@@ -60,4 +60,12 @@ TEST_CASE("real scene buddha: split, reconstruction and close-up photos fit toge
   auto items = build_work_list(dir, {"3dgs"}, {{}}, default_method_registry());
   REQUIRE(items.is_ok());
   CHECK(items->size() == 3);
+  // Its training log gives the reconstruction's cost to every record.
+  const auto cost = training_log_seconds(dir + "/train_log.jsonl");
+  REQUIRE(cost.has_value());
+  CHECK(*cost > 60);
+  const std::string log = *read_text_file(dir + "/train_log.jsonl");
+  CHECK(log.find("\"step\": 6999,") != std::string::npos);
+  CHECK(log.find("\"train_views\": [\"00018.png\", \"00047.png\", \"00052.png\"]") !=
+        std::string::npos);
 }

@@ -2,8 +2,10 @@
 // view (with intermediates), odd latent, two joint views, MACRO masked/unmasked; bf16 deviation;
 // checkpoint mismatches reported by name; the full-size SD-Turbo layout from the manifest loads.
 #include <catch2/catch.hpp>
+
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -127,6 +129,44 @@ TEST_CASE("unet: the MACRO mask changes the result and skips work", "[nets][unet
   REQUIRE(u.is_ok());
   auto unmasked = read_tensor(*u, "output.eps");
   CHECK(test::compare(masked.f32(), unmasked.f32(), size_t(masked.numel())).rel_l2 > 1e-3);
+}
+
+TEST_CASE("unet: the close-up alone skips the other views' dead work, bit for bit",
+          "[nets][unet]") {
+  // output_views = 1 computes, after the last transformer's joint attention, view 0 only: its eps
+  // must be the full forward's view 0 exactly, masked and unmasked, fp32 and bf16, any threads.
+  for (Precision p : {Precision::kF32, Precision::kBf16}) {
+    auto unet = load_tiny(p);
+    for (const char* name : {"case-macro-masked", "case-macro-unmasked", "case-ref2"}) {
+      INFO(name << " " << precision_name(p));
+      auto g = SafeTensors::open(unet_dir() + "/" + name + ".safetensors");
+      REQUIRE(g.is_ok());
+      Tensor z = read_tensor(*g, "input.z"), ctx = read_tensor(*g, "input.ctx");
+      const float t = read_tensor(*g, "input.timestep").f32()[0];
+      std::vector<BlockSparseMask> store;
+      UNetMasks masks;
+      golden_masks(*g, &store, &masks);
+      auto full = unet->forward(z, t, ctx, masks, &ThreadPool::global());
+      REQUIRE(full.is_ok());
+      const int64_t views = z.dim(0);
+      REQUIRE(views >= 2);
+      const size_t per_view = size_t(full->numel() / views);
+      for (int threads : {1, 3}) {
+        ThreadPool pool(threads);
+        auto one = unet->forward(z, t, ctx, masks, &pool, {}, nullptr, 1);
+        REQUIRE(one.is_ok());
+        CHECK(one->dim(0) == 1);
+        REQUIRE(size_t(one->numel()) == per_view);
+        CHECK(std::memcmp(one->f32(), full->f32(), per_view * sizeof(float)) == 0);
+      }
+      auto two = unet->forward(z, t, ctx, masks, &ThreadPool::global(), {}, nullptr, 2);
+      REQUIRE(two.is_ok());
+      CHECK(std::memcmp(two->f32(), full->f32(), 2 * per_view * sizeof(float)) == 0);
+      auto bad = unet->forward(z, t, ctx, masks, &ThreadPool::global(), {}, nullptr, views + 1);
+      REQUIRE(!bad.is_ok());
+      CHECK_THAT(bad.status().message(), Catch::Contains("output views"));
+    }
+  }
 }
 
 TEST_CASE("unet: bad shapes and masks are refused", "[nets][unet]") {

@@ -75,8 +75,8 @@ size_t DifixPipeline::step_workspace_bytes(int64_t views, int64_t h, int64_t w,
 }
 
 Result<DifixOutputs> DifixPipeline::step(const TensorView& images, const TensorView& ctx,
-                                         const UNetMasks& masks, ThreadPool* pool,
-                                         int timestep, const StageObserver& on_stage) const {
+                                         const UNetMasks& masks, ThreadPool* pool, int timestep,
+                                         const StageObserver& on_stage, bool all_views) const {
   MACRO_ASSIGN_OR_RETURN(double abar, alpha_bar(schedule_, timestep));
   (void)abar;
   std::lock_guard<std::mutex> lock(mu_);
@@ -97,10 +97,11 @@ Result<DifixOutputs> DifixPipeline::step(const TensorView& images, const TensorV
                          vae_->encode(images, /*keep_skips=*/1, pool, &arena_, bf16_skips));
   o.z = std::move(enc.z);
   stage_done("encode");
-  MACRO_ASSIGN_OR_RETURN(o.eps,
-                         unet_->forward(o.z, float(timestep), ctx, masks, pool, {}, &arena_));
-  o.z0 = Tensor::f32(o.z.shape());
-  MACRO_TRY(ddpm_x0(schedule_, timestep, o.z.f32(), o.eps.f32(), o.z0.f32(), size_t(o.z.numel())));
+  MACRO_ASSIGN_OR_RETURN(o.eps, unet_->forward(o.z, float(timestep), ctx, masks, pool, {}, &arena_,
+                                               all_views ? 0 : 1));
+  o.z0 = Tensor::f32(o.eps.shape());  // z's first eps.dim(0) views
+  MACRO_TRY(
+      ddpm_x0(schedule_, timestep, o.z.f32(), o.eps.f32(), o.z0.f32(), size_t(o.eps.numel())));
   stage_done("unet");
   const TensorView z0_view0 = o.z0.view().slice(0, 0, 1);
   std::vector<TensorView> skips;

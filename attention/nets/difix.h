@@ -37,8 +37,9 @@ class SafeTensors;
 namespace macro::nets {
 
 struct DifixOutputs {
-  Tensor z, eps, z0;  // [V, L, h, w]
-  Tensor image;       // [1, 3, H, W]
+  Tensor z;        // [V, L, h, w]
+  Tensor eps, z0;  // [V, L, h, w], or [1, L, h, w] for step(all_views = false)
+  Tensor image;    // [1, 3, H, W]
 };
 
 class DifixPipeline {
@@ -49,9 +50,12 @@ class DifixPipeline {
 
   // Called after each stage with its name and wall milliseconds.
   using StageObserver = std::function<void(const char* stage, double ms)>;
+  // all_views: eps and z0 of every view, as the reference computes them (nn-run, the goldens);
+  // false: of view 0 only, all the decode needs, and the U-Net skips what only the other views'
+  // outputs need (UNet2DConditionModel::forward output_views = 1): the same image, bit for bit.
   Result<DifixOutputs> step(const TensorView& images, const TensorView& ctx, const UNetMasks& masks,
                             ThreadPool* pool, int timestep = kDefaultTimestep,
-                            const StageObserver& on_stage = {}) const;
+                            const StageObserver& on_stage = {}, bool all_views = true) const;
   // Scratch bytes of one step for V views at H x W pixels with Lc context tokens: the largest of
   // encode, U-Net and decode (what the shared arena is reserved to).
   size_t step_workspace_bytes(int64_t views, int64_t h, int64_t w, int64_t ctx_tokens = 77) const;

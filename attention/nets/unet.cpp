@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/ops.h"
@@ -96,25 +97,34 @@ constexpr int64_t kFeedForwardRows = 4096;
 
 void BasicTransformerBlock::forward(const Run& r, float* x, int64_t views, int64_t hw,
                                     const float* ctx, int64_t ctx_views, int64_t lc,
-                                    const BlockSparseMask* mask) const {
-  const int64_t m = views * hw;
+                                    const BlockSparseMask* mask, int64_t live_views,
+                                    const BlockSparseMask* live_mask) const {
+  const int64_t all = views * hw;  // rows that give attn1 its keys and values
+  if (live_views <= 0 || live_views > views) live_views = views;
+  const int64_t m = live_views * hw;  // rows computed from the attention on
   const int64_t dc = attn2.ctx_dim;
   const int heads = attn1.heads;
   ScratchFrame frame(r);
   const int64_t ff_rows = std::min(m, kFeedForwardRows);
-  float* n = r.alloc(m * c);                    // LayerNorm output, then attention output [M, C]
-  float* big = r.alloc(m * 3 * c);              // q|k|v [M, 3C], then q2 [M, C]
+  float* n = r.alloc(all * c);                  // LayerNorm output, then attention output [M, C]
+  float* big = r.alloc(all * 3 * c);            // q|k|v [M, 3C], then q2 [M, C]
   float* proj = r.alloc(ff_rows * 8 * c);       // GEGLU projection of a row chunk [rows, 8C]
   float* g = r.alloc(ff_rows * 4 * c);          // GEGLU output of the chunk [rows, 4C]
   float* kv = r.alloc(ctx_views * lc * 2 * c);  // cross k|v [Vc*Lc, 2C]
 
   // attn1: joint self-attention over all views' tokens (view-major), optionally masked.
-  norm1.forward(r, n, x, m);                  // [M, C]
-  attn1.qkv.forward(r, m, n, c, big, 3 * c);  // [M, 3C] = q | k | v, each [M, heads, D]
-  round_if_bf16(r, big, m * 3 * c);
+  norm1.forward(r, n, x, all);                  // [M, C]
+  attn1.qkv.forward(r, all, n, c, big, 3 * c);  // [M, 3C] = q | k | v, each [M, heads, D]
+  round_if_bf16(r, big, all * 3 * c);
   // One sequence of M = V*HW tokens: q, k, v [M, heads, D] -> n [M, heads*D = C]; mask M x M.
-  AttentionArgs a1 = packed_qkv_attention(big, n, m, c, heads);
+  // With live views, only their queries (the first rows) against every key.
+  AttentionArgs a1 = packed_qkv_attention(big, n, all, c, heads);
   a1.mask = mask;
+  if (m < all) {
+    a1.nq = int(m);
+    a1.mask = mask ? live_mask : nullptr;
+    MACRO_CHECK(!mask || (live_mask && live_mask->nq == m && live_mask->nk == all));
+  }
   run_attention(r, a1);
   attn1.to_out.forward(r, m, n, c, x, c, /*residual=*/x);  // x [M, C] += to_out(n)
 
@@ -124,7 +134,7 @@ void BasicTransformerBlock::forward(const Run& r, float* x, int64_t views, int64
   attn2.qkv.forward(r, ctx_views * lc, ctx, dc, kv, 2 * c);  // ctx [Vc*Lc, Dc] -> k | v [Vc*Lc, 2C]
   round_if_bf16(r, big, m * c);
   round_if_bf16(r, kv, ctx_views * lc * 2 * c);
-  for (int64_t v = 0; v < views; ++v) {
+  for (int64_t v = 0; v < live_views; ++v) {
     // View v: q [HW, heads, D] (rows v*HW..) x k, v [Lc, heads, D] of its context -> n [HW, C].
     const float* kv_v = kv + (ctx_views == 1 ? 0 : v) * lc * 2 * c;  // k | v [Lc, 2C]
     AttentionArgs a2;
@@ -177,8 +187,10 @@ void Transformer2D::pack(Precision p) {
 }
 
 void Transformer2D::forward(const Run& r, float* x, int64_t views, int64_t hw, const float* ctx,
-                            int64_t ctx_views, int64_t lc, const BlockSparseMask* mask) const {
+                            int64_t ctx_views, int64_t lc, const BlockSparseMask* mask,
+                            int64_t live_views, const BlockSparseMask* live_mask) const {
   const int64_t m = views * hw;
+  if (live_views <= 0 || live_views > views) live_views = views;
   ScratchFrame frame(r);
   float* g = r.alloc(m * c);  // GN(x) NCHW, later proj_out tokens [M, C]
   float* t = r.alloc(m * c);  // tokens [M, C]
@@ -187,9 +199,9 @@ void Transformer2D::forward(const Run& r, float* x, int64_t views, int64_t hw, c
   for (int64_t v = 0; v < views; ++v)  // NCHW plane read transposed: tokens [HW, C]
     proj_in.forward(r, hw, g + v * c * hw, hw, t + v * hw * c, c, nullptr, /*trans_x=*/true);
   // t [M, C] = [V, HW, C], view-major: the joint token layout of attn1.
-  block.forward(r, t, views, hw, ctx, ctx_views, lc, mask);  // [M, C] in place
-  proj_out.forward(r, m, t, c, g, c);                        // g: tokens [M, C]
-  tokens_to_nchw_add(r, x, x, g, c, views, c, hw);           // x [V, C, HW] += g^T per view
+  block.forward(r, t, views, hw, ctx, ctx_views, lc, mask, live_views, live_mask);  // in place
+  proj_out.forward(r, live_views * hw, t, c, g, c);      // g: tokens [live*HW, C]
+  tokens_to_nchw_add(r, x, x, g, c, live_views, c, hw);  // x [live, C, HW] += g^T per view
 }
 
 // ---- blocks ------------------------------------------------------------------------------------
@@ -356,16 +368,21 @@ struct Skip {
 void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t views, int64_t h,
                                         int64_t w, float t, const float* ctx, int64_t ctx_views,
                                         int64_t lc, const UNetMasks& masks, float* eps,
-                                        const UNetTap& tap) const {
-  // z [V, Cin, h, w], ctx [Vc, Lc, Dc] -> eps [V, Cout, h, w].
+                                        const UNetTap& tap, int64_t output_views,
+                                        const BlockSparseMask* live_mask) const {
+  // z [V, Cin, h, w], ctx [Vc, Lc, Dc] -> eps [V_out, Cout, h, w].
   const auto grids = level_grids(h, w);  // (h_L, w_L) per level
   const int n = levels();
   const int64_t c0 = cfg_.block_out_channels[0], temb = cfg_.time_embed_dim();
   auto mask_at = [&](int level) -> const BlockSparseMask* {
     return size_t(level) < masks.level.size() ? masks.level[size_t(level)] : nullptr;
   };
+  // Views computed from here on: all of them until the last transformer's joint attention, then
+  // the output views only (the others are dead: nothing mixes views after that attention).
+  int64_t live = views;
+  const auto [last_block, last_layer] = last_up_transformer();
   auto emit = [&](const std::string& name, const float* data, int64_t c, int64_t hh, int64_t ww) {
-    if (tap && !r.planning()) tap(name, data, Shape{views, c, hh, ww});
+    if (tap && !r.planning()) tap(name, data, Shape{live, c, hh, ww});
   };
 
   // Time embedding: SiLU(linear_2(SiLU(linear_1(sinusoid(t))))) — the SiLU every resnet applies.
@@ -461,17 +478,21 @@ void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t vi
       skips.pop_back();
       MACRO_CHECK(s.h == hh && s.w == ww && cc + s.c == b.resnets[j].c_in);
       const int64_t hw = hh * ww;
-      for (int64_t v = 0; v < views; ++v) {  // cat[v] = [h[v], skip[v]] on channels
+      for (int64_t v = 0; v < live; ++v) {  // cat[v] = [h[v], skip[v]] on channels
         copy_floats(r, cat + v * (cc + s.c) * hw, cur + v * cc * hw, cc * hw);
         copy_floats(r, cat + v * (cc + s.c) * hw + cc * hw, s.data + v * s.c * hw, s.c * hw);
       }  // cat [V, C + Cs, hh, ww]
       float* o = hbuf[which];
       which ^= 1;
       // [V, C + Cs, hh, ww] -> [V, c_out, hh, ww]
-      b.resnets[j].forward(r, cat, views, hh, ww, emb, o, /*x_is_scratch=*/true);
+      b.resnets[j].forward(r, cat, live, hh, ww, emb, o, /*x_is_scratch=*/true);
       cc = b.c_out;
-      if (!b.attentions.empty())  // in place on [V, c_out, hw]; tokens [V*hw, c_out]
-        b.attentions[j].forward(r, o, views, hw, ctx, ctx_views, lc, mask_at(level));
+      if (!b.attentions.empty()) {  // in place on [V, c_out, hw]; tokens [V*hw, c_out]
+        const bool last = i == last_block && int(j) == last_layer;
+        b.attentions[j].forward(r, o, views, hw, ctx, ctx_views, lc, mask_at(level),
+                                last ? output_views : views, last ? live_mask : nullptr);
+        if (last) live = output_views;
+      }
       cur = o;
     }
     if (b.has_up) {
@@ -480,30 +501,38 @@ void UNet2DConditionModel::forward_impl(const Run& r, const float* z, int64_t vi
       const int64_t oh = skips.empty() ? 2 * hh : skips.back().h;
       const int64_t ow = skips.empty() ? 2 * ww : skips.back().w;
       MACRO_CHECK(cur == hbuf[which ^ 1]);  // both buffers hold max_h: resize into the other one
-      b.upsampler.forward_in_place(r, cur, views, cc, hh, ww, oh, ow, hbuf[which]);
+      b.upsampler.forward_in_place(r, cur, live, cc, hh, ww, oh, ow, hbuf[which]);
       hh = oh, ww = ow;
     }
     emit("up_blocks." + std::to_string(i), cur, cc, hh, ww);
   }
 
   // Output: conv_out(SiLU(GN(h))).
-  float* t2 = r.alloc(views * cc * hh * ww);                                    // [V, C0, h, w]
-  conv_norm_out.forward(r, t2, cur, views, hh * ww, /*silu=*/true);             // [V, C0, h, w]
-  conv_out.forward_scratch(r, t2, views, hh, ww, eps, nullptr, 1, 1, 1, 1, 1);  // [V, Cout, h, w]
+  live = output_views;  // views are independent from the last joint attention on
+  float* t2 = r.alloc(live * cc * hh * ww);                                    // [V, C0, h, w]
+  conv_norm_out.forward(r, t2, cur, live, hh * ww, /*silu=*/true);             // [V, C0, h, w]
+  conv_out.forward_scratch(r, t2, live, hh, ww, eps, nullptr, 1, 1, 1, 1, 1);  // [V, Cout, h, w]
+}
+
+std::pair<int, int> UNet2DConditionModel::last_up_transformer() const {
+  for (int i = levels() - 1; i >= 0; --i)
+    if (!up_blocks[size_t(i)].attentions.empty())
+      return {i, int(up_blocks[size_t(i)].attentions.size()) - 1};
+  return {-1, -1};
 }
 
 size_t UNet2DConditionModel::workspace_bytes(int64_t views, int64_t h, int64_t w,
                                              int64_t ctx_tokens) const {
   Workspace plan;
   forward_impl(Run{&plan, nullptr, precision_}, nullptr, views, h, w, 0, nullptr, views, ctx_tokens,
-               {}, nullptr, {});
+               {}, nullptr, {}, views, nullptr);
   return plan.peak();
 }
 
 Result<Tensor> UNet2DConditionModel::forward(const TensorView& z, float timestep,
                                              const TensorView& ctx, const UNetMasks& masks,
-                                             ThreadPool* pool, const UNetTap& tap,
-                                             Arena* arena) const {
+                                             ThreadPool* pool, const UNetTap& tap, Arena* arena,
+                                             int64_t output_views) const {
   if (z.dtype != DType::kF32 || z.rank != 4 || !z.is_contiguous() || z.dim(1) != cfg_.in_channels ||
       z.dim(0) < 1 || z.dim(2) < 1 || z.dim(3) < 1)
     return Status::error("unet: z: expected contiguous F32 [V," + std::to_string(cfg_.in_channels) +
@@ -530,15 +559,31 @@ Result<Tensor> UNet2DConditionModel::forward(const TensorView& z, float timestep
                            std::to_string(grids[l].second) + "), found " + std::to_string(m->nq) +
                            " x " + std::to_string(m->nk));
   }
-  Tensor eps = Tensor::f32({views, cfg_.out_channels, h, w});  // [V, Cout, h, w]
+  if (output_views == 0) output_views = views;
+  if (output_views < 1 || output_views > views)
+    return Status::error("unet: output views: expected 1.." + std::to_string(views) + ", found " +
+                         std::to_string(output_views));
+  // The last transformer's mask restricted to the output views' queries.
+  const auto [last_block, last_layer] = last_up_transformer();
+  std::optional<BlockSparseMask> live_mask;
+  if (output_views < views && last_block >= 0) {
+    const size_t level = size_t(levels() - 1 - last_block);
+    if (level < masks.level.size() && masks.level[level]) {
+      const auto [gh, gw] = grids[level];
+      MACRO_ASSIGN_OR_RETURN(live_mask,
+                             restrict_queries(*masks.level[level], int(output_views * gh * gw)));
+    }
+  }
+  const BlockSparseMask* live = live_mask ? &*live_mask : nullptr;
+  Tensor eps = Tensor::f32({output_views, cfg_.out_channels, h, w});  // [V_out, Cout, h, w]
   Workspace plan;
   forward_impl(Run{&plan, pool, precision_}, nullptr, views, h, w, timestep, nullptr, ctx.dim(0),
-               ctx.dim(1), masks, nullptr, tap);
+               ctx.dim(1), masks, nullptr, tap, output_views, live);
   Arena local;
   Arena& a = prepare_arena(arena, local, plan.peak());
   Workspace ws(&a);
   forward_impl(Run{&ws, pool, precision_}, z.f32(), views, h, w, timestep, ctx.f32(), ctx.dim(0),
-               ctx.dim(1), masks, eps.f32(), tap);
+               ctx.dim(1), masks, eps.f32(), tap, output_views, live);
   a.reset();
   return eps;
 }

@@ -58,8 +58,12 @@ struct BasicTransformerBlock {
            ff_proj.bytes() + ff_out.bytes();
   }
   // x [V*HW, C] in place; ctx [Vc, Lc, Dc] with Vc = V or 1 (shared by all views).
+  // live_views (1..V): only the first live views' rows are computed after attn1's keys and values
+  // (their queries, attn2, FF); the other rows of x are left as they were, dead to the caller.
+  // `live_mask` is `mask` restricted to the live rows (restrict_queries), when mask is set.
   void forward(const Run& r, float* x, int64_t views, int64_t hw, const float* ctx,
-               int64_t ctx_views, int64_t lc, const BlockSparseMask* mask) const;
+               int64_t ctx_views, int64_t lc, const BlockSparseMask* mask, int64_t live_views = 0,
+               const BlockSparseMask* live_mask = nullptr) const;
 };
 
 struct Transformer2D {
@@ -72,9 +76,10 @@ struct Transformer2D {
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack(Precision p);
   size_t bytes() const { return norm.bytes() + proj_in.bytes() + proj_out.bytes() + block.bytes(); }
-  // x [V, C, HW] in place.
+  // x [V, C, HW] in place; live_views / live_mask as BasicTransformerBlock (0: every view).
   void forward(const Run& r, float* x, int64_t views, int64_t hw, const float* ctx,
-               int64_t ctx_views, int64_t lc, const BlockSparseMask* mask) const;
+               int64_t ctx_views, int64_t lc, const BlockSparseMask* mask, int64_t live_views = 0,
+               const BlockSparseMask* live_mask = nullptr) const;
 };
 
 struct UNetBlock {  // down, mid or up block
@@ -119,16 +124,25 @@ class UNet2DConditionModel {
   // z [V, Cin, h, w], ctx [V or 1, Lc, Dc], one timestep for all views -> eps [V, Cout, h, w].
   // Shapes and masks are validated (errors name `what` and the argument).
   // `arena` (optional, empty): scratch reused across calls (grown to the planned size if needed).
+  // output_views (1..V, 0 = V): eps of the first output_views views only, [output_views, Cout,
+  // h, w], bit-identical to those views of the full output. After the last transformer's joint
+  // attention no view reads another, so everything the other views compute from there on is dead
+  // and skipped: their attention queries in that transformer, its attn2, FF and proj_out, and
+  // every later resnet, upsample and the output convolution (MACRO needs only the close-up, view
+  // 0). Taps see only the computed views after that point.
   Result<Tensor> forward(const TensorView& z, float timestep, const TensorView& ctx,
                          const UNetMasks& masks, ThreadPool* pool, const UNetTap& tap = {},
-                         Arena* arena = nullptr) const;
+                         Arena* arena = nullptr, int64_t output_views = 0) const;
   // Scratch bytes one forward takes (the planned arena size) for V views of a latent h x w.
   size_t workspace_bytes(int64_t views, int64_t h, int64_t w, int64_t ctx_tokens = 77) const;
 
  private:
   void forward_impl(const Run& r, const float* z, int64_t views, int64_t h, int64_t w, float t,
                     const float* ctx, int64_t ctx_views, int64_t lc, const UNetMasks& masks,
-                    float* eps, const UNetTap& tap) const;
+                    float* eps, const UNetTap& tap, int64_t output_views,
+                    const BlockSparseMask* live_mask) const;
+  // The up block and layer of the last transformer ({-1, -1}: none in the up path).
+  std::pair<int, int> last_up_transformer() const;
 
   UNetConfig cfg_;
   Precision precision_ = Precision::kF32;

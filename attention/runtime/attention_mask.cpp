@@ -351,6 +351,74 @@ Result<BlockSparseMask> macro_closeup_mask(int tokens_per_view, int planes,
   return mask_from_groups(qg, kg, gq, gk, allowed);
 }
 
+Result<BlockSparseMask> restrict_queries(const BlockSparseMask& mask, int limit) {
+  if (limit < 0 || limit > mask.nq)
+    return Status::error("restrict_queries: limit " + std::to_string(limit) + ", expected 0.." +
+                         std::to_string(mask.nq) + " (the mask's query tokens)");
+  // The kept mask rows, in mask order, and their tokens.
+  std::vector<int32_t> rows;
+  BlockSparseMask out;
+  out.nq = limit;
+  out.nk = mask.nk;
+  out.key_index = mask.key_index;
+  for (int r = 0; r < mask.nq; ++r) {
+    const int32_t token = mask.query_index.empty() ? r : mask.query_index[size_t(r)];
+    if (token < limit) {
+      rows.push_back(r);
+      out.query_index.push_back(token);
+    }
+  }
+  bool identity = true;
+  for (size_t i = 0; i < out.query_index.size(); ++i) identity &= out.query_index[i] == int32_t(i);
+  if (identity) out.query_index.clear();
+  // The old entry of (old row, key block): -2 none, -1 full, else its element tile.
+  auto entry = [&](int row, int kb) -> int32_t {
+    const int qb = row / kBQ;
+    const auto first = mask.key_block.begin() + mask.block_begin[size_t(qb)];
+    const auto last = mask.key_block.begin() + mask.block_begin[size_t(qb) + 1];
+    const auto it = std::lower_bound(first, last, kb);
+    if (it == last || *it != kb) return -2;
+    return mask.tile[size_t(it - mask.key_block.begin())];
+  };
+  auto classify = [&](int qb, int kb) {
+    const int r0 = qb * kBQ, r1 = std::min(limit, r0 + kBQ);
+    bool any = false, all_full = true;
+    for (int r = r0; r < r1; ++r) {
+      const int32_t e = entry(rows[size_t(r)], kb);
+      if (e == -2) {
+        all_full = false;
+        continue;
+      }
+      if (e >= 0) {  // a partial row may still allow nothing
+        const uint8_t* t = mask.tile_data(e);
+        const int row = rows[size_t(r)] % kBQ;
+        bool row_any = false;
+        for (int c = 0; c < std::min(kBK, mask.nk - kb * kBK); ++c)
+          row_any |= t[tile_offset(row, c)] != 0;
+        any |= row_any;
+        all_full = false;  // kept partial: the kernel then runs the same masked path for it
+        continue;
+      }
+      any = true;
+    }
+    return !any ? TileKind::kEmpty : all_full ? TileKind::kFull : TileKind::kPartial;
+  };
+  auto fill = [&](int qb, int kb, uint8_t* tile) {
+    const int r0 = qb * kBQ, r1 = std::min(limit, r0 + kBQ);
+    const int cols = std::min(kBK, mask.nk - kb * kBK);
+    for (int r = r0; r < r1; ++r) {
+      const int32_t e = entry(rows[size_t(r)], kb);
+      if (e == -2) continue;
+      const uint8_t* t = mask.tile_data(e);
+      const int row = rows[size_t(r)] % kBQ;
+      for (int c = 0; c < cols; ++c)
+        tile[tile_offset(r - r0, c)] = t ? t[tile_offset(row, c)] : uint8_t(1);
+    }
+  };
+  build_tiles(out, classify, fill);
+  return out;
+}
+
 BlockSparseMask causal_mask(int nq, int nk) {
   BlockSparseMask m;
   m.nq = std::max(nq, 0);

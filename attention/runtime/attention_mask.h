@@ -99,6 +99,13 @@ Result<BlockSparseMask> macro_closeup_mask(int tokens_per_view, int planes,
                                            const std::vector<int32_t>& crop_plane,
                                            const std::vector<uint8_t>& crop_valid);
 
+// The mask of the query tokens 0..limit-1 alone (same keys): row t of the result allows what row t
+// of `mask` allows, for every token t < limit; nq = limit. What a caller needs that keeps only the
+// first views' outputs of a joint attention (the later views still serve as keys). The rows keep
+// their mask order and are re-blocked, so a tile may turn from full to partial or disappear.
+// 0 <= limit <= mask.nq, else an error naming both.
+Result<BlockSparseMask> restrict_queries(const BlockSparseMask& mask, int limit);
+
 // Causal mask (key j allowed iff j <= i), nq x nk; the kernel's `causal` flag does the same
 // without a mask object. Provided for tests and for combining with other structure.
 BlockSparseMask causal_mask(int nq, int nk);

@@ -51,14 +51,11 @@ class ScratchDir {
   std::string path_;
 };
 
-// The 8-bit PNG levels of a render, as the release saves and reloads it: round half up, k / 255.
+// The 8-bit PNG levels of a render, as the release saves and reloads it.
 gs::Image quantised(const gs::RenderResult& r) {
   gs::Image img(r.width, r.height, 3);
-  for (size_t i = 0; i < r.color.size(); ++i) {
-    const float v = r.color[i];
-    const int level = !(v > 0.f) ? 0 : v >= 1.f ? 255 : int(v * 255.f + 0.5f);
-    img.data[i] = float(level) * (1.f / 255.f);
-  }
+  img.data = r.color;
+  gs::round_to_png_levels(&img.data);
   return img;
 }
 

@@ -47,16 +47,12 @@ std::vector<std::string> MethodRegistry::names() const {
 namespace {
 
 // A render as a method's prediction. The released pipeline saves the render as an 8-bit PNG and
-// scores the file: quantise exactly as gs::write_png + gs::read_image would (round half up, then
-// level * (1 / 255)).
+// scores the file: quantise exactly as gs::write_png + gs::read_image would.
 MethodOutput png_round_trip(gs::RenderResult r) {
   MethodOutput out;
   out.image = gs::Image(r.width, r.height, 3);
   out.image.data = std::move(r.color);
-  for (float& v : out.image.data) {
-    const int level = !(v > 0.f) ? 0 : v >= 1.f ? 255 : int(v * 255.f + 0.5f);
-    v = float(level) * (1.f / 255.f);
-  }
+  gs::round_to_png_levels(&out.image.data);
   return out;
 }
 

@@ -18,9 +18,7 @@ using Clock = std::chrono::steady_clock;
 
 // As write_png stores a float render (gs/image_io.cpp): clamp, x255, round half up.
 uint8_t png_u8(float v) {
-  if (!(v > 0.f)) return 0;
-  if (v >= 1.f) return 255;
-  return static_cast<uint8_t>(v * 255.f + 0.5f);
+  return gs::png_byte(v);
 }
 
 // A given close-up depth: W x H values, each finite and >= 0 (0 = no surface).

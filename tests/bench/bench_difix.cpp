@@ -21,7 +21,9 @@
 //               [--precision f32|bf16|both]
 //               [--threads 1,2] [--reps R] [--warmup] [--views V] [--random-latents] [--dir DIR]
 //               [--storage bf16|f32] [--golden DIR] [--whole]
-// --views V: V views (default 2; the MACRO case runs 10 at 960x536). --random-latents: with
+// --views V: V views (default 2; the MACRO case runs 10 at 960x536). With V > 1 the U-Net also
+// runs for view 0's output only (row "unet v0", output_views = 1) with its ratio to the full one.
+// --random-latents: with
 // --stage unet, feed uniform random latents instead of encoding the images first. --whole: the
 // VAE's whole-image paths (no row bands, whole-image bf16 pair planes, fp32 skips): the memory
 // baseline. Peak RSS is also printed per stage (VmHWM reset before each stage; -1 = not run).
@@ -94,7 +96,8 @@ Timing fma_peak(int threads, bool bf16 = false) {
   return {r.wall, r.cpu};
 }
 
-// ---- FLOP counts (docs/spec/difix-spec.md §4.5: 1 MAC = 2 FLOP; norms, softmax, elementwise ignored) ---------
+// ---- FLOP counts (docs/spec/difix-spec.md §4.5: 1 MAC = 2 FLOP; norms, softmax, elementwise
+// ignored) ---------
 
 double resnet_macs(double n, double cin, double cout) {
   return n * 9 * cout * (cin + cout) + (cin != cout ? n * cin * cout : 0);
@@ -471,6 +474,32 @@ int run(int argc, char** argv) {
             return 1;
           }
           row("unet", unet_flop, tu, pk0);
+          if (views > 1) {
+            // The same U-Net for view 0's output only (output_views = 1, what the enhancer
+            // decodes): the other views' work after the last joint attention is skipped; the
+            // same FLOP count is kept so the ratio is the time saved.
+            Tensor eps0;
+            auto do_unet0 = [&] {
+              auto r = p.unet().forward(enc.z, 199.0f, ctx, nets::UNetMasks{}, pool, {}, &arena,
+                                        /*output_views=*/1);
+              if (!r.is_ok()) {
+                err = r.status();
+                return;
+              }
+              eps0 = std::move(*r);
+            };
+            const Timing t0 = median_timing(o.reps, do_unet0, o.warmup);
+            if (!err) {
+              std::fprintf(stderr, "bench difix: %s\n", err.message().c_str());
+              return 1;
+            }
+            row("unet v0", unet_flop, t0, pk0);
+            const bool same =
+                eps0.numel() * views == eps.numel() &&
+                std::memcmp(eps0.f32(), eps.f32(), size_t(eps0.numel()) * sizeof(float)) == 0;
+            std::printf("    unet v0 / unet: wall %.3f, cpu %.3f; view 0 eps %s\n",
+                        t0.wall / tu.wall, t0.cpu / tu.cpu, same ? "bit-identical" : "DIFFERS");
+          }
         }
         if (all || o.stage == "decode") {
           reset_peak_rss();
