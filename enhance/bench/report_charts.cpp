@@ -118,8 +118,7 @@ Chart chart_time_vs_metric(const std::vector<ConfigResult>& configs, const Metri
                 "points: mean of the scene means over " + std::to_string(max_scenes) +
                     (max_scenes == 1 ? " scene" : " scenes") +
                     (any_sd ? "; bars: \u00b11 s.d. of the scene means" : ""),
-                full_cost ? "seconds per close-up of a new scene (s, reconstruction training + "
-                            "fine-tuning + render + enhance)"
+                full_cost ? "seconds per close-up of a new scene (s, training + method)"
                           : "seconds per close-up (s, render + plan + enhance)",
                 metric_axis_label(m)};
   Chart c;
