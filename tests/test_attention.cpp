@@ -212,18 +212,28 @@ TEST_CASE("dense masks with interleaved groups become block sparse when grouped"
   check_all_paths(p, &*grouped, dense.data(), false);
 }
 
+// A MACRO mask's inputs: a close-up grid 20 x 30 with 3 planes in spatial blobs, 5 crops (one
+// entirely invalid).
+struct MacroMaskCase {
+  int gh = 20, gw = 30, n = 600, planes = 3;
+  std::vector<int32_t> closeup_plane = std::vector<int32_t>(600), crop_plane = {0, 1, 2, 0, 1};
+  int crops = 5;
+  std::vector<uint8_t> valid = std::vector<uint8_t>(5 * 600);
+  MacroMaskCase() {
+    for (int y = 0; y < gh; ++y)
+      for (int x = 0; x < gw; ++x) closeup_plane[size_t(y * gw + x)] = ((x / 4) + (y / 3)) % planes;
+    for (int c = 0; c < crops; ++c)
+      for (int t = 0; t < n; ++t) valid[size_t(c) * n + t] = c != 4 && (t % gw) > 2 + c;
+  }
+};
+
 TEST_CASE("structured MACRO masks equal their dense rule and are block sparse",
           "[attention][mask]") {
-  // Close-up grid 20 x 30 with 3 planes in spatial blobs, 5 crops (one entirely invalid).
-  const int gh = 20, gw = 30, n = gh * gw, planes = 3;
-  std::vector<int32_t> closeup_plane(n), crop_plane = {0, 1, 2, 0, 1};
-  const int crops = int(crop_plane.size());
-  std::vector<uint8_t> valid(size_t(crops) * n);
-  std::mt19937 rng(3);
-  for (int y = 0; y < gh; ++y)
-    for (int x = 0; x < gw; ++x) closeup_plane[size_t(y * gw + x)] = ((x / 4) + (y / 3)) % planes;
-  for (int c = 0; c < crops; ++c)
-    for (int t = 0; t < n; ++t) valid[size_t(c) * n + t] = c != 4 && (t % gw) > 2 + c;
+  const MacroMaskCase mc;
+  const int n = mc.n, planes = mc.planes, crops = mc.crops;
+  const std::vector<int32_t>& closeup_plane = mc.closeup_plane;
+  const std::vector<int32_t>& crop_plane = mc.crop_plane;
+  const std::vector<uint8_t>& valid = mc.valid;
   auto mask = macro_closeup_mask(n, planes, closeup_plane, crop_plane, valid);
   REQUIRE(mask.is_ok());
   REQUIRE(mask->validate().is_ok());
@@ -494,18 +504,12 @@ TEST_CASE("a mask restricted to the first query tokens keeps their rows and thei
   // The MACRO mask of a close-up and 5 crops (as above), restricted to the close-up's tokens (and
   // to other limits, one that cuts a view): the same rows of the dense mask, and attention over
   // the kept queries gives the full attention's first rows bit for bit, on every path.
-  const int gh = 20, gw = 30, n = gh * gw, planes = 3;
-  std::vector<int32_t> closeup_plane(n), crop_plane = {0, 1, 2, 0, 1};
-  const int crops = int(crop_plane.size());
-  std::vector<uint8_t> valid(size_t(crops) * n);
-  for (int y = 0; y < gh; ++y)
-    for (int x = 0; x < gw; ++x) closeup_plane[size_t(y * gw + x)] = ((x / 4) + (y / 3)) % planes;
-  for (int c = 0; c < crops; ++c)
-    for (int t = 0; t < n; ++t) valid[size_t(c) * n + t] = c != 4 && (t % gw) > 2 + c;
+  const MacroMaskCase mc;
+  const int n = mc.n, crops = mc.crops;
   const int total = n * (1 + crops);
   std::vector<std::pair<std::string, BlockSparseMask>> masks;
   {
-    auto m = macro_closeup_mask(n, planes, closeup_plane, crop_plane, valid);
+    auto m = macro_closeup_mask(n, mc.planes, mc.closeup_plane, mc.crop_plane, mc.valid);
     REQUIRE(m.is_ok());
     masks.push_back({"macro (grouped, permuted rows)", *m});
     std::vector<uint8_t> dense = random_dense(total, total, 0.3, 77);

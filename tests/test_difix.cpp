@@ -45,21 +45,28 @@ std::string make_pipeline(const test::TempDir& dir) {
   return root;
 }
 
+// The golden's dense mask.levelL tensors as block-sparse masks (kept alive in *store).
+UNetMasks golden_masks(const SafeTensors& g, std::vector<BlockSparseMask>* store) {
+  store->clear();
+  store->reserve(8);
+  UNetMasks masks;
+  for (int l = 0; l < 8; ++l) {
+    const TensorEntry* e = g.find("mask.level" + std::to_string(l));
+    if (!e) break;
+    auto m = mask_from_dense(e->data, int(e->shape[0]), int(e->shape[1]), 0, true);
+    REQUIRE(m.is_ok());
+    store->push_back(std::move(*m));
+    masks.level.push_back(&store->back());
+  }
+  return masks;
+}
+
 void run_case(const DifixPipeline& pipe, const std::string& name, Precision p, Bound b) {
   auto g = SafeTensors::open(test::golden_dir() + "/difix-tiny/" + name + ".safetensors");
   REQUIRE(g.is_ok());
   Tensor images = read_tensor(*g, "input.images"), ctx = read_tensor(*g, "input.ctx");
   std::vector<BlockSparseMask> store;
-  store.reserve(8);
-  UNetMasks masks;
-  for (int l = 0; l < 8; ++l) {
-    const TensorEntry* e = g->find("mask.level" + std::to_string(l));
-    if (!e) break;
-    auto m = mask_from_dense(e->data, int(e->shape[0]), int(e->shape[1]), 0, true);
-    REQUIRE(m.is_ok());
-    store.push_back(std::move(*m));
-    masks.level.push_back(&store.back());
-  }
+  const UNetMasks masks = golden_masks(*g, &store);
   std::printf("difix-tiny %s (%s, %zu masked levels)\n", name.c_str(), precision_name(p),
               masks.level.size());
   auto o = pipe.step(images, ctx, masks, &ThreadPool::global());
@@ -176,16 +183,7 @@ TEST_CASE("difix: the close-up-only step gives the same image bit for bit", "[ne
       REQUIRE(g.is_ok());
       Tensor images = read_tensor(*g, "input.images"), ctx = read_tensor(*g, "input.ctx");
       std::vector<BlockSparseMask> store;
-      store.reserve(8);
-      UNetMasks masks;
-      for (int l = 0; l < 8; ++l) {
-        const TensorEntry* e = g->find("mask.level" + std::to_string(l));
-        if (!e) break;
-        auto m = mask_from_dense(e->data, int(e->shape[0]), int(e->shape[1]), 0, true);
-        REQUIRE(m.is_ok());
-        store.push_back(std::move(*m));
-        masks.level.push_back(&store.back());
-      }
+      const UNetMasks masks = golden_masks(*g, &store);
       auto all = (*pipe)->step(images, ctx, masks, &ThreadPool::global());
       REQUIRE(all.is_ok());
       auto one = (*pipe)->step(images, ctx, masks, &ThreadPool::global(),
