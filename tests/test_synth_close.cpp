@@ -76,11 +76,14 @@ struct FolderScores {
   double closeup_grad_mean = 0;
 };
 
-// Renders scene.ply at every training camera (vs images/) and close-up (vs closeup_gt/).
+// Renders the folder's reconstruction (find_scene_ply) at every training camera (vs images/)
+// and close-up (vs closeup_gt/).
 FolderScores score_folder(const std::string& dir) {
   auto split = gs::load_closeup_split(dir + "/split.json");
   REQUIRE(split.is_ok());
-  auto cloud = gs::load_scene(dir + "/scene.ply");
+  auto recon = find_scene_ply(dir);
+  REQUIRE(recon.is_ok());
+  auto cloud = gs::load_scene(*recon);
   REQUIRE(cloud.is_ok());
   auto cams = gs::load_cameras(dir + "/sparse/0");
   REQUIRE(cams.is_ok());
@@ -378,7 +381,7 @@ TEST_CASE("macro bench synth, run and report end to end on tiny SynthClose", "[s
   CHECK(sh("synth --size tiny") != 0);  // --out missing
 }
 
-TEST_CASE("synthclose demo scene: loads, sharp far away, blurrier than its close-up GT",
+TEST_CASE("synthclose demo scene: loads, fits its photos, blurrier than its close-up GT",
           "[synthclose]") {
   const std::string dir = test::source_dir() + "/data/scenes/synthclose";
   REQUIRE(file_exists(dir + "/split.json"));
@@ -390,14 +393,15 @@ TEST_CASE("synthclose demo scene: loads, sharp far away, blurrier than its close
   REQUIRE(split.is_ok());
   CHECK(split->closeup_eval_pairs.size() == 3);
   const FolderScores s = score_folder(dir);
-  // Measured: worst training view 30.4 dB; close-ups mean 21.7 dB (best 28.5 at 1.5x),
-  // gradient-energy ratio max 0.54 (1.5x), mean 0.21.
+  // The trained reconstruction (3000 steps from 10,000 SfM-like points, 6 photos), measured:
+  // worst training view 25.7 dB; close-ups mean 18.9 dB (best 28.3 at 1.5x), gradient-energy
+  // ratio max 0.78 (1.5x), mean 0.38. (The merge variant: 30.4, 21.7, 0.54, 0.21.)
   INFO("demo: train PSNR " << s.train_psnr << " close-up PSNR mean " << s.closeup_psnr_mean
                            << " best " << s.closeup_psnr << " grad ratio max " << s.closeup_grad_max
                            << " mean " << s.closeup_grad_mean);
-  CHECK(s.train_psnr > 29.0);
-  CHECK(s.closeup_grad_max < 0.7);
-  CHECK(s.closeup_grad_mean < 0.4);
+  CHECK(s.train_psnr > 24.0);
+  CHECK(s.closeup_grad_max < 0.9);
+  CHECK(s.closeup_grad_mean < 0.5);
   CHECK(s.closeup_psnr_mean < s.train_psnr - 3.0);
 }
 
@@ -407,15 +411,48 @@ TEST_CASE("synthclose demo scene: the committed files are what the generator mak
   test::TempDir tmp("synthclose-demo");
   SynthCloseOptions o;
   o.size = SynthCloseSize::kDemo;
-  o.recon = SynthCloseRecon::kMerge;  // the committed demo is the merge variant (its README)
+  // The committed demo is the train variant (its README): its reconstruction is what `macro
+  // train` made from the photos and points (scene.ply, committed as scene.spz) with its log; the
+  // merged cloud is not committed. Everything else is the same in both variants, so the (fast)
+  // merge variant is generated here and compared; the reconstruction is checked below. (Training
+  // is not repeated: its float sums differ between ISA paths, so its bits are this machine's.)
+  o.recon = SynthCloseRecon::kMerge;
   REQUIRE(write_synthclose(tmp.path, o).is_ok());
   auto made = files_under(tmp.path);
   auto committed = files_under(dir);
   committed.erase("README.md");
+  made.erase("scene.ply");
+  for (const char* f : {"scene.spz", "train_log.jsonl"}) {
+    INFO(f);
+    REQUIRE(committed.count(f) == 1);
+    committed.erase(f);
+  }
+  {
+    auto info = nlohmann::json::parse(*read_text_file(dir + "/synthclose.json"));
+    CHECK(info["recon"] == "train");
+    CHECK(info["train"]["steps"] == 3000);
+    auto cloud = gs::load_scene(dir + "/scene.spz");
+    REQUIRE(cloud.is_ok());
+    CHECK(cloud->size() == info["train"]["gaussians"].get<size_t>());
+    CHECK(cloud->sh_degree == 3);
+    const std::string log = *read_text_file(dir + "/train_log.jsonl");
+    CHECK(log.find("\"step\": 2999,") != std::string::npos);
+    CHECK(training_log_seconds(dir + "/train_log.jsonl").has_value());
+    // The recon-specific fields aside, synthclose.json is the merge variant's.
+    auto mine = nlohmann::json::parse(made.at("synthclose.json"));
+    for (auto* j : {&info, &mine})
+      for (const char* k : {"recon", "train", "train_mip", "recon_gaussians", "surfaces",
+                            "recon_ply", "recon_converted", "merged_ply"})
+        j->erase(k);
+    CHECK(info == mine);
+    made.erase("synthclose.json");
+    committed.erase("synthclose.json");
+  }
   CHECK(made.size() == committed.size());
   for (const auto& [name, bytes] : made) {
-    INFO(name << " (regenerate: macro bench synth --size demo --recon merge --out "
-                 "data/scenes/synthclose)");
+    INFO(name << " (regenerate: macro bench synth --size demo --out /tmp/demo, then its "
+                 "scene.ply converted to data/scenes/synthclose/scene.spz; data/scenes/"
+                 "synthclose/README.md)");
     REQUIRE(committed.count(name) == 1);
     if (name == "sparse/0/points3D.txt") {
       // The SfM-like points' visibility tests read GT renders, whose rounding differs between
