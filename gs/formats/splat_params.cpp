@@ -219,7 +219,8 @@ GaussianCloud to_cloud(const SplatParams& p) {
                                 double(q[3]) * q[3]);
     for (int a = 0; a < 4; ++a) c.rotation[i * 4 + a] = qn > 0 ? float(q[a] / qn) : 0.f;
     c.opacity[i] = float(1.0 / (1.0 + std::exp(-double(p.opacities[i]))));
-    std::copy_n(&p.shN[i * (K - 1) * 3], (K - 1) * 3, &c.sh[i * K * 3 + 3]);
+    if (K > 1)  // (degree 0: shN is empty, no element to point at)
+      std::copy_n(p.shN.data() + i * (K - 1) * 3, (K - 1) * 3, c.sh.data() + i * K * 3 + 3);
   }
   return c;
 }
@@ -250,7 +251,8 @@ Result<SplatParams> from_cloud(const GaussianCloud& c, const std::string& name) 
       p.quats[i * 4] = 1;
     const double o = std::clamp(double(c.opacity[i]), 1e-6, 1 - 1e-6);
     p.opacities[i] = float(std::log(o / (1 - o)));
-    std::copy_n(&c.sh[i * K * 3 + 3], (K - 1) * 3, &p.shN[i * (K - 1) * 3]);
+    if (K > 1)
+      std::copy_n(c.sh.data() + i * K * 3 + 3, (K - 1) * 3, p.shN.data() + i * (K - 1) * 3);
   }
   return p;
 }
