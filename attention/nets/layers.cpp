@@ -7,6 +7,7 @@
 #include <cstring>
 
 #include "attention/runtime/file_io.h"
+#include "attention/runtime/op_profile.h"
 #include "attention/runtime/ops.h"
 
 namespace macro::nets {
@@ -78,6 +79,7 @@ constexpr int64_t kChunk = 1 << 14;  // elements per task of the elementwise hel
 
 void round_if_bf16(const Run& r, float* x, int64_t n) {
   if (r.planning() || !r.bf16()) return;
+  op_profile::OpScope prof("round to bf16");
   const size_t chunks = size_t((n + kChunk - 1) / kChunk);
   parallel(r, chunks, [&](size_t b, size_t e) {
     for (size_t c = b; c < e; ++c) {
@@ -89,6 +91,7 @@ void round_if_bf16(const Run& r, float* x, int64_t n) {
 
 void copy_floats(const Run& r, float* dst, const float* src, int64_t n) {
   if (r.planning() || dst == src) return;
+  op_profile::OpScope prof("copy");
   const size_t chunks = size_t((n + kChunk - 1) / kChunk);
   parallel(r, chunks, [&](size_t b, size_t e) {
     for (size_t c = b; c < e; ++c) {
@@ -101,6 +104,7 @@ void copy_floats(const Run& r, float* dst, const float* src, int64_t n) {
 void gather_rows(const Run& r, float* dst, const float* src, int64_t c, int64_t h, int64_t w,
                  int64_t y0, int64_t y1) {
   if (r.planning()) return;
+  op_profile::OpScope prof("copy");
   const int64_t n = (y1 - y0) * w;
   parallel(r, size_t(c), [&](size_t b, size_t e) {
     for (size_t ch = b; ch < e; ++ch)
@@ -112,6 +116,7 @@ void gather_rows(const Run& r, float* dst, const float* src, int64_t c, int64_t 
 void scatter_rows(const Run& r, float* dst, const float* src, int64_t c, int64_t h, int64_t w,
                   int64_t y0, int64_t y1) {
   if (r.planning()) return;
+  op_profile::OpScope prof("copy");
   const int64_t n = (y1 - y0) * w;
   parallel(r, size_t(c), [&](size_t b, size_t e) {
     for (size_t ch = b; ch < e; ++ch)
@@ -123,6 +128,7 @@ void scatter_rows(const Run& r, float* dst, const float* src, int64_t c, int64_t
 void tokens_to_nchw_add(const Run& r, float* dst, const float* src, const float* tokens,
                         int64_t ldt, int64_t n, int64_t c, int64_t hw) {
   if (r.planning()) return;
+  op_profile::OpScope prof("tokens to NCHW + residual");
   constexpr int64_t kTile = 32;  // pixels per task: 32 token rows stay in cache across channels
   const int64_t tiles = (hw + kTile - 1) / kTile;
   parallel(r, size_t(n * tiles), [&](size_t b, size_t e) {
@@ -140,6 +146,12 @@ void tokens_to_nchw_add(const Run& r, float* dst, const float* src, const float*
 
 void run_attention(const Run& r, const AttentionArgs& args) {
   if (r.planning()) return;
+  const bool prof_on = op_profile::enabled();
+  const double pairs = !prof_on    ? 0.0
+                       : args.mask ? double(args.mask->computed_pairs())
+                                   : double(args.nq) * args.nk;
+  op_profile::OpScope prof(args.mask ? "attention (masked)" : "attention",
+                           4.0 * pairs * args.heads * args.head_dim);
   AttentionArgs a = args;
   a.bf16 = r.bf16();  // bf16 products where the path has them (attention.h)
   Status s = attention(a, r.pool ? *r.pool : ThreadPool::global());
@@ -198,7 +210,6 @@ WeightType weight_type(Precision p) {
   return p == Precision::kBf16 ? WeightType::kBf16 : WeightType::kF32;
 }
 
-
 }  // namespace
 
 void Linear::pack(Precision p) {
@@ -218,6 +229,7 @@ void Linear::pack(Precision p) {
 void Linear::forward(const Run& r, int64_t m, const float* x, int64_t ldx, float* y, int64_t ldy,
                      const float* residual, bool trans_x) const {
   if (r.planning() || m == 0) return;
+  op_profile::OpScope prof("linear", 2.0 * double(m) * double(in) * double(out));
   GemmParams p;
   p.trans_a = trans_x;
   p.bias_n = b.empty() ? nullptr : b.data();
@@ -269,6 +281,7 @@ void FusedLinear::pack(const std::vector<const Linear*>& parts, Precision p) {
 void FusedLinear::forward(const Run& r, int64_t m, const float* x, int64_t ldx, float* y,
                           int64_t ldy, bool trans_x) const {
   if (r.planning() || m == 0) return;
+  op_profile::OpScope prof("linear", 2.0 * double(m) * double(in) * double(out));
   GemmParams p;
   p.trans_a = trans_x;
   p.bias_n = b.empty() ? nullptr : b.data();
@@ -300,14 +313,14 @@ void Conv2d::pack(Precision p) {
   // when it gets them (conv.h, stride1_only).
   if (weight_scale == 1.0f) {
     ParamF32 w(weight);
-    packed = ConvWeights::pack(w.data(), bp, c_out, c_in, k, k, weight_type(p), active_isa(),
-                               !strided);
+    packed =
+        ConvWeights::pack(w.data(), bp, c_out, c_in, k, k, weight_type(p), active_isa(), !strided);
   } else {
     WidenedBuffer w(weight.numel());
     read_param_f32(weight, w.data());
     for (int64_t i = 0; i < w.size(); ++i) w.data()[i] *= weight_scale;
-    packed = ConvWeights::pack(w.data(), bp, c_out, c_in, k, k, weight_type(p), active_isa(),
-                               !strided);
+    packed =
+        ConvWeights::pack(w.data(), bp, c_out, c_in, k, k, weight_type(p), active_isa(), !strided);
   }
   release_param(weight);
   weight = Param();
@@ -328,6 +341,11 @@ void Conv2d::forward_scratch(const Run& r, float* x, int64_t n, int64_t h, int64
                              const float* residual, int stride, int pt, int pl, int pb, int pr,
                              int64_t row_origin) const {
   if (r.planning()) return;
+  const int64_t oh = (h + pt + pb - k) / stride + 1, ow = (w + pl + pr - k) / stride + 1;
+  op_profile::OpScope prof(k == 1        ? "conv 1x1"
+                           : stride == 1 ? "conv 3x3"
+                                         : "conv 3x3 stride 2",
+                           2.0 * double(n * oh * ow) * double(c_in * c_out) * double(k * k));
   if (packed.type() != WeightType::kBf16) round_if_bf16(r, x, n * c_in * h * w);
   Conv2dShape s;
   s.n = n, s.c_in = c_in, s.h = h, s.w = w, s.c_out = c_out, s.kh = k, s.kw = k;
@@ -372,6 +390,7 @@ void GroupNorm::pack() {
 void GroupNorm::forward(const Run& r, float* dst, const float* src, int64_t n, int64_t hw,
                         bool silu) const {
   if (r.planning()) return;
+  op_profile::OpScope prof(silu ? "group norm + SiLU" : "group norm");
   GroupNormParams p;
   p.groups = groups;
   p.eps = eps;
@@ -386,6 +405,7 @@ void GroupNorm::stats(const Run& r, const float* x, int64_t hw, bool silu, Stats
   st->b.assign(size_t(c), 0.0f);
   st->silu = silu;
   if (r.planning()) return;
+  op_profile::OpScope prof("group norm");
   const OpsKernels& k = ops_kernels();
   const int64_t cpg = c / groups, group_len = cpg * hw;
   parallel(r, size_t(groups), [&](size_t b0, size_t b1) {
@@ -407,6 +427,7 @@ void GroupNorm::stats(const Run& r, const float* x, int64_t hw, bool silu, Stats
 void GroupNorm::apply(const Run& r, const Stats& st, float* dst, int64_t dst_plane,
                       const float* src, int64_t src_plane, int64_t len) {
   if (r.planning()) return;
+  op_profile::OpScope prof(st.silu ? "group norm + SiLU" : "group norm");
   const OpsKernels& k = ops_kernels();
   const Act act = st.silu ? Act::kSilu : Act::kNone;
   parallel(r, st.mean.size(), [&](size_t b, size_t e) {
@@ -433,6 +454,7 @@ void LayerNorm::pack() {
 
 void LayerNorm::forward(const Run& r, float* dst, const float* src, int64_t m) const {
   if (r.planning()) return;
+  op_profile::OpScope prof("layer norm");
   layer_norm(dst, src, gamma.data(), beta.data(), m, d, eps, r.pool);
 }
 

@@ -18,6 +18,7 @@
 #include <optional>
 
 #include "attention/runtime/file_io.h"
+#include "attention/runtime/op_profile.h"
 #include "attention/runtime/ops.h"
 
 namespace macro::nets {
@@ -157,8 +158,11 @@ void BasicTransformerBlock::forward(const Run& r, float* x, int64_t views, int64
   norm3.forward(r, n, x, m);  // [M, C]
   for (int64_t r0 = 0; r0 < m; r0 += ff_rows) {
     const int64_t rows = std::min(ff_rows, m - r0);
-    ff_proj.forward(r, rows, n + r0 * c, c, proj, 8 * c);    // [rows, 8C] = value | gate
-    if (!r.planning()) geglu(g, proj, rows, 4 * c, r.pool);  // [rows, 4C]
+    ff_proj.forward(r, rows, n + r0 * c, c, proj, 8 * c);  // [rows, 8C] = value | gate
+    if (!r.planning()) {
+      op_profile::OpScope prof("GEGLU");
+      geglu(g, proj, rows, 4 * c, r.pool);  // [rows, 4C]
+    }
     // x rows [rows, C] += ff_out(g)
     ff_out.forward(r, rows, g, 4 * c, x + r0 * c, c, x + r0 * c);
   }

@@ -20,7 +20,10 @@
 //   bench difix [--size 512|960|all] [--stage all|encode|unet|decode|load]
 //               [--precision f32|bf16|both]
 //               [--threads 1,2] [--reps R] [--warmup] [--views V] [--random-latents] [--dir DIR]
-//               [--storage bf16|f32] [--golden DIR] [--whole]
+//               [--storage bf16|f32] [--golden DIR] [--whole] [--profile]
+// --profile: after each stage's timed runs, one more run with the per-op profile on
+// (attention/runtime/op_profile.h): time, calls, GFLOP/s and share of the path's peak per op, and
+// the time outside every op (the rest of the stage: upsampling, embeddings, concatenations, ...).
 // --views V: V views (default 2; the MACRO case runs 10 at 960x536). With V > 1 the U-Net also
 // runs for view 0's output only (row "unet v0", output_views = 1) with its ratio to the full one.
 // --random-latents: with
@@ -51,6 +54,7 @@
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/kernels.h"
+#include "attention/runtime/op_profile.h"
 #include "bench_registry.h"
 
 namespace macro::bench {
@@ -230,7 +234,36 @@ struct Options {
   bool lean = true;             // --whole: the whole-image VAE paths (the memory baseline)
   int64_t views = 2;
   std::string dir, storage = "bf16", golden;
+  bool profile = false;
 };
+
+// The per-op rows of one profiled run of `fn` (a stage that took `stage_wall` seconds in it).
+void print_profile(const char* stage, const std::function<void()>& fn, double path_peak) {
+  op_profile::take();
+  op_profile::enable(true);
+  const double t0 = now_seconds();
+  fn();
+  const double wall = now_seconds() - t0;
+  op_profile::enable(false);
+  const std::vector<op_profile::Row> rows = op_profile::take();
+  std::printf("    profile of one %s run: %.2f s wall; %% of the path's peak %.1f GFLOP/s\n", stage,
+              wall, path_peak);
+  std::printf("      %-28s %7s %9s %6s %9s %6s\n", "op", "calls", "s", "share", "GFLOP/s", "peak");
+  double in_ops = 0;
+  for (const op_profile::Row& r : rows) {
+    in_ops += r.seconds;
+    if (r.flop > 0)
+      std::printf("      %-28s %7lld %9.3f %5.1f%% %9.1f %5.1f%%\n", r.op.c_str(),
+                  (long long)r.calls, r.seconds, 100 * r.seconds / wall, r.flop / r.seconds * 1e-9,
+                  100 * r.flop / r.seconds * 1e-9 / path_peak);
+    else
+      std::printf("      %-28s %7lld %9.3f %5.1f%% %9s %6s\n", r.op.c_str(), (long long)r.calls,
+                  r.seconds, 100 * r.seconds / wall, "-", "-");
+  }
+  std::printf("      %-28s %7s %9.3f %5.1f%%\n", "(outside the ops above)", "", wall - in_ops,
+              100 * (wall - in_ops) / wall);
+  std::fflush(stdout);
+}
 
 void row(const char* stage, double flop, const Timing& t, const Timing& peak) {
   const double gw = flop / t.wall * 1e-9, gc = flop / t.cpu * 1e-9;
@@ -289,6 +322,8 @@ int run(int argc, char** argv) {
       o.random_latents = true;
     } else if (!std::strcmp(a, "--whole")) {
       o.lean = false;
+    } else if (!std::strcmp(a, "--profile")) {
+      o.profile = true;
     } else if (!std::strcmp(a, "--warmup")) {
       o.warmup = true;
     } else if (!std::strcmp(a, "--views")) {
@@ -345,7 +380,8 @@ int run(int argc, char** argv) {
               (long long)o.views, o.dir.c_str());
   std::printf(
       "machine: %s path, %ld online CPUs; FLOPs per difix-spec 4.5; medians of %d; "
-      "%% = of the fp32 FMA-loop peak at the same thread count, same run\n",
+      "%% = of the path's peak loop (fp32 FMA for f32, bf16 dot product for bf16) at the same "
+      "thread count, same run\n",
       isa_name(active_isa()), sysconf(_SC_NPROCESSORS_ONLN), o.reps);
   const bool all = o.stage == "all";
   for (Precision prec : o.precisions) {
@@ -394,6 +430,7 @@ int run(int argc, char** argv) {
         ThreadPool* pool = threads > 1 ? &ThreadPool::global() : nullptr;
         const Timing pk0 = fma_peak(threads);
         const Timing pkb = fma_peak(threads, /*bf16=*/true);
+        const Timing& pkp = prec == Precision::kBf16 ? pkb : pk0;  // the path's peak
         std::printf(
             "   threads %d, fp32 FMA peak %.1f GFLOP/s (%.1f per cpu-s); bf16 dot peak %.1f "
             "GFLOP/s (%.1f per cpu-s)\n",
@@ -464,7 +501,8 @@ int run(int argc, char** argv) {
           std::fprintf(stderr, "bench difix: %s\n", err.message().c_str());
           return 1;
         }
-        if (all || o.stage == "encode") row("encode", enc_flop, te, pk0);
+        if (all || o.stage == "encode") row("encode", enc_flop, te, pkp);
+        if (o.profile && (all || o.stage == "encode")) print_profile("encode", do_encode, pkp.wall);
         if (all || o.stage == "unet") {
           reset_peak_rss();
           tu = median_timing(o.reps, do_unet, o.warmup);
@@ -473,7 +511,8 @@ int run(int argc, char** argv) {
             std::fprintf(stderr, "bench difix: %s\n", err.message().c_str());
             return 1;
           }
-          row("unet", unet_flop, tu, pk0);
+          row("unet", unet_flop, tu, pkp);
+          if (o.profile) print_profile("unet", do_unet, pkp.wall);
           if (views > 1) {
             // The same U-Net for view 0's output only (output_views = 1, what the enhancer
             // decodes): the other views' work after the last joint attention is skipped; the
@@ -493,7 +532,8 @@ int run(int argc, char** argv) {
               std::fprintf(stderr, "bench difix: %s\n", err.message().c_str());
               return 1;
             }
-            row("unet v0", unet_flop, t0, pk0);
+            row("unet v0", unet_flop, t0, pkp);
+            if (o.profile) print_profile("unet v0", do_unet0, pkp.wall);
             const bool same =
                 eps0.numel() * views == eps.numel() &&
                 std::memcmp(eps0.f32(), eps.f32(), size_t(eps0.numel()) * sizeof(float)) == 0;
@@ -509,16 +549,17 @@ int run(int argc, char** argv) {
             std::fprintf(stderr, "bench difix: %s\n", err.message().c_str());
             return 1;
           }
-          row("decode", dec_flop, td, pk0);
+          row("decode", dec_flop, td, pkp);
+          if (o.profile) print_profile("decode", do_decode, pkp.wall);
         }
-        const Timing pk1 = fma_peak(threads);
+        const Timing pk1 = fma_peak(threads, prec == Precision::kBf16);
         if (all) {
           const Timing tot{te.wall + tu.wall + td.wall, te.cpu + tu.cpu + td.cpu};
-          const Timing pk{0.5 * (pk0.wall + pk1.wall), 0.5 * (pk0.cpu + pk1.cpu)};
+          const Timing pk{0.5 * (pkp.wall + pk1.wall), 0.5 * (pkp.cpu + pk1.cpu)};
           row("step", enc_flop + unet_flop + dec_flop, tot, pk);
         }
         std::printf(
-            "    (FMA peak after: %.1f GFLOP/s; peak RSS while running the stages %.2f GiB: "
+            "    (path's peak after: %.1f GFLOP/s; peak RSS while running the stages %.2f GiB: "
             "encode %.2f, unet %.2f, decode %.2f; ru_maxrss so far %.2f GB)\n",
             pk1.wall, std::max({hwm[0], hwm[1], hwm[2], proc_status_gb("VmHWM:")}), hwm[0], hwm[1],
             hwm[2], peak_rss_gb());
@@ -527,10 +568,8 @@ int run(int argc, char** argv) {
     }
   }
   std::printf(
-      "\nreference points (2 threads, other machine with a 240 GFLOP/s/core FMA peak): "
-      "PyTorch CPU U-Net 64x64 latent 4.47 s fp32 / 2.14 s bf16, VAE encode 512x512 "
-      "5.0 / 3.35 s, decode 21.6 / 6.54 s; stable-diffusion.cpp ~11 s per U-Net step, "
-      "12.7 s encode, 26 s decode\n");
+      "\nPyTorch CPU and stable-diffusion.cpp on the same workloads: docs/PERFORMANCE.md "
+      "(timed in the same sitting; ratios hold only within one sitting)\n");
   return 0;
 }
 
