@@ -10,7 +10,8 @@ namespace macro::op_profile {
 namespace {
 
 std::atomic<bool> g_on{false};
-std::thread::id g_owner;  // the thread that enabled profiling: the only one that records
+std::atomic<std::thread::id>
+    g_owner;  // the thread that enabled profiling: the only one that records
 
 struct Acc {
   int64_t ns = 0;
@@ -32,8 +33,8 @@ int64_t now_ns() {
 }  // namespace
 
 void enable(bool on) {
-  g_owner = std::this_thread::get_id();
-  g_on.store(on, std::memory_order_relaxed);
+  g_owner.store(std::this_thread::get_id(), std::memory_order_relaxed);
+  g_on.store(on, std::memory_order_release);
 }
 
 bool enabled() {
@@ -51,7 +52,9 @@ std::vector<Row> take() {
 }
 
 OpScope::OpScope(const char* op, double flop) {
-  if (!enabled() || std::this_thread::get_id() != g_owner) return;
+  if (!g_on.load(std::memory_order_acquire) ||
+      std::this_thread::get_id() != g_owner.load(std::memory_order_relaxed))
+    return;
   op_ = op;
   flop_ = flop;
   parent_ = t_top;

@@ -1,6 +1,6 @@
 // Per-op wall-clock profile of a network run: where the time between (and inside) the GEMMs goes.
 //
-// Off by default and free when off (one relaxed load per scope). When on (op_profile::enable(),
+// Off by default and free when off (one atomic load per scope). When on (op_profile::enable(),
 // `bench difix --profile`), each OpScope adds its wall time, minus the time of the scopes opened
 // inside it, to its op's row, with the op's FLOPs where it has any, so a row reads as "this op
 // took S seconds at G GFLOP/s". Scopes are opened by the calling thread only (the thread pool's

@@ -237,7 +237,7 @@ struct Options {
   bool profile = false;
 };
 
-// The per-op rows of one profiled run of `fn` (a stage that took `stage_wall` seconds in it).
+// One more run of the stage `fn` with the per-op profile on, printed against `path_peak` (GFLOP/s).
 void print_profile(const char* stage, const std::function<void()>& fn, double path_peak) {
   op_profile::take();
   op_profile::enable(true);
