@@ -47,23 +47,29 @@ void micro_f32(const MicroTile& t) {
   store_tile<kMrF32>(t, c0, c1);
 }
 
-// A panel [kcp][w] from row-major fp32 rows: 16 k x 4 rows per step, masked
-// loads past valid_k and zero rows past valid_rows, transposed in registers (gemm_store_avx512.h).
+// A panel [kcp][w] from row-major fp32 rows: 16 k x 4 rows per step, masked loads past valid_k and
+// zero rows past valid_rows, transposed in registers (gemm_store_avx512.h). Each group of four rows
+// is read front to back while the next group's rows are prefetched (as pack_a_pairs does).
 void pack_a_f32(const float* src, int64_t ld, int valid_rows, int64_t valid_k, int64_t kcp, int w,
                 void* dst) {
   float* d = static_cast<float*>(dst);
   const __m512 zero = _mm512_setzero_ps();
-  for (int64_t k0 = 0; k0 < kcp; k0 += 16) {
-    const int64_t left = valid_k - k0;
-    const __mmask16 m = left >= 16  ? __mmask16(0xffff)
-                        : left <= 0 ? __mmask16(0)
-                                    : __mmask16((1u << left) - 1);
-    const int nk = int(kcp - k0 < 16 ? kcp - k0 : 16);
-    for (int g = 0; g < w; g += 4) {
+  for (int g = 0; g < w; g += 4) {
+    const int rows = g + 4 <= valid_rows ? 4 : (valid_rows > g ? valid_rows - g : 0);
+    const int nrows = w - g < 4 ? w - g : 4;
+    const int next = valid_rows - (g + 4) < 4 ? valid_rows - (g + 4) : 4;
+    for (int64_t k0 = 0; k0 < kcp; k0 += 16) {
+      const int64_t left = valid_k - k0;
+      const __mmask16 m = left >= 16  ? __mmask16(0xffff)
+                          : left <= 0 ? __mmask16(0)
+                                      : __mmask16((1u << left) - 1);
+      const int nk = int(kcp - k0 < 16 ? kcp - k0 : 16);
+      for (int i = 0; i < next && left > 0; ++i)
+        _mm_prefetch(reinterpret_cast<const char*>(src + (g + 4 + i) * ld + k0), _MM_HINT_T0);
       __m512 r[4];
       for (int i = 0; i < 4; ++i)
-        r[i] = g + i < valid_rows ? _mm512_maskz_loadu_ps(m, src + (g + i) * ld + k0) : zero;
-      transpose_store_4x16(r[0], r[1], r[2], r[3], nk, w - g < 4 ? w - g : 4, w, d + k0 * w + g);
+        r[i] = i < rows ? _mm512_maskz_loadu_ps(m, src + (g + i) * ld + k0) : zero;
+      transpose_store_4x16(r[0], r[1], r[2], r[3], nk, nrows, w, d + k0 * w + g);
     }
   }
 }

@@ -37,23 +37,33 @@ void micro_bf16(const MicroTile& t) {
 
 // A panel [kcp/2][w] of pair words from row-major fp32 rows: 32 floats -> 16 pair words with one
 // vcvtne2ps2bf16 (nearest even; like the hardware, fp32 denormal inputs become zero), four rows at
-// a time transposed into the panel.
+// a time transposed into the panel. Each group of four rows is read front to back (the source
+// rows are usually contiguous, so the whole panel is one forward stream for the prefetchers) while
+// the next group's rows are prefetched: the activations come from memory, not from cache.
 void pack_a_pairs(const float* src, int64_t ld, int valid_rows, int64_t valid_k, int64_t kcp, int w,
                   void* dst) {
   float* d = static_cast<float*>(dst);  // pair words, moved as 32-bit lanes
   const int64_t pairs = kcp / 2;
-  for (int64_t q0 = 0; q0 < pairs; q0 += 16) {
-    const int64_t k = 2 * q0;
-    const int64_t left = valid_k - k;
-    const int64_t n0 = left <= 0 ? 0 : (left >= 16 ? 16 : left);
-    const int64_t n1 = left <= 16 ? 0 : (left >= 32 ? 16 : left - 16);
-    const __mmask16 m0 = n0 == 16 ? __mmask16(0xffff) : __mmask16((1u << n0) - 1);
-    const __mmask16 m1 = n1 == 16 ? __mmask16(0xffff) : __mmask16((1u << n1) - 1);
-    const int nq = int(pairs - q0 < 16 ? pairs - q0 : 16);
-    for (int g = 0; g < w; g += 4) {
+  for (int g = 0; g < w; g += 4) {
+    const int rows = g + 4 <= valid_rows ? 4 : (valid_rows > g ? valid_rows - g : 0);
+    const int nrows = w - g < 4 ? w - g : 4;
+    const int next = valid_rows - (g + 4) < 4 ? valid_rows - (g + 4) : 4;  // rows of group g + 4
+    for (int64_t q0 = 0; q0 < pairs; q0 += 16) {
+      const int64_t k = 2 * q0;
+      const int64_t left = valid_k - k;
+      const int64_t n0 = left <= 0 ? 0 : (left >= 16 ? 16 : left);
+      const int64_t n1 = left <= 16 ? 0 : (left >= 32 ? 16 : left - 16);
+      const __mmask16 m0 = n0 == 16 ? __mmask16(0xffff) : __mmask16((1u << n0) - 1);
+      const __mmask16 m1 = n1 == 16 ? __mmask16(0xffff) : __mmask16((1u << n1) - 1);
+      const int nq = int(pairs - q0 < 16 ? pairs - q0 : 16);
+      for (int i = 0; i < next && n0 > 0; ++i) {
+        const char* pf = reinterpret_cast<const char*>(src + (g + 4 + i) * ld + k);
+        _mm_prefetch(pf, _MM_HINT_T0);
+        _mm_prefetch(pf + 64, _MM_HINT_T0);
+      }
       __m512 r[4];
       for (int i = 0; i < 4; ++i) {
-        if (g + i < valid_rows) {
+        if (i < rows) {
           const float* s = src + (g + i) * ld + k;
           r[i] = _mm512_castsi512_ps((__m512i)_mm512_cvtne2ps_pbh(_mm512_maskz_loadu_ps(m1, s + 16),
                                                                   _mm512_maskz_loadu_ps(m0, s)));
@@ -61,7 +71,7 @@ void pack_a_pairs(const float* src, int64_t ld, int valid_rows, int64_t valid_k,
           r[i] = _mm512_setzero_ps();
         }
       }
-      transpose_store_4x16(r[0], r[1], r[2], r[3], nq, w - g < 4 ? w - g : 4, w, d + q0 * w + g);
+      transpose_store_4x16(r[0], r[1], r[2], r[3], nq, nrows, w, d + q0 * w + g);
     }
   }
 }

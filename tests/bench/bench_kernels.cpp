@@ -229,6 +229,12 @@ int run(int argc, char** argv) {
         {512, 134, 240, 1, 1, 1, 1, 1, 3, "VAE 512ch 3x3 @134x240"},
         {256, 256, 256, 2, 0, 0, 1, 1, 3, "VAE enc downsample 256ch s2"},
         {512, 128, 128, 1, 0, 0, 0, 0, 1, "1x1 512ch @128x128"},
+        // U-Net resnet convs at a 512x512 image (64x64 latent) and the 536x960 close-up.
+        {320, 64, 64, 1, 1, 1, 1, 1, 3, "UNet 320ch 3x3 @64x64"},
+        {640, 32, 32, 1, 1, 1, 1, 1, 3, "UNet 640ch 3x3 @32x32"},
+        {1280, 16, 16, 1, 1, 1, 1, 1, 3, "UNet 1280ch 3x3 @16x16"},
+        {1280, 8, 8, 1, 1, 1, 1, 1, 3, "UNet 1280ch 3x3 @8x8"},
+        {320, 67, 120, 1, 1, 1, 1, 1, 3, "UNet 320ch 3x3 @67x120"},
     };
     std::printf("\nconv2d (NCHW, implicit GEMM; fp32, and bf16 weights+activations)%s:\n",
                 quick ? " [--quick: spatial sizes cropped by 4x per side]" : "");
