@@ -6,6 +6,7 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <vector>
 
@@ -192,6 +193,36 @@ TEST_CASE("conv2d: threaded result equals single-threaded bit for bit", "[kernel
   conv2d(s, x.data(), w.data(), nullptr, nullptr, y1.data(), nullptr);
   conv2d(s, x.data(), w.data(), nullptr, nullptr, y2.data(), &pool);
   REQUIRE(y1 == y2);
+  check_conv(s, true, true, &pool);
+}
+
+TEST_CASE("conv2d: more output channels than pixels (the threads split the channels), bit for bit",
+          "[kernels][conv]") {
+  // Cout 250 over a 9x7 image: the weights outweigh the im2col panels, so with 2+ threads the
+  // output channels are split between the tasks and each task gathers its own panels; the result
+  // must not depend on the thread count, and stays within the reference bound on every path.
+  const Conv2dShape s = shape(1, 37, 9, 7, 250, 3, 1, 1, 1, 1, 1);
+  auto x = random_vec(size_t(s.c_in * s.h * s.w), 7);
+  auto w = random_vec(size_t(s.c_out * s.c_in * 9), 8);
+  auto b = random_vec(size_t(s.c_out), 9);
+  const size_t ny = size_t(s.c_out * s.out_h() * s.out_w());
+  for (Isa isa : supported_isas()) {
+    IsaGuard guard(isa);
+    for (WeightType type : {WeightType::kF32, WeightType::kBf16}) {
+      ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3, type);
+      std::vector<float> y1(ny);
+      conv2d(s, x.data(), cw, nullptr, y1.data(), nullptr);
+      for (int threads : {2, 4, 8}) {
+        INFO(isa_name(isa) << (type == WeightType::kF32 ? " fp32" : " bf16") << " threads "
+                           << threads);
+        ThreadPool pool(threads);
+        std::vector<float> y(ny, NAN);
+        conv2d(s, x.data(), cw, nullptr, y.data(), &pool);
+        REQUIRE(std::memcmp(y.data(), y1.data(), ny * sizeof(float)) == 0);
+      }
+    }
+  }
+  ThreadPool pool(2);
   check_conv(s, true, true, &pool);
 }
 

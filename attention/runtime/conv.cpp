@@ -258,8 +258,19 @@ void conv_rows(const Conv2dShape& s, const float* xf, const uint32_t* xp, int64_
   ds.K = bf16 ? cin2 * s.kh * s.kw : s.c_in * s.kh * s.kw;
   ds.C = y + oy0 * ow;
   ds.ldc = oh * ow;
-  // All output channels in one task (the im2col panels are then gathered once), up to 512.
-  ds.mc = detail::round_up(std::min<int64_t>(s.c_out, 512), kern.mr);
+  // All output channels in one task (the im2col panels are then gathered once), up to 512. When
+  // the weights outweigh the im2col panels (Cout >= pixels: the 16x16 and 8x8 U-Net levels, where
+  // K = 9 Cin is long), the threads split the output channels instead, each reading its share of
+  // the weights once and gathering the (small) panels itself; splitting the pixels would make
+  // every thread stream all the weights.
+  const int64_t threads = pool ? pool->size() : 1;
+  if (threads > 1 && s.c_out >= ds.N && s.c_out >= threads * 4 * kern.mr) {
+    const int64_t m_tasks = detail::round_up((s.c_out + 511) / 512, threads);
+    ds.mc = detail::round_up((s.c_out + m_tasks - 1) / m_tasks, kern.mr);
+    ds.m_only = true;
+  } else {
+    ds.mc = detail::round_up(std::min<int64_t>(s.c_out, 512), kern.mr);
+  }
   ds.nc = int64_t(kern.nr) * std::max(1, 256 / kern.nr);
   GemmParams p;
   p.bias_m = w.bias();

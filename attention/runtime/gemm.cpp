@@ -327,7 +327,7 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
     mc = round_up((M + m_tasks - 1) / m_tasks, mr);
     m_tasks = (M + mc - 1) / mc;
   }
-  if (threads == 1 || (s.mc == 0 && m_tasks >= threads))
+  if (threads == 1 || (s.mc == 0 && m_tasks >= threads) || (s.mc > 0 && s.m_only))
     n_tasks = 1;
   else
     n_tasks = std::clamp<int64_t>((4 * threads + m_tasks - 1) / m_tasks, 1, (N + nr - 1) / nr);

@@ -121,8 +121,9 @@ struct DriverShape {
   int64_t M = 0, N = 0, K = 0;
   float* C = nullptr;
   int64_t ldc = 0;
-  int64_t mc = 0;  // rows per task (0 = choose); a multiple of MR
-  int64_t nc = 0;  // columns per B block (0 = choose); a multiple of NR
+  int64_t mc = 0;       // rows per task (0 = choose); a multiple of MR
+  int64_t nc = 0;       // columns per B block (0 = choose); a multiple of NR
+  bool m_only = false;  // with mc set: never split the columns between tasks
 };
 
 void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, const Operand& b,
