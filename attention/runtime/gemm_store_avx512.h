@@ -89,6 +89,23 @@ inline void transpose_store_4x16(__m512 r0, __m512 r1, __m512 r2, __m512 r3, int
 #undef MACRO_STORE_LANE
     return;
   }
+  if (nk == 16 && nrows == 2) {
+    // The last pair of rows of a 14-row panel: the low 8 bytes of each lane.
+#define MACRO_STORE_LANE2(L)                                                          \
+  _mm_storel_pi(reinterpret_cast<__m64*>(dst + (4 * L + 0) * w),                    \
+                _mm512_extractf32x4_ps(u0, L));                                     \
+  _mm_storel_pi(reinterpret_cast<__m64*>(dst + (4 * L + 1) * w),                    \
+                _mm512_extractf32x4_ps(u1, L));                                     \
+  _mm_storel_pi(reinterpret_cast<__m64*>(dst + (4 * L + 2) * w),                    \
+                _mm512_extractf32x4_ps(u2, L));                                     \
+  _mm_storel_pi(reinterpret_cast<__m64*>(dst + (4 * L + 3) * w), _mm512_extractf32x4_ps(u3, L));
+    MACRO_STORE_LANE2(0)
+    MACRO_STORE_LANE2(1)
+    MACRO_STORE_LANE2(2)
+    MACRO_STORE_LANE2(3)
+#undef MACRO_STORE_LANE2
+    return;
+  }
   alignas(64) float tmp[4][16];
   _mm512_store_ps(tmp[0], u0);
   _mm512_store_ps(tmp[1], u1);
