@@ -11,6 +11,7 @@
 #include "attention/runtime/attention_avx512_traits.h"
 
 #include <cstring>
+#include <limits>
 
 #include "attention/runtime/half.h"
 
@@ -102,17 +103,42 @@ void score_tile_bf16(const uint16_t* const* k_rows, int keys, const uint32_t* qp
   if (c < keys) score_tail_bf16<R - 1>(keys - c, k_rows + c, qp, d2, s + size_t(c) * kTileQ);
 }
 
-// pp[c][r] = (bf16(P[2c][r]), bf16(P[2c+1][r])) from S^T; a missing odd key pairs with 0.
-void pack_p_pairs(const float* s, int cols, uint32_t* pp) {
+// The online softmax of one key block (softmax_tile in attention_simd.h: the same operations in
+// the same order, so the same bits) fused with the packing of the probabilities: per query vector,
+// m' = max(m, max_c S), alpha = 2^(m - m'), P = 2^(S - m') summed into l in key order and written
+// straight into pair words pp[c][r] = (bf16(P[2c][r]), bf16(P[2c+1][r])), a missing odd key as 0.
+// The fp32 P never goes back to memory.
+void softmax_pack_bf16(const float* s, int cols, float* m, float* l, float* alpha, uint32_t* pp) {
+  // cvtne2ps(hi, lo) gives [bf16(lo) x 16, bf16(hi) x 16]; word i needs (lo[i], hi[i]).
+  alignas(64) static const uint16_t kInterleave[32] = {0,  16, 1,  17, 2,  18, 3,  19, 4,  20, 5,
+                                                       21, 6,  22, 7,  23, 8,  24, 9,  25, 10, 26,
+                                                       11, 27, 12, 28, 13, 29, 14, 30, 15, 31};
+  const __m512i idx = _mm512_load_si512(kInterleave);
   const __m512 zero = _mm512_setzero_ps();
-  for (int c = 0; 2 * c < cols; ++c) {
-    const float* a = s + size_t(2 * c) * kTileQ;
-    const float* b = 2 * c + 1 < cols ? a + kTileQ : nullptr;
-    for (int v = 0; v < 4; ++v) {
-      const __m512 lo = _mm512_loadu_ps(a + v * 16);
-      const __m512 hi = b ? _mm512_loadu_ps(b + v * 16) : zero;
-      _mm512_storeu_si512(pp + size_t(c) * kTileQ + v * 16, pair_words(lo, hi));
+  for (int r0 = 0; r0 < kTileQ; r0 += 16) {
+    __m512 mx = _mm512_set1_ps(-std::numeric_limits<float>::infinity());
+    for (int c = 0; c < cols; ++c)
+      mx = _mm512_max_ps(mx, _mm512_loadu_ps(s + size_t(c) * kTileQ + r0));
+    const __m512 m_old = _mm512_loadu_ps(m + r0);
+    const __m512 m_new = _mm512_max_ps(_mm512_max_ps(m_old, mx),
+                                       _mm512_set1_ps(std::numeric_limits<float>::lowest()));
+    const __m512 a = Avx512::exp2(_mm512_sub_ps(m_old, m_new));
+    __m512 sum = zero;
+    for (int c = 0; 2 * c < cols; ++c) {
+      const float* sc = s + size_t(2 * c) * kTileQ + r0;
+      const __m512 lo = Avx512::exp2(_mm512_sub_ps(_mm512_loadu_ps(sc), m_new));
+      sum = _mm512_add_ps(sum, lo);
+      __m512 hi = zero;
+      if (2 * c + 1 < cols) {
+        hi = Avx512::exp2(_mm512_sub_ps(_mm512_loadu_ps(sc + kTileQ), m_new));
+        sum = _mm512_add_ps(sum, hi);
+      }
+      const __m512i w = _mm512_permutexvar_epi16(idx, (__m512i)_mm512_cvtne2ps_pbh(hi, lo));
+      _mm512_storeu_si512(pp + size_t(c) * kTileQ + r0, w);
     }
+    _mm512_storeu_ps(l + r0, _mm512_fmadd_ps(_mm512_loadu_ps(l + r0), a, sum));
+    _mm512_storeu_ps(m + r0, m_new);
+    _mm512_storeu_ps(alpha + r0, a);
   }
 }
 
@@ -192,14 +218,21 @@ struct Bf16Blocks {
     block_reset<Avx512>(j, sc);
     pack_q_pairs(j, reinterpret_cast<uint32_t*>(sc.qt));
   }
+  // The V pairs of a whole key block are packed once and shared by the group's jobs (`shared`);
+  // a partial tile with dropped keys packs its own.
   static void step(const BlockJob& j, const BlockScratch& sc, const uint16_t* const* k_rows,
-                   const uint16_t* const* v_rows, int cols, const uint8_t* tile) {
+                   const uint16_t* const* v_rows, int cols, const uint8_t* tile,
+                   const void** shared) {
     score_tile_bf16(k_rows, cols, reinterpret_cast<const uint32_t*>(sc.qt), j.d, sc.s);
     mask_scores<Avx512>(sc.s, cols, tile);
-    softmax_tile<Avx512>(sc.s, cols, sc.m, sc.l, sc.alpha);
-    pack_p_pairs(sc.s, cols, sc.pp);
-    pack_v_pairs(v_rows, cols, j.d, sc.vp);
-    pv_tile_bf16(j.rows, sc.pp, cols, sc.vp, sc.o, j.d, sc.alpha);
+    softmax_pack_bf16(sc.s, cols, sc.m, sc.l, sc.alpha, sc.pp);
+    const uint32_t* vp = shared && *shared ? static_cast<const uint32_t*>(*shared) : nullptr;
+    if (!vp) {
+      pack_v_pairs(v_rows, cols, j.d, sc.vp);
+      vp = sc.vp;
+      if (shared) *shared = vp;
+    }
+    pv_tile_bf16(j.rows, sc.pp, cols, vp, sc.o, j.d, sc.alpha);
   }
   static void finish(const BlockJob& j, const BlockScratch& sc) { block_finish<Avx512>(j, sc); }
 };

@@ -247,7 +247,10 @@ void block_finish(const BlockJob& job, const BlockScratch& sc) {
 // own blocks in its own order (results do not depend on the grouping).
 // Kern supplies the element type of the K / V rows and the per-block operations:
 //   using Row; k(job), v(job), k_stride(job), v_stride(job): head slice of token 0 and row strides;
-//   init(job, sc); step(job, sc, k_rows, v_rows, cols, tile); finish(job, sc).
+//   init(job, sc); step(job, sc, k_rows, v_rows, cols, tile, shared); finish(job, sc).
+// `shared` is null for a partial tile whose dead keys were dropped; for a whole key block it
+// points to one slot per key block, reset to null before the block's first job, where a kernel
+// may leave what it derived from the block (the bf16 kernel's V pairs) for the group's other jobs.
 template <typename Kern>
 void blocks_walk(const BlockJob* jobs, int count, const BlockScratch* scratch) {
   using Row = typename Kern::Row;
@@ -275,11 +278,12 @@ void blocks_walk(const BlockJob* jobs, int count, const BlockScratch* scratch) {
       if (pos[g] < jobs[g].entries && jobs[g].key_blocks[pos[g]] == kb) ++pos[g];
     const int next = next_block(pos);
     if (next != INT32_MAX) prefetch_key_block(j0, kbase, vbase, ks, vs, next);
+    const void* shared = nullptr;
     for (int g = 0; g < count; ++g) {
       if (pos[g] == 0 || jobs[g].key_blocks[pos[g] - 1] != kb) continue;
       const uint8_t* tile = jobs[g].tiles[pos[g] - 1];
       if (!tile) {
-        Kern::step(jobs[g], scratch[g], k_rows, v_rows, cols, nullptr);
+        Kern::step(jobs[g], scratch[g], k_rows, v_rows, cols, nullptr, &shared);
         continue;
       }
       // Partial tile: drop the keys no query of this block may see (they would only add exact
@@ -300,9 +304,9 @@ void blocks_walk(const BlockJob* jobs, int count, const BlockScratch* scratch) {
         ++live;
       }
       if (live == cols) {
-        Kern::step(jobs[g], scratch[g], k_rows, v_rows, cols, tile);
+        Kern::step(jobs[g], scratch[g], k_rows, v_rows, cols, tile, &shared);
       } else if (live > 0) {
-        Kern::step(jobs[g], scratch[g], live_k, live_v, live, live_tile);
+        Kern::step(jobs[g], scratch[g], live_k, live_v, live, live_tile, nullptr);
       }
     }
     kb = next;
@@ -320,7 +324,7 @@ struct F32Blocks {
   static size_t v_stride(const BlockJob& j) { return j.v_stride; }
   static void init(const BlockJob& j, const BlockScratch& sc) { block_init<T>(j, sc); }
   static void step(const BlockJob& j, const BlockScratch& sc, const float* const* k_rows,
-                   const float* const* v_rows, int cols, const uint8_t* tile) {
+                   const float* const* v_rows, int cols, const uint8_t* tile, const void**) {
     block_step<T>(j, sc, k_rows, v_rows, cols, tile);
   }
   static void finish(const BlockJob& j, const BlockScratch& sc) { block_finish<T>(j, sc); }
