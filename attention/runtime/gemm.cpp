@@ -547,13 +547,16 @@ PackedWeights PackedWeights::build(const void* src, bool src_bf16, bool transpos
   pw.kp_ = detail::round_up(std::max<int64_t>(k, 1), kern.k_align);
   const int64_t elems = detail::round_up(rows, w) * pw.kp_;
   const int64_t bytes = elems * detail::packed_elem_bytes(l);
-  pw.data_.assign(size_t((bytes + 3) / 4 + 16), 0.0f);
+  pw.words_ = size_t((bytes + 3) / 4 + 16);
+  pw.data_.reset(static_cast<float*>(large_alloc(pw.words_ * sizeof(float), /*populate=*/true)));
+  MACRO_CHECK(pw.data_ != nullptr);
+  std::memset(pw.data_.get(), 0, pw.words_ * sizeof(float));
   if (src_bf16) {
     detail::pack_panels_bf16(static_cast<const uint16_t*>(src), ld, transposed, rows, k, l, w, 0,
-                             rows, 0, k, pw.kp_, pw.data_.data());
+                             rows, 0, k, pw.kp_, pw.data_.get());
   } else {
     detail::pack_panels_f32(static_cast<const float*>(src), ld, transposed, rows, k, l, w, 0, rows,
-                            0, k, pw.kp_, pw.data_.data());
+                            0, k, pw.kp_, pw.data_.get());
   }
   return pw;
 }

@@ -21,10 +21,12 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/kernels.h"
+#include "attention/runtime/large_alloc.h"
 #include "attention/runtime/thread_pool.h"
 
 namespace macro {
@@ -80,9 +82,9 @@ class PackedWeights {
   WeightType type() const { return type_; }
   Isa isa() const { return isa_; }
   bool empty() const { return n_ == 0; }
-  size_t bytes() const { return data_.size() * sizeof(float); }
+  size_t bytes() const { return words_ * sizeof(float); }
   const GemmKernel& kernel() const;
-  const void* panels() const { return data_.data(); }
+  const void* panels() const { return data_.get(); }
   int64_t k_padded() const { return kp_; }
   bool as_a() const { return as_a_; }
 
@@ -93,7 +95,10 @@ class PackedWeights {
   bool as_a_ = false;
   WeightType type_ = WeightType::kF32;
   Isa isa_ = Isa::kScalar;
-  std::vector<float> data_;  // storage (bf16 panels are stored two per float slot)
+  // Storage (bf16 panels are stored two per float slot), huge-page backed when large
+  // (large_alloc.h): the U-Net's 1.7 GB of panels are written once at load and streamed per step.
+  std::unique_ptr<float, LargeFree> data_;
+  size_t words_ = 0;
 };
 
 // C[M, N] = alpha * A[M, K] . W^T + ... with W packed (N = w.n(), K = w.k()). For a bf16 W, A

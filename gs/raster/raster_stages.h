@@ -12,8 +12,6 @@
 // size allocates nothing.
 #pragma once
 
-#include <sys/mman.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
@@ -21,6 +19,7 @@
 #include <cstdlib>
 #include <memory>
 
+#include "attention/runtime/large_alloc.h"
 #include "attention/runtime/progress.h"
 #include "attention/runtime/thread_pool.h"
 #include "gs/cameras/camera.h"
@@ -32,8 +31,8 @@
 namespace macro::gs::raster {
 
 // A grow-only byte buffer from which typed arrays are carved, 64-byte aligned. Buffers of 4 MB
-// and more are 2 MB aligned and advised for transparent huge pages: the bin and blend stages read
-// records at random across tens of MB, where 4 KB pages would miss the TLB on nearly every read.
+// and more are huge-page backed (large_alloc.h): the bin and blend stages read records at random
+// across tens of MB, where 4 KB pages would miss the TLB on nearly every read.
 class Arena {
  public:
   // Start carving; make room for `bytes` (call with the sum of carve sizes, see carve_size()).
@@ -41,9 +40,8 @@ class Arena {
     if (bytes > capacity_) {
       constexpr size_t kHuge = size_t(2) << 20;
       const size_t size = (bytes + kHuge - 1) / kHuge * kHuge;
-      buffer_.reset(static_cast<std::byte*>(std::aligned_alloc(kHuge, size)));
+      buffer_.reset(static_cast<std::byte*>(large_alloc(size, /*populate=*/true)));
       MACRO_CHECK(buffer_ != nullptr);
-      if (size >= 2 * kHuge) madvise(buffer_.get(), size, MADV_HUGEPAGE);  // a hint; may fail
       capacity_ = size;
     }
     used_ = 0;
