@@ -142,25 +142,42 @@ namespace {
 // The largest buffer a thread has widened into, kept for the next one: a loader widens tensor
 // after tensor, and a fresh buffer each time costs its page faults again. Freed by
 // release_widen_spare().
-thread_local std::vector<float> t_widen_spare;
+// A new buffer comes huge-page backed and pre-faulted (large_alloc.h).
+struct WidenSpare {
+  std::unique_ptr<float, LargeFree> p;
+  size_t cap = 0;
+};
+thread_local WidenSpare t_widen_spare;
 }  // namespace
 
 void release_widen_spare() {
-  std::vector<float>().swap(t_widen_spare);
+  t_widen_spare = WidenSpare{};
 }
 
 WidenedBuffer::WidenedBuffer(int64_t floats) {
-  if (t_widen_spare.capacity() >= size_t(floats)) v_.swap(t_widen_spare);
-  v_.assign(size_t(floats), 0.0f);
-  const size_t live = g_widened_live += v_.size() * sizeof(float);
+  n_ = size_t(std::max<int64_t>(floats, 0));
+  if (t_widen_spare.cap >= n_) {
+    p_ = std::move(t_widen_spare.p);
+    cap_ = t_widen_spare.cap;
+    t_widen_spare.cap = 0;
+  } else {
+    cap_ = std::max<size_t>(n_, 1);
+    p_.reset(static_cast<float*>(large_alloc(cap_ * sizeof(float), /*populate=*/true)));
+    MACRO_CHECK(p_ != nullptr);
+  }
+  std::memset(p_.get(), 0, n_ * sizeof(float));
+  const size_t live = g_widened_live += n_ * sizeof(float);
   size_t peak = g_widened_peak.load();
   while (live > peak && !g_widened_peak.compare_exchange_weak(peak, live)) {
   }
 }
 
 WidenedBuffer::~WidenedBuffer() {
-  g_widened_live -= v_.size() * sizeof(float);
-  if (v_.capacity() > t_widen_spare.capacity()) v_.swap(t_widen_spare);
+  g_widened_live -= n_ * sizeof(float);
+  if (cap_ > t_widen_spare.cap) {
+    t_widen_spare.p = std::move(p_);
+    t_widen_spare.cap = cap_;
+  }
 }
 
 WidenStats widen_stats() {

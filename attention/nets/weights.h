@@ -27,6 +27,7 @@
 
 #include "attention/nets/precision.h"
 #include "attention/runtime/io/safetensors.h"
+#include "attention/runtime/large_alloc.h"
 #include "attention/runtime/status.h"
 
 namespace macro::nets {
@@ -75,11 +76,12 @@ class WidenedBuffer {
   ~WidenedBuffer();
   WidenedBuffer(const WidenedBuffer&) = delete;
   WidenedBuffer& operator=(const WidenedBuffer&) = delete;
-  float* data() { return v_.data(); }
-  int64_t size() const { return int64_t(v_.size()); }
+  float* data() { return p_.get(); }
+  int64_t size() const { return int64_t(n_); }
 
  private:
-  std::vector<float> v_;
+  std::unique_ptr<float, LargeFree> p_;  // huge-page backed and pre-faulted when large
+  size_t n_ = 0, cap_ = 0;
 };
 struct WidenStats {
   size_t live_bytes = 0, peak_bytes = 0;
