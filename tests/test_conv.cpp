@@ -88,6 +88,10 @@ TEST_CASE("conv2d: stride 2, symmetric and right/bottom-only padding, every path
     check_conv(shape(1, 16, 13, 11, 19, 3, 2, 1, 1, 1, 1), true, false, nullptr);  // UNet ds
     check_conv(shape(2, 9, 12, 16, 7, 3, 2, 0, 0, 1, 1), true, false, nullptr);    // VAE enc ds
     check_conv(shape(1, 9, 11, 15, 7, 3, 2, 0, 0, 1, 1), true, false, nullptr);    // odd sizes
+    // Output rows of 35 and 40 pixels: runs that fill a whole 32-column panel and span 64 input
+    // words, cut by the left and right padding.
+    check_conv(shape(1, 5, 7, 70, 6, 3, 2, 1, 1, 1, 1), true, false, nullptr);
+    check_conv(shape(1, 6, 6, 81, 5, 3, 2, 0, 0, 1, 1), true, true, nullptr);
   }
 }
 
@@ -109,7 +113,8 @@ TEST_CASE("conv2d: bf16 weights and activations, every path", "[kernels][conv]")
   const Conv2dShape shapes[] = {shape(1, 50, 13, 35, 37, 3, 1, 1, 1, 1, 1),  // K > KC
                                 shape(2, 9, 11, 15, 7, 3, 2, 0, 0, 1, 1),
                                 shape(1, 33, 9, 10, 65, 1, 1, 0, 0, 0, 0),
-                                shape(1, 3, 5, 6, 4, 3, 1, 1, 1, 1, 1)};  // odd K = 27
+                                shape(1, 3, 5, 6, 4, 3, 1, 1, 1, 1, 1),    // odd K = 27
+                                shape(1, 6, 6, 81, 5, 3, 2, 0, 0, 1, 1)};  // stride 2, wide rows
   for (Isa isa : supported_isas()) {
     REQUIRE(set_isa(isa));
     for (const Conv2dShape& s : shapes) {

@@ -245,24 +245,9 @@ void print_profile(const char* stage, const std::function<void()>& fn, double pa
   fn();
   const double wall = now_seconds() - t0;
   op_profile::enable(false);
-  const std::vector<op_profile::Row> rows = op_profile::take();
   std::printf("    profile of one %s run: %.2f s wall; %% of the path's peak %.1f GFLOP/s\n", stage,
               wall, path_peak);
-  std::printf("      %-28s %7s %9s %6s %9s %6s\n", "op", "calls", "s", "share", "GFLOP/s", "peak");
-  double in_ops = 0;
-  for (const op_profile::Row& r : rows) {
-    in_ops += r.seconds;
-    if (r.flop > 0)
-      std::printf("      %-28s %7lld %9.3f %5.1f%% %9.1f %5.1f%%\n", r.op.c_str(),
-                  (long long)r.calls, r.seconds, 100 * r.seconds / wall, r.flop / r.seconds * 1e-9,
-                  100 * r.flop / r.seconds * 1e-9 / path_peak);
-    else
-      std::printf("      %-28s %7lld %9.3f %5.1f%% %9s %6s\n", r.op.c_str(), (long long)r.calls,
-                  r.seconds, 100 * r.seconds / wall, "-", "-");
-  }
-  std::printf("      %-28s %7s %9.3f %5.1f%%\n", "(outside the ops above)", "", wall - in_ops,
-              100 * (wall - in_ops) / wall);
-  std::fflush(stdout);
+  print_op_profile(wall, path_peak);
 }
 
 void row(const char* stage, double flop, const Timing& t, const Timing& peak) {

@@ -21,7 +21,10 @@
 // of that run (VmHWM reset before it). Ratios are against the macro configuration of the same run.
 //
 //   bench enhance [--quick] [--config LIST] [--precision f32|bf16|both] [--no-net]
-//                 [--no-attention] [--reps R] [--weights DIR] [--keep DIR]
+//                 [--no-attention] [--reps R] [--weights DIR] [--keep DIR] [--profile]
+// --profile: the per-op profile of each network run (encode, U-Net and decode together), against
+// the peak loop of the path in use (fp32 FMA for f32, bf16 dot product for bf16) probed right
+// after.
 // --keep DIR keeps (and reuses) the scene folder; --no-attention skips the kernel timing (the
 // unmasked baseline alone is about a minute at full size on a busy machine).
 #include <sys/resource.h>
@@ -42,9 +45,10 @@
 #include "attention/runtime/attention.h"
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/io/safetensors.h"
+#include "attention/runtime/kernels.h"
 #include "bench_registry.h"
-#include "enhance/enhance.h"
 #include "enhance/datasets/synth_scene_folder.h"
+#include "enhance/enhance.h"
 
 namespace macro::bench {
 namespace {
@@ -122,7 +126,7 @@ double attention_seconds(int tokens, const BlockSparseMask* mask, int reps) {
 }
 
 int run(int argc, char** argv) {
-  bool quick = false, net = true, attn = true;
+  bool quick = false, net = true, attn = true, profile = false;
   int reps = 3;
   std::string configs = "macro,auto,tight,composite", precision = "bf16", weights, keep;
   for (int i = 1; i < argc; ++i) {
@@ -144,13 +148,15 @@ int run(int argc, char** argv) {
       weights = next();
     else if (a == "--keep")
       keep = next();
+    else if (a == "--profile")
+      profile = true;
     else {
       std::fprintf(
           stderr,
           "usage: bench enhance [--quick] [--config macro,auto,tight,composite,unmasked,warp] "
           "[--precision f32|bf16|both] [--no-net] [--no-attention] [--reps R] "
           "[--weights DIR] "
-          "[--keep DIR]\n");
+          "[--keep DIR] [--profile]\n");
       return 2;
     }
   }
@@ -316,7 +322,12 @@ int run(int argc, char** argv) {
       eo.precision = precisions[pi];
       reset_peak_rss();
       const double rss0 = vm_gb("VmRSS:");
+      if (profile) {
+        op_profile::take();
+        op_profile::enable(true);
+      }
       auto r = enhance::enhance_closeup(*in, eo);
+      op_profile::enable(false);
       if (!r) return fail(r.status());
       const enhance::EnhanceTimings& t = r->timings;
       const double net_s = (t.ms_encode + t.ms_unet + t.ms_decode) * 1e-3;
@@ -332,6 +343,17 @@ int run(int argc, char** argv) {
           base_net[bi] > 0 ? net_s / base_net[bi] : 0.0, cfgs[0].name.c_str(), vm_gb("VmHWM:"),
           rss0);
       std::fflush(stdout);
+      if (profile) {
+        ThreadPool& pool = ThreadPool::global();
+        const KernelTable& kt = kernels();
+        const Rate peak = probe_rate(bi ? kt.probe_bf16 : kt.probe_fma,
+                                     pool.size() > 1 ? &pool : nullptr, 2000000, 3);
+        std::printf(
+            "    profile of the networks (%.1f s): %% of the path's peak %.1f GFLOP/s (%s "
+            "loop, %d threads, probed after the run)\n",
+            net_s, peak.wall, bi ? "bf16 dot-product" : "fp32 FMA", pool.size());
+        print_op_profile(net_s, peak.wall);
+      }
     }
   }
   if (keep.empty()) fs::remove_all(dir);

@@ -6,12 +6,14 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <functional>
 #include <string>
 #include <vector>
 
+#include "attention/runtime/op_profile.h"
 #include "attention/runtime/thread_pool.h"
 #include "tests/test_random.h"
 
@@ -126,6 +128,29 @@ inline Rate probe_rate(double (*probe)(int64_t), ThreadPool* pool, int64_t iters
       warmup);
   const double flop = probe(1) * double(iters) * threads;
   return {flop / t.wall * 1e-9, flop / t.cpu * 1e-9};
+}
+
+// The per-op profile (attention/runtime/op_profile.h) of work that took `wall` seconds: per op,
+// calls, exclusive seconds, share of `wall`, and for ops with FLOPs their GFLOP/s and their share
+// of `path_peak` (GFLOP/s of the path in use, measured in the same run); then what ran outside
+// every op. Takes (and so clears) the recorded rows.
+inline void print_op_profile(double wall, double path_peak) {
+  const std::vector<op_profile::Row> rows = op_profile::take();
+  std::printf("      %-28s %7s %9s %6s %9s %6s\n", "op", "calls", "s", "share", "GFLOP/s", "peak");
+  double in_ops = 0;
+  for (const op_profile::Row& r : rows) {
+    in_ops += r.seconds;
+    if (r.flop > 0)
+      std::printf("      %-28s %7lld %9.3f %5.1f%% %9.1f %5.1f%%\n", r.op.c_str(),
+                  (long long)r.calls, r.seconds, 100 * r.seconds / wall, r.flop / r.seconds * 1e-9,
+                  100 * r.flop / r.seconds * 1e-9 / path_peak);
+    else
+      std::printf("      %-28s %7lld %9.3f %5.1f%% %9s %6s\n", r.op.c_str(), (long long)r.calls,
+                  r.seconds, 100 * r.seconds / wall, "-", "-");
+  }
+  std::printf("      %-28s %7s %9.3f %5.1f%%\n", "(outside the ops above)", "", wall - in_ops,
+              100 * (wall - in_ops) / wall);
+  std::fflush(stdout);
 }
 
 }  // namespace macro::bench
