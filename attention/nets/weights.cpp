@@ -165,7 +165,7 @@ WidenedBuffer::WidenedBuffer(int64_t floats) {
     p_.reset(static_cast<float*>(large_alloc(cap_ * sizeof(float), /*populate=*/true)));
     MACRO_CHECK(p_ != nullptr);
   }
-  std::memset(p_.get(), 0, n_ * sizeof(float));
+  if (n_) std::memset(p_.get(), 0, n_ * sizeof(float));
   const size_t live = g_widened_live += n_ * sizeof(float);
   size_t peak = g_widened_peak.load();
   while (live > peak && !g_widened_peak.compare_exchange_weak(peak, live)) {

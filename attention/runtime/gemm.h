@@ -82,7 +82,7 @@ class PackedWeights {
   WeightType type() const { return type_; }
   Isa isa() const { return isa_; }
   bool empty() const { return n_ == 0; }
-  size_t bytes() const { return words_ * sizeof(float); }
+  size_t bytes() const { return data_ ? words_ * sizeof(float) : 0; }
   const GemmKernel& kernel() const;
   const void* panels() const { return data_.get(); }
   int64_t k_padded() const { return kp_; }

@@ -91,13 +91,10 @@ inline void transpose_store_4x16(__m512 r0, __m512 r1, __m512 r2, __m512 r3, int
   }
   if (nk == 16 && nrows == 2) {
     // The last pair of rows of a 14-row panel: the low 8 bytes of each lane.
-#define MACRO_STORE_LANE2(L)                                                          \
-  _mm_storel_pi(reinterpret_cast<__m64*>(dst + (4 * L + 0) * w),                    \
-                _mm512_extractf32x4_ps(u0, L));                                     \
-  _mm_storel_pi(reinterpret_cast<__m64*>(dst + (4 * L + 1) * w),                    \
-                _mm512_extractf32x4_ps(u1, L));                                     \
-  _mm_storel_pi(reinterpret_cast<__m64*>(dst + (4 * L + 2) * w),                    \
-                _mm512_extractf32x4_ps(u2, L));                                     \
+#define MACRO_STORE_LANE2(L)                                                                     \
+  _mm_storel_pi(reinterpret_cast<__m64*>(dst + (4 * L + 0) * w), _mm512_extractf32x4_ps(u0, L)); \
+  _mm_storel_pi(reinterpret_cast<__m64*>(dst + (4 * L + 1) * w), _mm512_extractf32x4_ps(u1, L)); \
+  _mm_storel_pi(reinterpret_cast<__m64*>(dst + (4 * L + 2) * w), _mm512_extractf32x4_ps(u2, L)); \
   _mm_storel_pi(reinterpret_cast<__m64*>(dst + (4 * L + 3) * w), _mm512_extractf32x4_ps(u3, L));
     MACRO_STORE_LANE2(0)
     MACRO_STORE_LANE2(1)

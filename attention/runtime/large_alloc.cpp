@@ -14,7 +14,9 @@ void* large_alloc(size_t bytes, bool populate) {
   if (!p) return nullptr;
   (void)madvise(p, size, MADV_HUGEPAGE);  // hints: an older or stricter kernel may refuse them
 #ifdef MADV_POPULATE_WRITE
-  if (populate) (void)madvise(p, size, MADV_POPULATE_WRITE);
+  // Only the pages asked for: where huge pages are refused, the 2 MB rounding stays untouched.
+  constexpr size_t kPage = 4096;
+  if (populate) (void)madvise(p, (bytes + kPage - 1) / kPage * kPage, MADV_POPULATE_WRITE);
 #else
   (void)populate;
 #endif

@@ -38,11 +38,9 @@ class Arena {
   // Start carving; make room for `bytes` (call with the sum of carve sizes, see carve_size()).
   void reset(size_t bytes) {
     if (bytes > capacity_) {
-      constexpr size_t kHuge = size_t(2) << 20;
-      const size_t size = (bytes + kHuge - 1) / kHuge * kHuge;
-      buffer_.reset(static_cast<std::byte*>(large_alloc(size, /*populate=*/true)));
+      buffer_.reset(static_cast<std::byte*>(large_alloc(bytes, /*populate=*/true)));
       MACRO_CHECK(buffer_ != nullptr);
-      capacity_ = size;
+      capacity_ = bytes;
     }
     used_ = 0;
   }
