@@ -63,15 +63,6 @@ std::string join(const std::vector<std::string>& v) {
   return s.empty() ? "none" : s;
 }
 
-// The render as the 8-bit PNG holds it and read_image reads it back (gs/image_io.cpp's rounding
-// and byte x (1 / 255)): what the figure shows and the metrics are computed on.
-gs::Image quantized(const std::vector<float>& color, int w, int h) {
-  gs::Image img(w, h, 3);
-  img.data.assign(color.begin(), color.begin() + ptrdiff_t(img.data.size()));
-  gs::round_to_png_levels(&img.data);
-  return img;
-}
-
 // The model as the rasterizer draws it in `mode`; mip folds in the 3D filter of the training
 // cameras (gs/train/diff_project.h: s' = sqrt(s^2 + f^2), opacity x prod s / prod s').
 gs::GaussianCloud model_cloud(const gs::SplatParams& p, gs::RasterMode mode,
@@ -106,7 +97,8 @@ Result<Rendered> render_view(const gs::GaussianCloud& cloud, const gs::Camera& c
   ro.sh_degree_cap = cloud.sh_degree;
   MACRO_ASSIGN_OR_RETURN(gs::RenderResult r, gs::render(cloud, camera, ro, pool));
   Rendered out;
-  out.image = quantized(r.color, r.width, r.height);
+  // The render as the 8-bit PNG holds it: what the figure shows and the metrics are computed on.
+  out.image = gs::png_levels_image(r.color.data(), r.width, r.height);
   for (float a : r.alpha) out.max_alpha = std::max(out.max_alpha, a);
   MACRO_ASSIGN_OR_RETURN(out.psnr, psnr(out.image, photo));
   MACRO_ASSIGN_OR_RETURN(out.ssim, ssim(out.image, photo, {}, pool));

@@ -287,6 +287,13 @@ void round_to_png_levels(std::vector<float>* values) {
   for (float& v : *values) v = float(png_byte(v)) * (1.f / 255.f);
 }
 
+Image png_levels_image(const float* rgb, int w, int h) {
+  Image img(w, h, 3);
+  std::copy(rgb, rgb + img.data.size(), img.data.begin());
+  round_to_png_levels(&img.data);
+  return img;
+}
+
 namespace {
 uint8_t to_u8(float v) {
   return png_byte(v);

@@ -57,6 +57,9 @@ uint8_t png_byte(float v);
 // The values an image takes through write_png and read_image (each value its level / 255), in
 // place: what a pipeline that saves its output as 8-bit PNG is scored on.
 void round_to_png_levels(std::vector<float>* values);
+// The first w * h * 3 values of `rgb` as a w x h RGB image through round_to_png_levels: a render
+// as a pipeline that saves it as an 8-bit PNG and reads it back is scored (and shown) on.
+Image png_levels_image(const float* rgb, int w, int h);
 // The bytes write_png would write (for tests and for callers that bundle files).
 Result<std::vector<uint8_t>> encode_png(const Image& image);
 // Baseline JPEG (stb: 4:2:0 up to quality 90, 4:4:4 above) from a 1- or 3-channel float image,

@@ -51,14 +51,6 @@ class ScratchDir {
   std::string path_;
 };
 
-// The 8-bit PNG levels of a render, as the release saves and reloads it.
-gs::Image quantised(const gs::RenderResult& r) {
-  gs::Image img(r.width, r.height, 3);
-  img.data = r.color;
-  gs::round_to_png_levels(&img.data);
-  return img;
-}
-
 // The reference candidates a fix may use: the training photos, and (PR-Difix3D) the enhanced
 // novel images of earlier rounds.
 struct References {
@@ -221,7 +213,9 @@ Result<std::unique_ptr<Difix3dRun>> Difix3dRun::run(const SceneInputs& inputs,
   st.tuned = gs::to_cloud(params);
   gs::RenderOptions ro;
   MACRO_ASSIGN_OR_RETURN(gs::RenderResult final_render, gs::render(st.tuned, inputs.closeup, ro));
-  res.render = quantised(final_render);
+  // The 8-bit PNG levels of the render, as the release saves and reloads it.
+  res.render =
+      gs::png_levels_image(final_render.color.data(), final_render.width, final_render.height);
   res.seconds_final_render = seconds_since(t2);
   return run;
 }

@@ -48,11 +48,9 @@ namespace {
 
 // A render as a method's prediction. The released pipeline saves the render as an 8-bit PNG and
 // scores the file: quantise exactly as gs::write_png + gs::read_image would.
-MethodOutput png_round_trip(gs::RenderResult r) {
+MethodOutput png_round_trip(const gs::RenderResult& r) {
   MethodOutput out;
-  out.image = gs::Image(r.width, r.height, 3);
-  out.image.data = std::move(r.color);
-  gs::round_to_png_levels(&out.image.data);
+  out.image = gs::png_levels_image(r.color.data(), r.width, r.height);
   return out;
 }
 
@@ -63,7 +61,7 @@ Result<MethodOutput> run_3dgs_method(const MethodContext& context) {
   gs::RenderOptions ro;  // classic, black background, SH degree 3 (gsplat's render defaults)
   MACRO_ASSIGN_OR_RETURN(gs::RenderResult r,
                          gs::render(context.inputs.cloud, context.inputs.closeup, ro));
-  MethodOutput out = png_round_trip(std::move(r));
+  MethodOutput out = png_round_trip(r);
   out.stages.push_back({"render", seconds_since(t0)});
   return out;
 }
@@ -84,7 +82,7 @@ Result<MethodOutput> run_mip_splatting_method(const MethodContext& context) {
   gs::RenderOptions ro;
   ro.mode = gs::RasterMode::kMip;
   MACRO_ASSIGN_OR_RETURN(gs::RenderResult r, gs::render(cloud, context.inputs.closeup, ro));
-  MethodOutput out = png_round_trip(std::move(r));
+  MethodOutput out = png_round_trip(r);
   out.stages.push_back({"load", load_s, false});
   out.stages.push_back({"render", seconds_since(t1)});
   return out;
