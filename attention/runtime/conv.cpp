@@ -190,10 +190,8 @@ ConvWeights ConvWeights::pack(const float* w, const float* bias, int64_t c_out, 
     const int64_t cin2 = (c_in + 1) / 2 * 2, K = int64_t(kh) * kw * cin2;
     const size_t n = size_t(c_out * K);
     std::unique_ptr<float, LargeFree> wr_block(
-        static_cast<float*>(large_alloc(n * sizeof(float), /*populate=*/true)));
-    MACRO_CHECK(wr_block != nullptr);
+        static_cast<float*>(large_zeroed(n * sizeof(float))));
     float* const wr = wr_block.get();
-    std::memset(wr, 0, n * sizeof(float));
     for (int64_t co = 0; co < c_out; ++co)
       for (int64_t ci = 0; ci < c_in; ++ci)
         for (int dy = 0; dy < kh; ++dy)

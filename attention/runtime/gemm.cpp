@@ -548,9 +548,7 @@ PackedWeights PackedWeights::build(const void* src, bool src_bf16, bool transpos
   const int64_t elems = detail::round_up(rows, w) * pw.kp_;
   const int64_t bytes = elems * detail::packed_elem_bytes(l);
   pw.words_ = size_t((bytes + 3) / 4 + 16);
-  pw.data_.reset(static_cast<float*>(large_alloc(pw.words_ * sizeof(float), /*populate=*/true)));
-  MACRO_CHECK(pw.data_ != nullptr);
-  std::memset(pw.data_.get(), 0, pw.words_ * sizeof(float));
+  pw.data_.reset(static_cast<float*>(large_zeroed(pw.words_ * sizeof(float))));
   if (src_bf16) {
     detail::pack_panels_bf16(static_cast<const uint16_t*>(src), ld, transposed, rows, k, l, w, 0,
                              rows, 0, k, pw.kp_, pw.data_.get());

@@ -22,7 +22,6 @@
 
 #include <cstdint>
 #include <memory>
-#include <vector>
 
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/kernels.h"

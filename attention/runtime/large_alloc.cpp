@@ -2,6 +2,10 @@
 
 #include <sys/mman.h>
 
+#include <cstring>
+
+#include "attention/runtime/status.h"
+
 namespace macro {
 
 void* large_alloc(size_t bytes, bool populate) {
@@ -20,6 +24,13 @@ void* large_alloc(size_t bytes, bool populate) {
 #else
   (void)populate;
 #endif
+  return p;
+}
+
+void* large_zeroed(size_t bytes) {
+  void* p = large_alloc(bytes, /*populate=*/true);
+  MACRO_CHECK(p != nullptr);
+  std::memset(p, 0, bytes == 0 ? 1 : bytes);
   return p;
 }
 

@@ -22,6 +22,9 @@ inline constexpr size_t kLargeAllocMin = size_t(4) << 20;
 // At least `bytes` (>= 1) bytes, 64-byte aligned (2 MB aligned from kLargeAllocMin on); the
 // contents are unspecified. populate: fault every page in now. Null when out of memory.
 void* large_alloc(size_t bytes, bool populate);
+// large_alloc(bytes, /*populate=*/true), zero-filled. Running out of memory is fatal here (as it
+// is for std::vector), so the result is never null.
+void* large_zeroed(size_t bytes);
 
 struct LargeFree {
   void operator()(void* p) const { std::free(p); }

@@ -129,10 +129,7 @@ namespace {
 void* aligned_zeroed(size_t bytes) {
   size_t rounded = (bytes + kTensorAlign - 1) / kTensorAlign * kTensorAlign;
   if (rounded == 0) rounded = kTensorAlign;
-  void* p = large_alloc(rounded, /*populate=*/true);
-  MACRO_CHECK(p != nullptr);
-  std::memset(p, 0, rounded);
-  return p;
+  return large_zeroed(rounded);
 }
 }  // namespace
 
