@@ -65,7 +65,9 @@ void pack_q_pairs(const BlockJob& job, uint32_t* qp) {
 template <int R>
 inline void score_rows_bf16(const uint16_t* const* k_rows, const uint32_t* qp, int d2, float* s) {
   __m512 acc[R][4];
+#pragma GCC unroll 8
   for (int i = 0; i < R; ++i)
+#pragma GCC unroll 4
     for (int v = 0; v < 4; ++v) acc[i][v] = _mm512_setzero_ps();
   for (int e = 0; e < d2; ++e) {
     const uint32_t* q = qp + size_t(e) * kTileQ;
@@ -79,7 +81,9 @@ inline void score_rows_bf16(const uint16_t* const* k_rows, const uint32_t* qp, i
       acc[i][3] = dot(acc[i][3], b, q3);
     }
   }
+#pragma GCC unroll 8
   for (int i = 0; i < R; ++i)
+#pragma GCC unroll 4
     for (int v = 0; v < 4; ++v) _mm512_storeu_ps(s + size_t(i) * kTileQ + v * 16, acc[i][v]);
 }
 
@@ -175,8 +179,10 @@ template <int R, int DV>
 inline void pv_rows_bf16(const uint32_t* pp, int c2, const uint32_t* vp, int d0, float* o, int d,
                          const float* alpha) {
   __m512 acc[R][DV];
+#pragma GCC unroll 8
   for (int i = 0; i < R; ++i) {
     const __m512 a = _mm512_set1_ps(alpha[i]);
+#pragma GCC unroll 4
     for (int v = 0; v < DV; ++v)
       acc[i][v] = _mm512_mul_ps(_mm512_loadu_ps(o + size_t(i) * d + d0 + v * 16), a);
   }
@@ -190,7 +196,9 @@ inline void pv_rows_bf16(const uint32_t* pp, int c2, const uint32_t* vp, int d0,
       for (int v = 0; v < DV; ++v) acc[i][v] = dot(acc[i][v], b, vv[v]);
     }
   }
+#pragma GCC unroll 8
   for (int i = 0; i < R; ++i)
+#pragma GCC unroll 4
     for (int v = 0; v < DV; ++v) _mm512_storeu_ps(o + size_t(i) * d + d0 + v * 16, acc[i][v]);
 }
 

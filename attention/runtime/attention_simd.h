@@ -34,7 +34,9 @@ template <typename T, int R, int CV>
 inline void score_rows(const float* const* k_rows, const float* qt, int d, float* s, int r0) {
   using V = typename T::V;
   V acc[R][CV];
+#pragma GCC unroll 8
   for (int i = 0; i < R; ++i)
+#pragma GCC unroll 4
     for (int v = 0; v < CV; ++v) acc[i][v] = T::zero();
   const float* k[R];
   for (int i = 0; i < R; ++i) k[i] = k_rows[i];
@@ -46,7 +48,9 @@ inline void score_rows(const float* const* k_rows, const float* qt, int d, float
       for (int v = 0; v < CV; ++v) acc[i][v] = T::fma(b, qv[v], acc[i][v]);
     }
   }
+#pragma GCC unroll 8
   for (int i = 0; i < R; ++i)
+#pragma GCC unroll 4
     for (int v = 0; v < CV; ++v) T::store(s + size_t(i) * kTileQ + r0 + v * T::W, acc[i][v]);
 }
 
@@ -82,8 +86,10 @@ inline void pv_rows(const float* pt, int cols, const float* const* v_rows, int d
                     const float* alpha) {
   using V = typename T::V;
   V acc[R][DV];
+#pragma GCC unroll 8
   for (int i = 0; i < R; ++i) {
     const V a = T::set1(alpha[i]);
+#pragma GCC unroll 4
     for (int v = 0; v < DV; ++v) acc[i][v] = T::mul(T::load(o + size_t(i) * d + d0 + v * T::W), a);
   }
   for (int c = 0; c < cols; ++c) {
@@ -96,7 +102,9 @@ inline void pv_rows(const float* pt, int cols, const float* const* v_rows, int d
       for (int v = 0; v < DV; ++v) acc[i][v] = T::fma(b, vv[v], acc[i][v]);
     }
   }
+#pragma GCC unroll 8
   for (int i = 0; i < R; ++i)
+#pragma GCC unroll 4
     for (int v = 0; v < DV; ++v) T::store(o + size_t(i) * d + d0 + v * T::W, acc[i][v]);
 }
 
