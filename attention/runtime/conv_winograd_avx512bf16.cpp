@@ -5,9 +5,12 @@
 //           split into even/odd columns give d[i][0..3] for 16 tiles; V in 16 registers per
 //           channel; two channels rounded to bf16 by one vcvtne2ps2bf16 (nearest even, denormals
 //           to zero, NaN quiet: the scalar bf16_bits_daz) and interleaved into pair words, one
-//           masked store per xi.
+//           masked store per xi. The next channel pair's rows of the run are prefetched first:
+//           the planes lie far apart and a chunk reads a short stretch of each row, too short
+//           for the hardware prefetchers (the inputs of the large VAE convs come from memory).
 //   output: 16 masked loads of M, A^T M A, then each output row's two columns interleaved back
-//           into 32 consecutive pixels (masked at the right edge), + bias, + residual, ReLU.
+//           into 32 consecutive pixels (masked at the right edge), + bias, + residual, ReLU;
+//           the next channel's output and residual lines are prefetched the same way.
 // GCC 12's AVX-512 headers trip -W(maybe-)uninitialized on their own _mm512_undefined_*() idiom.
 #pragma GCC diagnostic ignored "-Wuninitialized"
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
@@ -81,6 +84,22 @@ void input_avx512(const detail::WinoInput& a) {
       const detail::WinoRun& run = a.runs[r];
       const int64_t iy0 = 2 * run.ty - a.row_phase - a.pad_top;
       const int64_t ix0 = 2 * run.tx0 - a.pad_left;
+      // The next pair's rows of this run (the planes are far apart and each chunk reads only a
+      // short stretch of each row, too little for the hardware prefetcher to follow).
+      if (q + 1 < a.q1 && 2 * q + 3 < a.c_in) {
+        const int64_t y0 = iy0 < 0 ? 0 : iy0, y1 = iy0 + 4 > a.h ? a.h : iy0 + 4;
+        const int64_t x0 = ix0 < 0 ? 0 : ix0;
+        for (int64_t y = y0; y < y1; ++y) {
+          const char* n0 = reinterpret_cast<const char*>(p0 + 2 * hw + y * a.w + x0);
+          const char* n1 = n0 + 4 * hw;
+          _mm_prefetch(n0, _MM_HINT_T0);
+          _mm_prefetch(n0 + 64, _MM_HINT_T0);
+          _mm_prefetch(n0 + 128, _MM_HINT_T0);
+          _mm_prefetch(n1, _MM_HINT_T0);
+          _mm_prefetch(n1 + 64, _MM_HINT_T0);
+          _mm_prefetch(n1 + 128, _MM_HINT_T0);
+        }
+      }
       __m512 v0[16], v1[16];
       input_tiles(p0, a.h, a.w, iy0, ix0, v0);
       input_tiles(p1, a.h, a.w, iy0, ix0, v1);
@@ -135,6 +154,16 @@ void output_avx512(const detail::WinoOutput& a) {
         __m512 lo = _mm512_permutex2var_ps(y0, lo_idx, y1);
         __m512 hi = _mm512_permutex2var_ps(y0, hi_idx, y1);
         const int64_t off = oy * a.ow + ox0;
+        if (c + 1 < a.co0 + a.nco) {  // the next channel's lines of this run (as the input's)
+          const char* ny = reinterpret_cast<const char*>(yc + a.oh * a.ow + off);
+          _mm_prefetch(ny, _MM_HINT_T0);
+          _mm_prefetch(ny + 64, _MM_HINT_T0);
+          if (rc) {
+            const char* nr = reinterpret_cast<const char*>(rc + a.oh * a.ow + off);
+            _mm_prefetch(nr, _MM_HINT_T0);
+            _mm_prefetch(nr + 64, _MM_HINT_T0);
+          }
+        }
         if (rc) {
           lo = _mm512_add_ps(lo, _mm512_maskz_loadu_ps(klo, rc + off));
           hi = _mm512_add_ps(hi, _mm512_maskz_loadu_ps(khi, rc + off + 16));
