@@ -25,18 +25,20 @@ inline void prefetch_c(const MicroTile& t, int mr) {
   }
 }
 
-void micro_f32(const MicroTile& t) {
-  prefetch_c(t, kMrF32);
-  __m512 c0[kMrF32], c1[kMrF32];
+// R rows of the 12-row panel (R < 12 only for the last panel of M).
+template <int R>
+void micro_f32_rows(const MicroTile& t) {
+  prefetch_c(t, R);
+  __m512 c0[R], c1[R];
 #pragma GCC unroll 16
-  for (int r = 0; r < kMrF32; ++r) c0[r] = c1[r] = _mm512_setzero_ps();
+  for (int r = 0; r < R; ++r) c0[r] = c1[r] = _mm512_setzero_ps();
   const float* a = static_cast<const float*>(t.a);
   const float* b = static_cast<const float*>(t.b);
   for (int64_t k = 0; k < t.kc; ++k) {
     const __m512 b0 = _mm512_loadu_ps(b), b1 = _mm512_loadu_ps(b + 16);
     _mm_prefetch(reinterpret_cast<const char*>(b + 8 * kNr), _MM_HINT_T0);
 #pragma GCC unroll 16
-    for (int r = 0; r < kMrF32; ++r) {
+    for (int r = 0; r < R; ++r) {
       const __m512 ar = _mm512_set1_ps(a[r]);
       c0[r] = _mm512_fmadd_ps(ar, b0, c0[r]);
       c1[r] = _mm512_fmadd_ps(ar, b1, c1[r]);
@@ -44,7 +46,11 @@ void micro_f32(const MicroTile& t) {
     a += kMrF32;
     b += kNr;
   }
-  store_tile<kMrF32>(t, c0, c1);
+  store_tile<R>(t, c0, c1);
+}
+
+void micro_f32(const MicroTile& t) {
+  for_rows<kMrF32>(t, [&]<int R>() { micro_f32_rows<R>(t); });
 }
 
 // A panel [kcp][w] from row-major fp32 rows: 16 k x 4 rows per step, masked loads past valid_k and
@@ -78,10 +84,11 @@ void pack_a_f32(const float* src, int64_t ld, int valid_rows, int64_t valid_k, i
 // odd & 0xffff0000 are the exact fp32 values. Odd products first, as vdpbf16ps does.
 constexpr int kMrBf16 = 12;
 
-void micro_bf16_emulated(const MicroTile& t) {
-  __m512 c0[kMrBf16], c1[kMrBf16];
+template <int R>
+void micro_bf16_emulated_rows(const MicroTile& t) {
+  __m512 c0[R], c1[R];
 #pragma GCC unroll 16
-  for (int r = 0; r < kMrBf16; ++r) c0[r] = c1[r] = _mm512_setzero_ps();
+  for (int r = 0; r < R; ++r) c0[r] = c1[r] = _mm512_setzero_ps();
   const uint32_t* a = static_cast<const uint32_t*>(t.a);
   const __m512i* b = static_cast<const __m512i*>(t.b);
   const __m512i hi = _mm512_set1_epi32(int(0xffff0000u));
@@ -92,7 +99,7 @@ void micro_bf16_emulated(const MicroTile& t) {
     const __m512 b1o = _mm512_castsi512_ps(_mm512_and_si512(w1, hi));
     const __m512 b1e = _mm512_castsi512_ps(_mm512_slli_epi32(w1, 16));
 #pragma GCC unroll 16
-    for (int r = 0; r < kMrBf16; ++r) {
+    for (int r = 0; r < R; ++r) {
       const uint32_t pair = a[r];
       const __m512 ao = _mm512_castsi512_ps(_mm512_set1_epi32(int(pair & 0xffff0000u)));
       const __m512 ae = _mm512_castsi512_ps(_mm512_set1_epi32(int(pair << 16)));
@@ -104,7 +111,11 @@ void micro_bf16_emulated(const MicroTile& t) {
     a += kMrBf16;
     b += 2;
   }
-  store_tile<kMrBf16>(t, c0, c1);
+  store_tile<R>(t, c0, c1);
+}
+
+void micro_bf16_emulated(const MicroTile& t) {
+  for_rows<kMrBf16>(t, [&]<int R>() { micro_bf16_emulated_rows<R>(t); });
 }
 
 // 24 independent FMA chains (enough to cover latency x throughput on current cores).

@@ -13,10 +13,12 @@ namespace {
 
 constexpr int kMr = 14, kNr = 32;
 
-void micro_bf16(const MicroTile& t) {
-  __m512 c0[kMr], c1[kMr];
+// R rows of the 14-row panel (R < 14 only for the last panel of M).
+template <int R>
+void micro_bf16_rows(const MicroTile& t) {
+  __m512 c0[R], c1[R];
 #pragma GCC unroll 16
-  for (int r = 0; r < kMr; ++r) c0[r] = c1[r] = _mm512_setzero_ps();
+  for (int r = 0; r < R; ++r) c0[r] = c1[r] = _mm512_setzero_ps();
   const uint32_t* a = static_cast<const uint32_t*>(t.a);  // [kc/2][MR] pairs
   const __m512i* b = static_cast<const __m512i*>(t.b);    // [kc/2][NR] pairs, 2 zmm per step
   for (int64_t kp = 0; kp < t.kc / 2; ++kp) {
@@ -24,7 +26,7 @@ void micro_bf16(const MicroTile& t) {
     const __m512bh b1 = (__m512bh)_mm512_loadu_si512(b + 1);
     _mm_prefetch(reinterpret_cast<const char*>(b + 16), _MM_HINT_T0);
 #pragma GCC unroll 16
-    for (int r = 0; r < kMr; ++r) {
+    for (int r = 0; r < R; ++r) {
       const __m512bh ar = (__m512bh)_mm512_set1_epi32(int(a[r]));
       c0[r] = _mm512_dpbf16_ps(c0[r], ar, b0);
       c1[r] = _mm512_dpbf16_ps(c1[r], ar, b1);
@@ -32,7 +34,11 @@ void micro_bf16(const MicroTile& t) {
     a += kMr;
     b += 2;
   }
-  store_tile<kMr>(t, c0, c1);
+  store_tile<R>(t, c0, c1);
+}
+
+void micro_bf16(const MicroTile& t) {
+  for_rows<kMr>(t, [&]<int R>() { micro_bf16_rows<R>(t); });
 }
 
 // A panel [kcp/2][w] of pair words from row-major fp32 rows: 32 floats -> 16 pair words with one

@@ -7,10 +7,27 @@
 
 #include <immintrin.h>
 
+#include <utility>
+
 #include "attention/runtime/kernels.h"
 
 namespace macro {
 namespace {
+
+// A micro-kernel for the tile's rows only: f.template operator()<R>() with R = min(t.m, MR), so
+// the last panel of an M that is not a multiple of MR (128 output channels are 9 full 14-row
+// panels and 2 rows) runs 2 rows of products, not 14. Each row's sums are the same either way.
+template <int MR, typename F>
+inline void for_rows(const MicroTile& t, F&& f) {
+  if (t.m >= MR) {
+    f.template operator()<MR>();
+    return;
+  }
+  [&]<int... I>(std::integer_sequence<int, I...>) {
+    (void)((t.m == I + 1 ? (f.template operator()<I + 1>(), true) : false) || ...);
+  }
+  (std::make_integer_sequence<int, MR - 1>{});
+}
 
 // C = alpha*acc + beta*C (if load_c) + bias_n + bias_m + res, masked to t.n columns, t.m rows.
 template <int MR>
