@@ -1,14 +1,18 @@
-// Winograd F(2x2, 3x3) bf16 convs (attention/runtime/conv_winograd.h, conv.h's ConvWinograd).
+// Winograd F(2x2, 3x3) bf16 and fp32 convs (attention/runtime/conv_winograd.h, conv.h's
+// ConvWinograd).
 //
 // Bound, per output (b, co, oy, ox) in tile (ty, tx) at position (i, j):
-//   |y - ref| <= (2^-8 + 2^-16 + (Cin + 10) 2^-24) S + 2^-22 (|ref| + |bias| + |residual|)
+//   bf16: |y - ref| <= (2^-8 + 2^-16 + (Cin + 10) 2^-24) S + 2^-22 (|ref| + |bias| + |residual|)
+//   fp32: |y - ref| <= (Cin + 10) 2^-24 S + 2^-22 (|ref| + |bias| + |residual|)
 //   S = sum_ci sum_xi |A^T|[i][xi/4] |A^T|[j][xi%4] (|G| |g| |G|^T)_xi (|B|^T |d| |B|)_xi
 // with ref the double loop nest (conv2d_reference), d the tile's 4x4 input patch and g the 3x3
-// kernel: U and V are each rounded to bf16 once (2^-9 relative each, to the magnitudes above,
-// which also bound their fp32 sums), the products are exact, fp32 accumulation over Cin and the
-// output transform add at most (Cin + 8) roundings, bias and residual two more. This worst case is
-// loose (max error / bound ~0.03-0.09 here), so the typical error is also checked: rms error at
-// most 3x the direct bf16 path's on the same weights (measured 1.6-2.0x).
+// kernel. bf16: U and V are each rounded to bf16 once (2^-9 relative each, to the magnitudes
+// above, which also bound their fp32 sums) and the products are exact. Both: U is rounded to fp32
+// once and V's two levels of adds round twice (3 roundings, under the 10), fp32 accumulation over
+// Cin and the output transform add at most (Cin + 8) roundings, bias and residual two more. These
+// worst cases are loose (max error / bound ~0.03-0.09 for bf16), so the typical error is also
+// checked: rms error at most 3x the direct path's of the same type on the same weights (measured
+// 1.6-2.0x for bf16, 0.7-1.3x for fp32; max error / bound ~0.002-0.017 for fp32).
 #include <catch2/catch.hpp>
 
 #include <cmath>
@@ -48,7 +52,7 @@ Conv2dShape shape(int64_t n, int64_t ci, int64_t h, int64_t w, int64_t co, int p
 
 // The bound above for every output of s (row_origin honoured).
 std::vector<double> winograd_bound(const Conv2dShape& s, const float* x, const float* w,
-                                   const float* bias, const float* res, const float* ref,
+                                   const float* bias, const float* res, const float* ref, bool f32,
                                    double* s_over_direct) {
   const int64_t oh = s.out_h(), ow = s.out_w();
   const int phase = int(s.row_origin & 1);
@@ -119,9 +123,8 @@ std::vector<double> winograd_bound(const Conv2dShape& s, const float* x, const f
           const int64_t o = ((b * s.c_out + co) * oh + oy) * ow + ox;
           const double extra = std::abs(double(ref[o])) + (bias ? std::abs(bias[co]) : 0.0) +
                                (res ? std::abs(res[o]) : 0.0);
-          bound[size_t(o)] = (std::ldexp(1.0, -8) + std::ldexp(1.0, -16) +
-                              double(s.c_in + 10) * std::ldexp(1.0, -24)) *
-                                 S +
+          const double rounding = f32 ? 0.0 : std::ldexp(1.0, -8) + std::ldexp(1.0, -16);
+          bound[size_t(o)] = (rounding + double(s.c_in + 10) * std::ldexp(1.0, -24)) * S +
                              std::ldexp(1.0, -22) * extra;
           if (direct > 0) ratio_sum += S / direct, ++ratio_n;
         }
@@ -136,7 +139,8 @@ struct Case {
 };
 
 // Runs the conv on the active path (Winograd forced) and checks it against the bound; returns y.
-std::vector<float> check_case(const Case& c, ThreadPool* pool) {
+std::vector<float> check_case(const Case& c, WeightType type, ThreadPool* pool) {
+  const bool f32 = type == WeightType::kF32;
   const Conv2dShape& s = c.s;
   auto x = random_vec(size_t(s.n * s.c_in * s.h * s.w), 21);
   auto w = random_vec(size_t(s.c_out * s.c_in * 9), 22);
@@ -146,8 +150,8 @@ std::vector<float> check_case(const Case& c, ThreadPool* pool) {
   std::vector<float> ref(ny);
   conv2d_reference(s, x.data(), w.data(), c.bias ? bias.data() : nullptr,
                    c.residual ? res.data() : nullptr, ref.data());
-  ConvWeights cw = ConvWeights::pack(w.data(), c.bias ? bias.data() : nullptr, s.c_out, s.c_in, 3,
-                                     3, WeightType::kBf16);
+  ConvWeights cw =
+      ConvWeights::pack(w.data(), c.bias ? bias.data() : nullptr, s.c_out, s.c_in, 3, 3, type);
   REQUIRE(cw.winograd().size() == 16);
   REQUIRE(detail::winograd_applies(s, cw));
   std::vector<float> y(ny, NAN);
@@ -157,7 +161,7 @@ std::vector<float> check_case(const Case& c, ThreadPool* pool) {
   double ratio = 0;
   const std::vector<double> bound =
       winograd_bound(s, x.data(), w.data(), c.bias ? bias.data() : nullptr,
-                     c.residual ? res.data() : nullptr, ref.data(), &ratio);
+                     c.residual ? res.data() : nullptr, ref.data(), f32, &ratio);
   size_t bad = 0, first = 0, clamped = 0;
   double worst = 0;  // max err / bound
   for (size_t i = 0; i < ny; ++i) {
@@ -170,15 +174,16 @@ std::vector<float> check_case(const Case& c, ThreadPool* pool) {
     }
     worst = std::max(worst, err / bound[i]);
   }
-  INFO(isa_name(active_isa()) << " N=" << s.n << " Cin=" << s.c_in << " " << s.h << "x" << s.w
-                              << " Cout=" << s.c_out << " pad=" << s.pad_top << " origin="
-                              << s.row_origin << " res=" << c.residual << " alias=" << c.alias
-                              << " relu=" << c.relu << " mean S/sum|w||x|=" << ratio
-                              << " max err/bound=" << worst << " first bad " << first << ": y "
-                              << y[first] << " ref " << ref[first] << " bound " << bound[first]);
+  INFO(isa_name(active_isa()) << (f32 ? " fp32" : " bf16") << " N=" << s.n << " Cin=" << s.c_in
+                              << " " << s.h << "x" << s.w << " Cout=" << s.c_out
+                              << " pad=" << s.pad_top << " origin=" << s.row_origin
+                              << " res=" << c.residual << " alias=" << c.alias << " relu=" << c.relu
+                              << " mean S/sum|w||x|=" << ratio << " max err/bound=" << worst
+                              << " first bad " << first << ": y " << y[first] << " ref "
+                              << ref[first] << " bound " << bound[first]);
   CHECK(bad == 0);
   if (c.relu) CHECK(clamped > ny / 4);
-  // The typical error against the direct bf16 path's on the same weights (mode off).
+  // The typical error against the direct path's of the same type on the same weights (mode off).
   std::vector<float> yd(ny, NAN);
   if (c.alias) yd = res;
   const ConvWinograd mode = conv2d_set_winograd(ConvWinograd::kOff);
@@ -191,7 +196,7 @@ std::vector<float> check_case(const Case& c, ThreadPool* pool) {
     ew += (y[i] - r) * (y[i] - r);
     ed += (yd[i] - r) * (yd[i] - r);
   }
-  INFO("rms error winograd / direct bf16 = " << std::sqrt(ew / ed));
+  INFO("rms error winograd / direct = " << std::sqrt(ew / ed));
   CHECK(std::sqrt(ew) <= 3.0 * std::sqrt(ed));
   CHECK(std::memcmp(y.data(), yd.data(), ny * 4) != 0);
   return y;
@@ -211,69 +216,81 @@ TEST_CASE("winograd: the scalar twin and every path against the double loop nest
   ModeGuard guard(ConvWinograd::kAlways);
   for (Isa isa : supported_isas()) {
     REQUIRE(set_isa(isa));
-    for (const Case& c : kCases) check_case(c, nullptr);
+    for (const Case& c : kCases)
+      for (WeightType type : {WeightType::kBf16, WeightType::kF32}) check_case(c, type, nullptr);
   }
 }
 
 TEST_CASE("winograd: the vector transforms equal the scalar twins bit for bit", "[winograd]") {
-  if (!isa_supported(Isa::kAvx512Bf16)) {
-    WARN("no AVX512-BF16 on this machine: only the scalar transforms exist here");
-    return;
-  }
   const detail::WinogradTransforms& sc = detail::winograd_scalar_transforms();
-  const detail::WinogradTransforms& vx = detail::winograd_transforms(Isa::kAvx512Bf16);
-  REQUIRE(vx.input != sc.input);
-  // A chunk of 45 tiles from tile 5 of a 17 x 13 output (TW = 7: runs cut by rows and 16-groups).
-  for (int pad : {0, 1})
-    for (int phase : {0, 1}) {
-      const int64_t cin = 7, h = 19, w = 13 + 2 * (1 - pad), oh = h + 2 * pad - 2,
-                    ow = w + 2 * pad - 2;
-      const int64_t tw = (ow + 1) / 2, th = (oh + phase + 1) / 2, tiles = th * tw;
-      const int64_t t0 = 5, nt = std::min<int64_t>(45, tiles - t0);
-      std::vector<detail::WinoRun> runs;
-      for (int64_t col = 0; col < nt;) {
-        const int64_t t = t0 + col, len = std::min({nt - col, tw - t % tw, 16 - col % 16});
-        runs.push_back({t / tw, t % tw, int(col), int(len)});
-        col += len;
-      }
-      auto x = random_vec(size_t(cin * h * w), 31);
-      x[3] = NAN;  // a NaN rounds to the same quiet NaN in both
-      // A patch of fp32 denormals (V denormal too: flushed to zero by both).
-      for (int64_t i = 0; i < 4; ++i)
-        for (int64_t j = 0; j < 4; ++j)
-          x[size_t(2 * w * h + (6 + i) * w + 4 + j)] = 3e-39f * float(i - j);
-      const int nr = 32;
-      const int64_t kp2 = 5, T = 64, xs = T * kp2;
-      std::vector<uint32_t> v1(size_t(16 * xs), 0xdeadbeef), v2 = v1;
-      detail::WinoInput in;
-      in.x = x.data(), in.c_in = cin, in.h = h, in.w = w;
-      in.pad_top = in.pad_left = pad, in.row_phase = phase;
-      in.q0 = 0, in.q1 = 4, in.runs = runs.data(), in.nruns = int(runs.size());
-      in.nr = nr, in.kp2 = kp2, in.xi_stride = xs;
-      in.v = v1.data();
-      sc.input(in);
-      in.v = v2.data();
-      vx.input(in);
-      CHECK(std::memcmp(v1.data(), v2.data(), v1.size() * 4) == 0);
-      // Output: M for 3 channels from 1, bias, residual aliasing y, ReLU.
-      const int64_t cout = 4, co0 = 1, nco = 3;
-      auto m = random_vec(size_t(16 * nco * T), 32);
-      auto bias = random_vec(size_t(cout), 33);
-      for (bool relu : {false, true})
-        for (bool with_res : {false, true}) {
-          auto y1 = random_vec(size_t(cout * oh * ow), 34), y2 = y1;
-          detail::WinoOutput out;
-          out.m = m.data(), out.ldm = T, out.xi_stride = nco * T, out.co0 = co0, out.nco = nco;
-          out.bias = bias.data(), out.oh = oh, out.ow = ow, out.row_phase = phase;
-          out.relu = relu, out.runs = runs.data(), out.nruns = int(runs.size());
-          out.y = y1.data(), out.residual = with_res ? y1.data() : nullptr;
-          sc.output(out);
-          out.y = y2.data(), out.residual = with_res ? y2.data() : nullptr;
-          vx.output(out);
-          INFO("pad " << pad << " phase " << phase << " relu " << relu << " res " << with_res);
-          CHECK(std::memcmp(y1.data(), y2.data(), y1.size() * 4) == 0);
-        }
+  for (bool f32 : {false, true}) {
+    const Isa isa = f32 ? Isa::kAvx512 : Isa::kAvx512Bf16;
+    if (!isa_supported(isa)) {
+      WARN("no " << isa_name(isa) << " on this machine: only the scalar " << (f32 ? "fp32" : "bf16")
+                 << " transforms exist here");
+      continue;
     }
+    const detail::WinogradTransforms& vx = detail::winograd_transforms(isa, f32);
+    REQUIRE(vx.input != sc.input);
+    INFO((f32 ? "fp32" : "bf16"));
+    // A chunk of 45 tiles from tile 5 of a 17 x 13 output (TW = 7: runs cut by rows and
+    // 16-groups).
+    for (int pad : {0, 1})
+      for (int phase : {0, 1}) {
+        const int64_t cin = 7, h = 19, w = 13 + 2 * (1 - pad), oh = h + 2 * pad - 2,
+                      ow = w + 2 * pad - 2;
+        const int64_t tw = (ow + 1) / 2, th = (oh + phase + 1) / 2, tiles = th * tw;
+        const int64_t t0 = 5, nt = std::min<int64_t>(45, tiles - t0);
+        std::vector<detail::WinoRun> runs;
+        for (int64_t col = 0; col < nt;) {
+          const int64_t t = t0 + col, len = std::min({nt - col, tw - t % tw, 16 - col % 16});
+          runs.push_back({t / tw, t % tw, int(col), int(len)});
+          col += len;
+        }
+        auto x = random_vec(size_t(cin * h * w), 31);
+        x[3] = NAN;  // a NaN rounds to the same quiet NaN in both
+        // A patch of fp32 denormals (V denormal too: flushed to zero by both bf16 transforms).
+        for (int64_t i = 0; i < 4; ++i)
+          for (int64_t j = 0; j < 4; ++j)
+            x[size_t(2 * w * h + (6 + i) * w + 4 + j)] = 3e-39f * float(i - j);
+        const int nr = 32;
+        // Rows per panel: 4 pairs (bf16) or 7 channels (fp32), plus one the transform leaves.
+        const int64_t k_rows = f32 ? 8 : 5, T = 64, xs = T * k_rows;
+        std::vector<uint32_t> v1(size_t(16 * xs), 0xdeadbeef), v2 = v1;
+        detail::WinoInput in;
+        in.x = x.data(), in.c_in = cin, in.h = h, in.w = w;
+        in.pad_top = in.pad_left = pad, in.row_phase = phase;
+        in.q0 = 0, in.q1 = f32 ? cin : 4, in.runs = runs.data(), in.nruns = int(runs.size());
+        in.nr = nr, in.k_rows = k_rows, in.xi_stride = xs;
+        in.f32 = f32;
+        in.v = v1.data();
+        sc.input(in);
+        in.v = v2.data();
+        vx.input(in);
+        CHECK(std::memcmp(v1.data(), v2.data(), v1.size() * 4) == 0);
+        size_t written = 0;
+        for (uint32_t u : v1) written += u != 0xdeadbeef;
+        CHECK(written == size_t(16 * nt * in.q1));
+        // Output: M for 3 channels from 1, bias, residual aliasing y, ReLU.
+        const int64_t cout = 4, co0 = 1, nco = 3;
+        auto m = random_vec(size_t(16 * nco * T), 32);
+        auto bias = random_vec(size_t(cout), 33);
+        for (bool relu : {false, true})
+          for (bool with_res : {false, true}) {
+            auto y1 = random_vec(size_t(cout * oh * ow), 34), y2 = y1;
+            detail::WinoOutput out;
+            out.m = m.data(), out.ldm = T, out.xi_stride = nco * T, out.co0 = co0, out.nco = nco;
+            out.bias = bias.data(), out.oh = oh, out.ow = ow, out.row_phase = phase;
+            out.relu = relu, out.runs = runs.data(), out.nruns = int(runs.size());
+            out.y = y1.data(), out.residual = with_res ? y1.data() : nullptr;
+            sc.output(out);
+            out.y = y2.data(), out.residual = with_res ? y2.data() : nullptr;
+            vx.output(out);
+            INFO("pad " << pad << " phase " << phase << " relu " << relu << " res " << with_res);
+            CHECK(std::memcmp(y1.data(), y2.data(), y1.size() * 4) == 0);
+          }
+      }
+  }
 }
 
 TEST_CASE("winograd: bit-identical for 1 and 2 threads, any chunk size and row bands",
@@ -287,53 +304,55 @@ TEST_CASE("winograd: bit-identical for 1 and 2 threads, any chunk size and row b
   const int64_t oh = s.out_h(), ow = s.out_w();
   const size_t ny = size_t(s.n * s.c_out * oh * ow);
   auto r = random_vec(ny, 44);
-  for (Isa isa : supported_isas()) {
-    REQUIRE(set_isa(isa));
-    ConvWeights cw =
-        ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3, WeightType::kBf16);
-    std::vector<float> base(ny);
-    conv2d_set_winograd_chunk(0);
-    conv2d(s, x.data(), cw, r.data(), base.data(), nullptr);
-    for (size_t chunk : {size_t(16), size_t(32), size_t(64), size_t(1000)})
-      for (ThreadPool* p : {static_cast<ThreadPool*>(nullptr), &pool}) {
-        conv2d_set_winograd_chunk(chunk);
-        std::vector<float> y(ny, NAN);
-        conv2d(s, x.data(), cw, r.data(), y.data(), p);
-        INFO(isa_name(isa) << " chunk " << chunk << " threads " << (p ? 2 : 1));
-        CHECK(std::memcmp(y.data(), base.data(), ny * 4) == 0);
-      }
-    conv2d_set_winograd_chunk(0);
-    conv2d_release_scratch();  // regrown by the next call
-    // Row bands of 3 (odd starts) and 4 rows of image 1, each re-cut like Conv2d::forward_rows
-    // with row_origin = its first row, give the whole image's rows.
-    for (int64_t rows : {3, 4}) {
-      for (int64_t y0 = 0; y0 < oh; y0 += rows) {
-        const int64_t y1 = std::min(oh, y0 + rows);
-        const int64_t iy0 = std::max<int64_t>(0, y0 - 1), iy1 = std::min(s.h, y1 + 1);
-        Conv2dShape bs = s;
-        bs.n = 1, bs.h = iy1 - iy0;
-        bs.pad_top = int(1 - (y0 - iy0)), bs.pad_bottom = int(1 - (iy1 - y1));
-        bs.row_origin = y0;
-        REQUIRE(bs.out_h() == y1 - y0);
-        std::vector<float> xb(size_t(s.c_in * bs.h * s.w)), rb(size_t(s.c_out * (y1 - y0) * ow));
-        for (int64_t c = 0; c < s.c_in; ++c)
-          std::memcpy(xb.data() + c * bs.h * s.w, x.data() + ((s.c_in + c) * s.h + iy0) * s.w,
-                      size_t(bs.h * s.w) * 4);
-        for (int64_t c = 0; c < s.c_out; ++c)
-          std::memcpy(rb.data() + c * (y1 - y0) * ow, r.data() + ((s.c_out + c) * oh + y0) * ow,
-                      size_t((y1 - y0) * ow) * 4);
-        std::vector<float> yb(rb.size(), NAN);
-        conv2d(bs, xb.data(), cw, rb.data(), yb.data(), &pool);
-        bool same = true;
-        for (int64_t c = 0; c < s.c_out; ++c)
-          same = same && std::memcmp(yb.data() + c * (y1 - y0) * ow,
-                                     base.data() + ((s.c_out + c) * oh + y0) * ow,
-                                     size_t((y1 - y0) * ow) * 4) == 0;
-        INFO(isa_name(isa) << " band rows " << rows << " from " << y0);
-        CHECK(same);
+  for (Isa isa : supported_isas())
+    for (WeightType type : {WeightType::kBf16, WeightType::kF32}) {
+      REQUIRE(set_isa(isa));
+      const char* tname = type == WeightType::kF32 ? " fp32" : " bf16";
+      ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3, type);
+      REQUIRE(cw.winograd().size() == 16);
+      std::vector<float> base(ny);
+      conv2d_set_winograd_chunk(0);
+      conv2d(s, x.data(), cw, r.data(), base.data(), nullptr);
+      for (size_t chunk : {size_t(16), size_t(32), size_t(64), size_t(1000)})
+        for (ThreadPool* p : {static_cast<ThreadPool*>(nullptr), &pool}) {
+          conv2d_set_winograd_chunk(chunk);
+          std::vector<float> y(ny, NAN);
+          conv2d(s, x.data(), cw, r.data(), y.data(), p);
+          INFO(isa_name(isa) << tname << " chunk " << chunk << " threads " << (p ? 2 : 1));
+          CHECK(std::memcmp(y.data(), base.data(), ny * 4) == 0);
+        }
+      conv2d_set_winograd_chunk(0);
+      conv2d_release_scratch();  // regrown by the next call
+      // Row bands of 3 (odd starts) and 4 rows of image 1, each re-cut like Conv2d::forward_rows
+      // with row_origin = its first row, give the whole image's rows.
+      for (int64_t rows : {3, 4}) {
+        for (int64_t y0 = 0; y0 < oh; y0 += rows) {
+          const int64_t y1 = std::min(oh, y0 + rows);
+          const int64_t iy0 = std::max<int64_t>(0, y0 - 1), iy1 = std::min(s.h, y1 + 1);
+          Conv2dShape bs = s;
+          bs.n = 1, bs.h = iy1 - iy0;
+          bs.pad_top = int(1 - (y0 - iy0)), bs.pad_bottom = int(1 - (iy1 - y1));
+          bs.row_origin = y0;
+          REQUIRE(bs.out_h() == y1 - y0);
+          std::vector<float> xb(size_t(s.c_in * bs.h * s.w)), rb(size_t(s.c_out * (y1 - y0) * ow));
+          for (int64_t c = 0; c < s.c_in; ++c)
+            std::memcpy(xb.data() + c * bs.h * s.w, x.data() + ((s.c_in + c) * s.h + iy0) * s.w,
+                        size_t(bs.h * s.w) * 4);
+          for (int64_t c = 0; c < s.c_out; ++c)
+            std::memcpy(rb.data() + c * (y1 - y0) * ow, r.data() + ((s.c_out + c) * oh + y0) * ow,
+                        size_t((y1 - y0) * ow) * 4);
+          std::vector<float> yb(rb.size(), NAN);
+          conv2d(bs, xb.data(), cw, rb.data(), yb.data(), &pool);
+          bool same = true;
+          for (int64_t c = 0; c < s.c_out; ++c)
+            same = same && std::memcmp(yb.data() + c * (y1 - y0) * ow,
+                                       base.data() + ((s.c_out + c) * oh + y0) * ow,
+                                       size_t((y1 - y0) * ow) * 4) == 0;
+          INFO(isa_name(isa) << tname << " band rows " << rows << " from " << y0);
+          CHECK(same);
+        }
       }
     }
-  }
 }
 
 TEST_CASE("winograd: modes, pack rule, and the direct path when forced", "[winograd]") {
@@ -373,13 +392,20 @@ TEST_CASE("winograd: modes, pack rule, and the direct path when forced", "[winog
     const std::vector<float> w_wide(size_t(64 * 1280 * 9), 0.25f);
     ConvWeights wide = ConvWeights::pack(w_wide.data(), nullptr, 64, 1280, 3, 3, WeightType::kBf16);
     CHECK(wide.winograd().empty());  // Cin 1280: no packs under kAuto
+    // fp32 packs under kAuto only where the fp32 transforms are vector code (AVX-512 and up).
+    const bool f32_fast = isa == Isa::kAvx512 || isa == Isa::kAvx512Bf16 || isa == Isa::kAmx;
     ConvWeights f32 = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3);
-    CHECK(f32.winograd().empty());
-    // Auto: only on the bf16 hardware paths, and only with enough tiles (60 here: too few).
+    CHECK(f32.winograd().size() == (f32_fast ? 16u : 0u));
+    // Auto: bf16 only on the bf16 hardware paths, fp32 on AVX-512 and up, and only with enough
+    // tiles (60 here: too few).
     CHECK_FALSE(detail::winograd_applies(s, auto_w));
     Conv2dShape big = s;
     big.h = 16, big.w = 16;  // 64 tiles
     CHECK(detail::winograd_applies(big, auto_w) == (isa == Isa::kAvx512Bf16 || isa == Isa::kAmx));
+    if (f32_fast) {
+      CHECK_FALSE(detail::winograd_applies(s, f32));
+      CHECK(detail::winograd_applies(big, f32));
+    }
     Conv2dShape s2 = big;
     s2.stride = 2;
     CHECK_FALSE(detail::winograd_applies(s2, auto_w));

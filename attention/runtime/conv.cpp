@@ -176,14 +176,19 @@ ConvWeights ConvWeights::pack(const float* w, const float* bias, int64_t c_out, 
   cw.kh_ = kh;
   cw.kw_ = kw;
   const ConvWinograd mode = conv2d_winograd_mode();
-  const bool wino = type == WeightType::kBf16 && kh == 3 && kw == 3 &&
+  // fp32 under kAuto: only on the paths with the vector fp32 transforms (AVX-512 and up).
+  const bool f32_fast = isa == Isa::kAvx512 || isa == Isa::kAvx512Bf16 || isa == Isa::kAmx;
+  const bool wino = kh == 3 && kw == 3 &&
                     (mode == ConvWinograd::kAlways ||
-                     (mode == ConvWinograd::kAuto && detail::winograd_pack_qualifies(c_out, c_in)));
-  if (wino) cw.wino_ = detail::winograd_pack(w, c_out, c_in, isa);
-  if (type == WeightType::kF32) {
+                     (mode == ConvWinograd::kAuto && detail::winograd_pack_qualifies(c_out, c_in) &&
+                      (type == WeightType::kBf16 || f32_fast)));
+  if (wino) cw.wino_ = detail::winograd_pack(w, c_out, c_in, isa, type);
+  if (wino && stride1_only) {
+    // Only the Winograd packs.
+  } else if (type == WeightType::kF32) {
     const int64_t K = c_in * kh * kw;
     cw.packed_ = PackedWeights::pack_as_a(w, c_out, K, K, type, isa);
-  } else if (!(wino && stride1_only)) {
+  } else {
     // Reorder to [Cout][KH][KW][Cin2] (Cin2 = Cin rounded up to even, zero weights for the pad).
     // The reordered copy is as large as the weight (118 MB for a 2560 -> 1280 3x3): a fresh,
     // pre-faulted huge-page block (large_alloc.h), not one page fault per 4 KB.
@@ -322,7 +327,7 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
   const int64_t oh = s.out_h(), ow = s.out_w();
   if (oh <= 0 || ow <= 0 || s.n <= 0 || s.c_out <= 0) return;
   const bool bf16 = w.type() == WeightType::kBf16;
-  if (bf16 && (w.packed().empty() || detail::winograd_applies(s, w))) {
+  if (w.packed().empty() || detail::winograd_applies(s, w)) {
     detail::conv2d_winograd(s, x, w, residual, y, act, pool);
     return;
   }

@@ -70,10 +70,10 @@ class ConvWeights {
   }
   const PackedWeights& packed() const { return packed_; }  // empty when dropped (stride1_only)
   const float* bias() const { return bias_.empty() ? nullptr : bias_.data(); }
-  // bf16 3x3 weights packed while the Winograd rule held (conv2d_set_winograd below): the 16
-  // transformed packs U_xi [Cout, Cin2] (conv_winograd.h), 16/9 of the direct pack's bytes,
-  // kept beside it (the same layer may be called with stride 2) unless stride1_only. Empty
-  // otherwise.
+  // 3x3 weights packed while the Winograd rule held (conv2d_set_winograd below): the 16
+  // transformed packs U_xi [Cout, Cin2] (bf16) or [Cout, Cin] (fp32) (conv_winograd.h), 16/9 of
+  // the direct pack's bytes, kept beside it (the same layer may be called with stride 2) unless
+  // stride1_only. Empty otherwise.
   const std::vector<PackedWeights>& winograd() const { return wino_; }
   // All packs and the bias.
   size_t bytes() const;
@@ -108,17 +108,20 @@ void conv2d_release_scratch();
 // Sets the band budget in pair words (>= 1; tests force banding on small images); returns the old.
 size_t conv2d_set_pair_band(size_t words);
 
-// Winograd F(2x2, 3x3) for bf16 3x3 stride-1 convs (any padding, batch, bias, residual, ReLU):
-// 16 products per 2x2 output tile and input channel instead of 36. The input and the weights are
-// rounded to bf16 after their transforms, so the error is a few times the direct bf16 path's
-// (conv_winograd.h states it). Modes:
+// Winograd F(2x2, 3x3) for bf16 and fp32 3x3 stride-1 convs (any padding, batch, bias,
+// residual, ReLU): 16 products per 2x2 output tile and input channel instead of 36. bf16 rounds
+// the input and the weights after their transforms, so its error is a few times the direct bf16
+// path's; fp32's rms error is that of the direct fp32 path (conv_winograd.h states both bounds).
+// Modes:
 //   kOff     every conv takes the direct path; no Winograd packs are built.
-//   kAuto    (default) where it was measured faster on AVX512-BF16 (docs/PERFORMANCE.md, "Winograd
-//            bf16 conv"): the bf16 kernel path is avx512bf16 or amx, 64 <= Cin, Cout <= 640 (packs
-//            are built for those channel counts only: 1280 channels gain 1.5x but their packs
-//            would add ~1.6 GB to the U-Net) and at least 64 2x2 output tiles per image.
-//   kAlways  every bf16 3x3 stride-1 conv whose weights carry Winograd packs, on any path
-//            (packs are then built for every bf16 3x3 conv; tests, benchmarks).
+//   kAuto    (default) where it was measured faster (docs/PERFORMANCE.md, "Winograd bf16 conv"
+//            and "fp32 Winograd"): 64 <= Cin, Cout <= 640 (packs are built for those channel
+//            counts only: 1280 channels gain 1.5x in bf16 but their packs would add ~1.6 GB to
+//            the U-Net), at least 64 2x2 output tiles per image, and for bf16 the kernel path
+//            avx512bf16 or amx, for fp32 avx512, avx512bf16 or amx (fp32 packs are built only
+//            on those paths).
+//   kAlways  every 3x3 stride-1 conv whose weights carry Winograd packs, on any path
+//            (packs are then built for every 3x3 conv; tests, benchmarks).
 // The packs are built by ConvWeights::pack under the mode of that moment; the choice per call is
 // made under the current mode. Start-up mode from the environment: MACRO_CONV_WINOGRAD=0 (kOff),
 // =1 or unset (kAuto), =always (kAlways).

@@ -1,9 +1,10 @@
-// Winograd F(2x2, 3x3) bf16 convs (conv_winograd.h): the weight transform and packing, the mode
-// switch, the chunk driver over the GEMM driver, and the scalar transforms (the twins of
-// conv_winograd_avx512bf16.cpp, bit for bit).
+// Winograd F(2x2, 3x3) bf16 and fp32 convs (conv_winograd.h): the weight transform and packing,
+// the mode switch, the chunk driver over the GEMM driver, and the scalar transforms (the twins of
+// conv_winograd_avx512.cpp and conv_winograd_avx512bf16.cpp, bit for bit).
 //
 // Per chunk of tiles (one image, T tiles in raster order, split into runs on one tile row):
-//   V [16][T/NR panels][Kp/2][NR]  pair words, the prepacked B operand of the bf16 kernel
+//   V [16][T/NR panels][K rows][NR]  the prepacked B operand of the path's kernel: bf16 pair
+//                                    words (K rows = Kp/2) or fp32 values (K rows = Cin)
 //   for each block of output channels (a multiple of MR):
 //     M_xi [co_blk][T] = U_xi[co block] . V_xi       16 run_gemm calls, prepacked A and B
 //     y[co block, the chunk's pixels] = A^T M A + bias (+ residual) (ReLU)
@@ -109,6 +110,25 @@ inline void load_patch(const float* p, int64_t h, int64_t w, int64_t iy0, int64_
 
 void input_scalar(const detail::WinoInput& a) {
   const int64_t hw = a.h * a.w;
+  if (a.f32) {
+    for (int64_t c = a.q0; c < a.q1; ++c) {
+      const float* p = a.x + c * hw;
+      for (int r = 0; r < a.nruns; ++r) {
+        const detail::WinoRun& run = a.runs[r];
+        const int64_t iy0 = 2 * run.ty - a.row_phase - a.pad_top;
+        for (int l = 0; l < run.len; ++l) {
+          const int64_t ix0 = 2 * (run.tx0 + l) - a.pad_left;
+          const int col = run.col + l;
+          float d[16], v[16];
+          load_patch(p, a.h, a.w, iy0, ix0, d);
+          input_tile(d, v);
+          uint32_t* dst = a.v + (col / a.nr) * a.k_rows * a.nr + c * a.nr + col % a.nr;
+          for (int xi = 0; xi < 16; ++xi) std::memcpy(dst + xi * a.xi_stride, v + xi, 4);
+        }
+      }
+    }
+    return;
+  }
   for (int64_t q = a.q0; q < a.q1; ++q) {
     const int64_t c0 = 2 * q, c1 = c0 + 1;
     const float* p0 = c0 < a.c_in ? a.x + c0 * hw : nullptr;
@@ -124,7 +144,7 @@ void input_scalar(const detail::WinoInput& a) {
         load_patch(p1, a.h, a.w, iy0, ix0, d1);
         input_tile(d0, v0);
         input_tile(d1, v1);
-        uint32_t* dst = a.v + (col / a.nr) * a.kp2 * a.nr + q * a.nr + col % a.nr;
+        uint32_t* dst = a.v + (col / a.nr) * a.k_rows * a.nr + q * a.nr + col % a.nr;
         for (int xi = 0; xi < 16; ++xi)
           dst[xi * a.xi_stride] = bf16_bits_daz(v0[xi]) | (bf16_bits_daz(v1[xi]) << 16);
       }
@@ -230,8 +250,11 @@ const WinogradTransforms& winograd_scalar_transforms() {
   return t;
 }
 
-const WinogradTransforms& winograd_transforms(Isa isa) {
-  if (isa == Isa::kAvx512Bf16 || isa == Isa::kAmx) {
+const WinogradTransforms& winograd_transforms(Isa isa, bool f32) {
+  if (f32 && (isa == Isa::kAvx512 || isa == Isa::kAvx512Bf16 || isa == Isa::kAmx)) {
+    if (const WinogradTransforms* t = winograd_avx512_transforms()) return *t;
+  }
+  if (!f32 && (isa == Isa::kAvx512Bf16 || isa == Isa::kAmx)) {
     if (const WinogradTransforms* t = winograd_avx512bf16_transforms()) return *t;
   }
   return winograd_scalar_transforms();
@@ -239,11 +262,12 @@ const WinogradTransforms& winograd_transforms(Isa isa) {
 
 thread_local std::vector<float> t_pack_buffer;
 
-std::vector<PackedWeights> winograd_pack(const float* w, int64_t c_out, int64_t c_in, Isa isa) {
-  const int64_t cin2 = (c_in + 1) / 2 * 2;
-  // u [xi][Cout][Cin2], zero for the pad channel. Kept per thread across packs (a network packs
-  // dozens of convs in a row; a fresh buffer each time costs its page faults again), freed by
-  // winograd_release_scratch().
+std::vector<PackedWeights> winograd_pack(const float* w, int64_t c_out, int64_t c_in, Isa isa,
+                                         WeightType type) {
+  const int64_t cin2 = type == WeightType::kBf16 ? (c_in + 1) / 2 * 2 : c_in;
+  // u [xi][Cout][Cin2], zero for the pad channel (bf16; fp32 has none). Kept per thread across
+  // packs (a network packs dozens of convs in a row; a fresh buffer each time costs its page faults
+  // again), freed by winograd_release_scratch().
   std::vector<float>& u = t_pack_buffer;
   u.assign(size_t(16 * c_out * cin2), 0.0f);
   for (int64_t co = 0; co < c_out; ++co)
@@ -268,7 +292,7 @@ std::vector<PackedWeights> winograd_pack(const float* w, int64_t c_out, int64_t 
   packs.reserve(16);
   for (int xi = 0; xi < 16; ++xi)
     packs.push_back(PackedWeights::pack_as_a(u.data() + size_t(xi * c_out * cin2), c_out, cin2,
-                                             cin2, WeightType::kBf16, isa));
+                                             cin2, type, isa));
   return packs;
 }
 
@@ -283,7 +307,8 @@ bool winograd_applies(const Conv2dShape& s, const ConvWeights& w) {
   if (s.kh != 3 || s.kw != 3 || s.stride != 1 || s.row_origin < 0) return false;
   if (mode == ConvWinograd::kAlways) return true;
   const Isa isa = w.winograd()[0].isa();
-  if (isa != Isa::kAvx512Bf16 && isa != Isa::kAmx) return false;
+  const bool f32 = w.winograd()[0].type() == WeightType::kF32;
+  if (isa != Isa::kAvx512Bf16 && isa != Isa::kAmx && !(f32 && isa == Isa::kAvx512)) return false;
   const int64_t tiles = (s.out_h() + 1) / 2 * ((s.out_w() + 1) / 2);
   return winograd_pack_qualifies(s.c_out, s.c_in) && tiles >= kAutoMinTiles;
 }
@@ -293,15 +318,19 @@ void conv2d_winograd(const Conv2dShape& s, const float* x, const ConvWeights& w,
   const std::vector<PackedWeights>& U = w.winograd();
   MACRO_CHECK(U.size() == 16 && s.kh == 3 && s.kw == 3 && s.stride == 1 && s.row_origin >= 0);
   const GemmKernel& kern = U[0].kernel();
-  const WinogradTransforms& tr = winograd_transforms(U[0].isa());
+  const bool f32 = U[0].type() == WeightType::kF32;
+  const WinogradTransforms& tr = winograd_transforms(U[0].isa(), f32);
   const int nr = kern.nr, mr = kern.mr;
   MACRO_CHECK(nr % 16 == 0);
   const int64_t esz = packed_elem_bytes(kern.layout);
-  const int64_t kp = U[0].k_padded(), kp2 = kp / 2, cin2 = (s.c_in + 1) / 2 * 2;
+  // K of the GEMMs (Cin, or Cin2 for the pairs), the padded K and the words per panel row set.
+  const int64_t kk = f32 ? s.c_in : (s.c_in + 1) / 2 * 2;
+  const int64_t kp = U[0].k_padded(), k_rows = f32 ? kp : kp / 2, rows_valid = f32 ? kk : kk / 2;
   const int64_t oh = s.out_h(), ow = s.out_w();
   const int phase = int(s.row_origin & 1);
   const int64_t th = (oh + phase + 1) / 2, tw = (ow + 1) / 2, tiles = th * tw;
-  // Chunk: T tiles (a multiple of NR), V about kVBytes; channel blocks: M about kMBytes.
+  // Chunk: T tiles (a multiple of NR), V about kVBytes in bf16 (the same tiles in fp32, twice the
+  // bytes: measured faster than halving T, 2026-12-02); channel blocks: M about kMBytes.
   int64_t T = g_chunk_tiles > 0 ? int64_t(g_chunk_tiles)
                                 : std::min(kMaxAutoTiles, budgets().v / (16 * kp * 2));
   T = std::clamp<int64_t>(T / nr * nr, nr, round_up(tiles, nr));
@@ -317,7 +346,7 @@ void conv2d_winograd(const Conv2dShape& s, const float* x, const ConvWeights& w,
     blocks_per_part = (co_blocks + parts - 1) / parts;
   }
   const int64_t parts = (co_blocks + blocks_per_part - 1) / blocks_per_part;
-  const int64_t xs_v = T * kp2, xs_m = co_blk * T;
+  const int64_t xs_v = T * k_rows, xs_m = co_blk * T;
   const size_t max_runs = size_t(T + T / 16 + 2);
   // The calling thread's slots (a thread_local named inside the job would be the worker's own).
   std::vector<Slot>& slots = t_slots;
@@ -341,20 +370,22 @@ void conv2d_winograd(const Conv2dShape& s, const float* x, const ConvWeights& w,
     const int64_t panels = (nt + nr - 1) / nr, tail = nt - (panels - 1) * nr;
     for (int xi = 0; xi < 16; ++xi)
       for (int64_t p = 0; p < panels; ++p) {
-        uint32_t* vp = v + xi * xs_v + p * kp2 * nr;
-        if (kp2 > cin2 / 2) std::memset(vp + cin2 / 2 * nr, 0, size_t((kp2 - cin2 / 2) * nr) * 4);
+        uint32_t* vp = v + xi * xs_v + p * k_rows * nr;
+        if (k_rows > rows_valid)
+          std::memset(vp + rows_valid * nr, 0, size_t((k_rows - rows_valid) * nr) * 4);
         if (p == panels - 1 && tail < nr)
-          for (int64_t q = 0; q < cin2 / 2; ++q)
+          for (int64_t q = 0; q < rows_valid; ++q)
             std::memset(vp + q * nr + tail, 0, size_t(nr - tail) * 4);
       }
     WinoInput in;
     in.x = x + b * s.c_in * hw;
     in.c_in = s.c_in, in.h = s.h, in.w = s.w;
     in.pad_top = s.pad_top, in.pad_left = s.pad_left, in.row_phase = phase;
-    in.q0 = 0, in.q1 = cin2 / 2;
+    in.q0 = 0, in.q1 = rows_valid;
     in.runs = runs, in.nruns = nruns;
-    in.nr = nr, in.kp2 = kp2, in.xi_stride = xs_v;
+    in.nr = nr, in.k_rows = k_rows, in.xi_stride = xs_v;
     in.v = v;
+    in.f32 = f32;
     tr.input(in);
     const int64_t cb1 = std::min(co_blocks, (part + 1) * blocks_per_part);
     for (int64_t cb = part * blocks_per_part; cb < cb1; ++cb) {
@@ -366,7 +397,7 @@ void conv2d_winograd(const Conv2dShape& s, const float* x, const ConvWeights& w,
             kp};
         Operand ob{nullptr, nullptr, v + xi * xs_v, kp};
         DriverShape ds;
-        ds.M = nco, ds.N = nt, ds.K = cin2;
+        ds.M = nco, ds.N = nt, ds.K = kk;
         ds.C = sl.m.data + xi * xs_m;
         ds.ldc = T;
         ds.mc = round_up(nco, mr);

@@ -1,4 +1,5 @@
-// Winograd F(2x2, 3x3) for bf16 3x3 stride-1 convs (conv.h dispatches here; not for network code).
+// Winograd F(2x2, 3x3) for bf16 and fp32 3x3 stride-1 convs (conv.h dispatches here; not for
+// network code).
 //
 // Legend: Cin/Cout channels (Cin2 = Cin rounded up to even), H x W input, OH x OW output, tiles
 // of 2 x 2 output pixels (TH x TW of them; the last ones cropped when OH or OW is odd), xi = 4 i +
@@ -11,13 +12,16 @@
 //   A^T = [1 1 1 0; 0 1 -1 -1]
 // so 16 products per tile and channel pair instead of 36 (2.25x fewer).
 //
-// Numerics: U is computed in double at pack time, rounded to fp32, then bf16 by the packer. V is
-// computed in fp32 (adds only, in the order written in conv_winograd.cpp) and rounded to bf16
-// as vcvtne2ps2bf16 does (nearest even, NaN quiet, fp32 denormals to zero). The 16 GEMMs
-// are the bf16 kernel's (fp32 accumulation over Cin, in the kernel's order); the output transform
-// is fp32 adds, then + bias, + residual, ReLU, in that order. Error against the exact conv:
-// about 2^-8 * sum_ci sum_xi |A_xi| |U_xi| |V_xi| per output (tests/test_conv_winograd.cpp), a few
-// times the direct bf16 conv's 2^-8 * sum |w| |x|.
+// Numerics: U is computed in double at pack time and rounded to fp32 (then to bf16 by the bf16
+// packer). V is computed in fp32 (adds only, in the order written in conv_winograd.cpp); bf16
+// rounds it as vcvtne2ps2bf16 does (nearest even, NaN quiet, fp32 denormals to zero). The 16
+// GEMMs are the path's bf16 or fp32 kernel (fp32 accumulation over Cin, in the kernel's order);
+// the output transform is fp32 adds, then + bias, + residual, ReLU, in that order. With
+// S = sum_ci sum_xi |A_xi| |U_xi| |V_xi| per output (7-8x sum |w| |x| on random data), the error
+// against the exact conv is at most (2^-8 + (Cin + 10) 2^-24) S for bf16 and (Cin + 10) 2^-24 S
+// for fp32 (plus 2^-22 of |y| + |bias| + |residual|). Measured (tests/test_conv_winograd.cpp,
+// which checks both bounds on every path): the rms error is 1.6-2.0x the direct bf16 conv's for
+// bf16 and 0.7-1.3x the direct fp32 conv's for fp32, whose rounding it shares in kind.
 //
 // Work goes by chunks of tiles (in raster order, per image): one chunk's V for all channels and
 // its M for a block of output channels fit in L2; no image-sized buffer exists. A tile's result
@@ -45,9 +49,10 @@ struct WinoRun {
   int col = 0, len = 0;
 };
 
-// Input transform of one chunk: for channel pairs [q0, q1) and every run, the 16 values V_xi of
-// channels 2q and 2q + 1 as one bf16 pair word (even channel low) at
-//   v[xi * xi_stride + (col / nr) * kp2 * nr + q * nr + col % nr].
+// Input transform of one chunk. bf16: for channel pairs [q0, q1) and every run, the 16 values
+// V_xi of channels 2q and 2q + 1 as one bf16 pair word (even channel low) at
+//   v[xi * xi_stride + (col / nr) * k_rows * nr + q * nr + col % nr];
+// f32: for channels [q0, q1), V_xi of channel q as fp32 (its bits in the word) at the same place.
 // Tile (ty, tx) reads input rows 2 ty - row_phase - pad_top + i and columns 2 tx - pad_left + j,
 // i, j in [0, 4), as zero outside [0, H) x [0, W); channel Cin (when Cin is odd) reads as zero.
 struct WinoInput {
@@ -58,9 +63,10 @@ struct WinoInput {
   const WinoRun* runs = nullptr;
   int nruns = 0;
   int nr = 0;             // B panel width of the kernel
-  int64_t kp2 = 0;        // pair rows per panel (padded K / 2)
+  int64_t k_rows = 0;     // rows per panel: pair rows (bf16, padded K / 2) or channels (fp32, K)
   int64_t xi_stride = 0;  // words between the 16 V_xi blocks
   uint32_t* v = nullptr;
+  bool f32 = false;  // fp32 values (the fp32 kernel's B panels), not bf16 pairs
 };
 
 // Output transform of one chunk for output channels [co0, co0 + nco): M_xi[c][col] at
@@ -87,15 +93,20 @@ struct WinogradTransforms {
   const char* name = "";
 };
 
-// The transforms for a kernel path: AVX-512 for kAvx512Bf16 and kAmx, scalar for the others.
-const WinogradTransforms& winograd_transforms(Isa isa);
+// The transforms for a kernel path and element type: AVX-512 where the path has them (bf16:
+// kAvx512Bf16 and kAmx; fp32: kAvx512 too), scalar otherwise. The scalar input transform handles
+// both element types (WinoInput::f32), each vector one its own.
+const WinogradTransforms& winograd_transforms(Isa isa, bool f32 = false);
 const WinogradTransforms& winograd_scalar_transforms();
-const WinogradTransforms* winograd_avx512bf16_transforms();  // conv_winograd_avx512bf16.cpp
+const WinogradTransforms* winograd_avx512_transforms();      // fp32; conv_winograd_avx512.cpp
+const WinogradTransforms* winograd_avx512bf16_transforms();  // bf16; conv_winograd_avx512bf16.cpp
 
-// The 16 transformed weight packs U_xi [Cout, Cin2] (A operands of the bf16 kernel of `isa`).
-std::vector<PackedWeights> winograd_pack(const float* w, int64_t c_out, int64_t c_in, Isa isa);
+// The 16 transformed weight packs U_xi (A operands of the `type` kernel of `isa`): [Cout, Cin2]
+// for bf16 (the pad channel zero), [Cout, Cin] for fp32.
+std::vector<PackedWeights> winograd_pack(const float* w, int64_t c_out, int64_t c_in, Isa isa,
+                                         WeightType type);
 
-// Whether ConvWeights::pack builds the Winograd packs for a bf16 3x3 conv of these channels.
+// Whether ConvWeights::pack builds the Winograd packs for a 3x3 conv of these channels.
 bool winograd_pack_qualifies(int64_t c_out, int64_t c_in);
 // Whether conv2d takes the Winograd path for this call (mode, weights, shape rule).
 bool winograd_applies(const Conv2dShape& s, const ConvWeights& w);

@@ -1,8 +1,9 @@
-// bench winograd: bf16 3x3 stride-1 conv, Winograd F(2x2, 3x3) against the direct implicit GEMM
-// (the baseline), same weights, same run, runs interleaved (direct, Winograd, direct, ...) so a
-// busy neighbour hits both alike; medians of wall and process CPU time.
+// bench winograd: bf16 (or, with --f32, fp32) 3x3 stride-1 conv, Winograd F(2x2, 3x3) against
+// the direct implicit GEMM of the same type (the baseline), same weights, same run, runs
+// interleaved (direct, Winograd, direct, ...) so a busy neighbour hits both alike; medians of
+// wall and process CPU time.
 //
-//   bench winograd [--threads N] [--reps R] [--quick] [--only SUBSTR] [--chunk TILES]
+//   bench winograd [--threads N] [--reps R] [--quick] [--only SUBSTR] [--chunk TILES] [--f32]
 // Shapes: the Difix VAE's 3x3 convs at 960x536 and the SD-Turbo U-Net's at its 120x67 latent.
 // --quick crops the spatial sizes by 4 per side. GFLOP/s are the direct conv's FLOP per second
 // (2 Cin Cout 9 per pixel) for both, so the columns compare directly.
@@ -32,6 +33,7 @@ int run(int argc, char** argv) {
   bool quick = false;
   std::string only;
   size_t chunk = 0;
+  bool f32 = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--threads") && i + 1 < argc)
       threads = std::atoi(argv[++i]);
@@ -43,10 +45,12 @@ int run(int argc, char** argv) {
       only = argv[++i];
     else if (!std::strcmp(argv[i], "--chunk") && i + 1 < argc)
       chunk = size_t(std::atoll(argv[++i]));
+    else if (!std::strcmp(argv[i], "--f32"))
+      f32 = true;
     else {
       std::fprintf(stderr,
                    "usage: bench winograd [--threads N] [--reps R] [--quick] [--only SUBSTR] "
-                   "[--chunk TILES]\n");
+                   "[--chunk TILES] [--f32]\n");
       return 2;
     }
   }
@@ -61,8 +65,8 @@ int run(int argc, char** argv) {
       {512, 67, 120, "VAE 512ch lo"}, {320, 67, 120, "UNet 320ch"}, {640, 34, 60, "UNet 640ch"},
       {1280, 17, 30, "UNet 1280ch"},
   };
-  std::printf("bf16 conv 3x3 s1 p1, Winograd F(2x2,3x3) vs direct; isa %s, threads %d, reps %d%s\n",
-              isa_name(active_isa()), threads, reps,
+  std::printf("%s conv 3x3 s1 p1, Winograd F(2x2,3x3) vs direct; isa %s, threads %d, reps %d%s\n",
+              f32 ? "fp32" : "bf16", isa_name(active_isa()), threads, reps,
               quick ? " [--quick: spatial sizes / 4 per side]" : "");
   std::printf("  %-14s %-16s %10s %10s %8s | %9s %9s %8s | %7s %7s\n", "layer", "shape",
               "direct ms", "wino ms", "ratio", "direct cpu", "wino cpu", "ratio", "GF/s d",
@@ -80,8 +84,8 @@ int run(int argc, char** argv) {
     auto b = random_vec(size_t(s.c_out), 8);
     std::vector<float> y(size_t(s.c_out * s.out_h() * s.out_w()));
     const ConvWinograd old = conv2d_set_winograd(ConvWinograd::kAlways);  // packs for any shape
-    const ConvWeights cw =
-        ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3, WeightType::kBf16);
+    const ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3,
+                                             f32 ? WeightType::kF32 : WeightType::kBf16);
     auto once = [&](ConvWinograd m) {
       conv2d_set_winograd(m);
       const double w0 = now_seconds(), c0 = cpu_seconds();
@@ -110,7 +114,8 @@ int run(int argc, char** argv) {
 }
 
 const bool registered = register_benchmark(
-    {"winograd", "bf16 3x3 conv: Winograd F(2x2,3x3) vs the direct implicit GEMM, VAE/U-Net shapes",
+    {"winograd",
+     "bf16 or fp32 3x3 conv: Winograd F(2x2,3x3) vs the direct implicit GEMM, VAE/U-Net shapes",
      run});
 
 }  // namespace
