@@ -14,7 +14,7 @@
 # kernels behind them, [kernels] and [ops]; [vit] the ViT loader and small forwards (DINOv2 /
 # DreamSim), [mem] the VAE's banded full-resolution level (halo rows, in-place bands), [pairs]
 # points3D and pair construction, [composite] composite views and masks, [attention] the fused
-# attention (fp32 and bf16 kernels and their scalar twins), [winograd] the Winograd bf16 conv,
+# attention (fp32 and bf16 kernels and their scalar twins), [winograd] the Winograd bf16 and fp32 conv,
 # [pth] PyTorch checkpoints, [pft] the PFT-SR network, [zip] the zip writer, [undistort] lens
 # undistortion of camera files and images, [view] the viewer's HTTP API (bad requests; the
 # browser test, [browser], stays in the normal run), [train_fast] the trainer's float kernels (the

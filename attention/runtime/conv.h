@@ -114,11 +114,11 @@ size_t conv2d_set_pair_band(size_t words);
 // path's; fp32's rms error is that of the direct fp32 path (conv_winograd.h states both bounds).
 // Modes:
 //   kOff     every conv takes the direct path; no Winograd packs are built.
-//   kAuto    (default) where it was measured faster (docs/PERFORMANCE.md, "Winograd bf16 conv"
-//            and "fp32 Winograd"): 64 <= Cin, Cout <= 640 (packs are built for those channel
-//            counts only: 1280 channels gain 1.5x in bf16 but their packs would add ~1.6 GB to
-//            the U-Net), at least 64 2x2 output tiles per image, and for bf16 the kernel path
-//            avx512bf16 or amx, for fp32 avx512, avx512bf16 or amx (fp32 packs are built only
+//   kAuto    (default) where it was measured faster (docs/PERFORMANCE.md: "Winograd bf16 conv";
+//            for fp32 the 2026-12-02 evening sitting): 64 <= Cin, Cout <= 640 (packs are built for
+//            those channel counts only: 1280 channels gain 1.5x in bf16 but their packs would add
+//            ~1.6 GB to the U-Net), at least 64 2x2 output tiles per image, and for bf16 the kernel
+//            path avx512bf16 or amx, for fp32 avx512, avx512bf16 or amx (fp32 packs are built only
 //            on those paths).
 //   kAlways  every 3x3 stride-1 conv whose weights carry Winograd packs, on any path
 //            (packs are then built for every 3x3 conv; tests, benchmarks).
