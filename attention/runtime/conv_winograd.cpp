@@ -13,6 +13,7 @@
 #include "attention/runtime/conv_winograd.h"
 
 #include <algorithm>
+#include <bit>
 #include <cstdlib>
 #include <cstring>
 #include <memory>
@@ -110,29 +111,11 @@ inline void load_patch(const float* p, int64_t h, int64_t w, int64_t iy0, int64_
 
 void input_scalar(const detail::WinoInput& a) {
   const int64_t hw = a.h * a.w;
-  if (a.f32) {
-    for (int64_t c = a.q0; c < a.q1; ++c) {
-      const float* p = a.x + c * hw;
-      for (int r = 0; r < a.nruns; ++r) {
-        const detail::WinoRun& run = a.runs[r];
-        const int64_t iy0 = 2 * run.ty - a.row_phase - a.pad_top;
-        for (int l = 0; l < run.len; ++l) {
-          const int64_t ix0 = 2 * (run.tx0 + l) - a.pad_left;
-          const int col = run.col + l;
-          float d[16], v[16];
-          load_patch(p, a.h, a.w, iy0, ix0, d);
-          input_tile(d, v);
-          uint32_t* dst = a.v + (col / a.nr) * a.k_rows * a.nr + c * a.nr + col % a.nr;
-          for (int xi = 0; xi < 16; ++xi) std::memcpy(dst + xi * a.xi_stride, v + xi, 4);
-        }
-      }
-    }
-    return;
-  }
+  // Row q of the panels: channel q (fp32) or the pair of channels 2q, 2q + 1 (bf16).
   for (int64_t q = a.q0; q < a.q1; ++q) {
-    const int64_t c0 = 2 * q, c1 = c0 + 1;
+    const int64_t c0 = a.f32 ? q : 2 * q, c1 = c0 + 1;
     const float* p0 = c0 < a.c_in ? a.x + c0 * hw : nullptr;
-    const float* p1 = c1 < a.c_in ? a.x + c1 * hw : nullptr;
+    const float* p1 = !a.f32 && c1 < a.c_in ? a.x + c1 * hw : nullptr;
     for (int r = 0; r < a.nruns; ++r) {
       const detail::WinoRun& run = a.runs[r];
       const int64_t iy0 = 2 * run.ty - a.row_phase - a.pad_top;
@@ -141,12 +124,15 @@ void input_scalar(const detail::WinoInput& a) {
         const int col = run.col + l;
         float d0[16], d1[16], v0[16], v1[16];
         load_patch(p0, a.h, a.w, iy0, ix0, d0);
-        load_patch(p1, a.h, a.w, iy0, ix0, d1);
         input_tile(d0, v0);
-        input_tile(d1, v1);
+        if (!a.f32) {
+          load_patch(p1, a.h, a.w, iy0, ix0, d1);
+          input_tile(d1, v1);
+        }
         uint32_t* dst = a.v + (col / a.nr) * a.k_rows * a.nr + q * a.nr + col % a.nr;
         for (int xi = 0; xi < 16; ++xi)
-          dst[xi * a.xi_stride] = bf16_bits_daz(v0[xi]) | (bf16_bits_daz(v1[xi]) << 16);
+          dst[xi * a.xi_stride] = a.f32 ? std::bit_cast<uint32_t>(v0[xi])
+                                        : bf16_bits_daz(v0[xi]) | (bf16_bits_daz(v1[xi]) << 16);
       }
     }
   }
