@@ -177,14 +177,13 @@ ConvWeights ConvWeights::pack(const float* w, const float* bias, int64_t c_out, 
   cw.kw_ = kw;
   const ConvWinograd mode = conv2d_winograd_mode();
   // fp32 under kAuto: only on the paths with the vector fp32 transforms (AVX-512 and up).
-  const bool f32_fast = isa == Isa::kAvx512 || isa == Isa::kAvx512Bf16 || isa == Isa::kAmx;
   const bool wino = kh == 3 && kw == 3 &&
                     (mode == ConvWinograd::kAlways ||
                      (mode == ConvWinograd::kAuto && detail::winograd_pack_qualifies(c_out, c_in) &&
-                      (type == WeightType::kBf16 || f32_fast)));
+                      (type == WeightType::kBf16 || detail::winograd_vector_path(isa, type))));
   if (wino) cw.wino_ = detail::winograd_pack(w, c_out, c_in, isa, type);
   if (wino && stride1_only) {
-    // Only the Winograd packs.
+    // The Winograd packs only: every call takes them.
   } else if (type == WeightType::kF32) {
     const int64_t K = c_in * kh * kw;
     cw.packed_ = PackedWeights::pack_as_a(w, c_out, K, K, type, isa);

@@ -236,12 +236,16 @@ const WinogradTransforms& winograd_scalar_transforms() {
   return t;
 }
 
+bool winograd_vector_path(Isa isa, WeightType type) {
+  return isa == Isa::kAvx512Bf16 || isa == Isa::kAmx ||
+         (type == WeightType::kF32 && isa == Isa::kAvx512);
+}
+
 const WinogradTransforms& winograd_transforms(Isa isa, bool f32) {
-  if (f32 && (isa == Isa::kAvx512 || isa == Isa::kAvx512Bf16 || isa == Isa::kAmx)) {
-    if (const WinogradTransforms* t = winograd_avx512_transforms()) return *t;
-  }
-  if (!f32 && (isa == Isa::kAvx512Bf16 || isa == Isa::kAmx)) {
-    if (const WinogradTransforms* t = winograd_avx512bf16_transforms()) return *t;
+  if (winograd_vector_path(isa, f32 ? WeightType::kF32 : WeightType::kBf16)) {
+    const WinogradTransforms* t =
+        f32 ? winograd_avx512_transforms() : winograd_avx512bf16_transforms();
+    if (t) return *t;
   }
   return winograd_scalar_transforms();
 }
@@ -292,9 +296,7 @@ bool winograd_applies(const Conv2dShape& s, const ConvWeights& w) {
   if (mode == ConvWinograd::kOff || w.winograd().size() != 16) return false;
   if (s.kh != 3 || s.kw != 3 || s.stride != 1 || s.row_origin < 0) return false;
   if (mode == ConvWinograd::kAlways) return true;
-  const Isa isa = w.winograd()[0].isa();
-  const bool f32 = w.winograd()[0].type() == WeightType::kF32;
-  if (isa != Isa::kAvx512Bf16 && isa != Isa::kAmx && !(f32 && isa == Isa::kAvx512)) return false;
+  if (!winograd_vector_path(w.winograd()[0].isa(), w.winograd()[0].type())) return false;
   const int64_t tiles = (s.out_h() + 1) / 2 * ((s.out_w() + 1) / 2);
   return winograd_pack_qualifies(s.c_out, s.c_in) && tiles >= kAutoMinTiles;
 }

@@ -106,6 +106,10 @@ const WinogradTransforms* winograd_avx512bf16_transforms();  // bf16; conv_winog
 std::vector<PackedWeights> winograd_pack(const float* w, int64_t c_out, int64_t c_in, Isa isa,
                                          WeightType type);
 
+// Whether `isa` has vector transforms for `type` (bf16: avx512bf16 and amx; fp32: avx512 too):
+// the paths kAuto takes Winograd on (and, for fp32, builds its packs on).
+bool winograd_vector_path(Isa isa, WeightType type);
+
 // Whether ConvWeights::pack builds the Winograd packs for a 3x3 conv of these channels.
 bool winograd_pack_qualifies(int64_t c_out, int64_t c_in);
 // Whether conv2d takes the Winograd path for this call (mode, weights, shape rule).
