@@ -1,11 +1,15 @@
 // bench attention: fused block-sparse attention against the machine's own rates, measured in the
 // same run.
 //
-//   bench attention [--threads N] [--reps R] [--quick] [--unet-only] [--bf16]
+//   bench attention [--threads N] [--reps R] [--quick] [--unet-only] [--bf16] [--closeup]
 //
 // --bf16: every case also runs with bf16 products (AttentionArgs::bf16) and prints its time and
 // the fp32 / bf16 ratio (the fp32 run of the same case is the baseline); adds the VAE mid-block
 // shape (960x536 / 8 = 8040 tokens, 1 head x 512).
+// --closeup: only the U-Net level-0 attention of the MACRO close-up 960x536, K = P = 3 (a close-up
+// and 9 crops of 120 x 67 tokens, 5 heads x 64, the close-up mask rule), against dense attention
+// over one view of the same size: the masked time should be the dense time scaled by the allowed
+// pairs.
 //
 // Baselines (same run, same thread count):
 //  - FMA peak: a register-only FMA loop of the active path (per thread, times threads);
@@ -133,7 +137,7 @@ Buffers make_buffers(int n, int c) {
 int run(int argc, char** argv) {
   std::vector<int> thread_counts = {1, 2};
   int reps = 3;
-  bool quick = false, unet_only = false, bf16 = false;
+  bool quick = false, unet_only = false, bf16 = false, closeup = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) {
       thread_counts = {std::atoi(argv[++i])};
@@ -145,6 +149,8 @@ int run(int argc, char** argv) {
       unet_only = true;
     } else if (!std::strcmp(argv[i], "--bf16")) {
       bf16 = true;
+    } else if (!std::strcmp(argv[i], "--closeup")) {
+      closeup = true;
     } else {
       std::fprintf(stderr, "bench attention: unknown flag '%s'\n", argv[i]);
       return 2;
@@ -180,6 +186,7 @@ int run(int argc, char** argv) {
         threads, peak, peak_t.wall, gemm, 100 * gemm / peak);
     std::printf("  %-44s %9s %9s %8s %8s %7s %7s\n", "case", "wall ms", "cpu ms", "GF/wall",
                 "GF/cpu", "%peak", "%gemm");
+    Timing last{};  // the last run of the latest case (bf16 where asked for)
     auto time_case = [&](const char* what, Buffers& b, int tokens, int h,
                          const BlockSparseMask* mask, double allowed, int head_dim) {
       AttentionArgs a;
@@ -200,16 +207,51 @@ int run(int argc, char** argv) {
         const Timing t = median_timing(reps, [&] { ok &= attention(a, pool).is_ok(); });
         const double per_cpu = flop / t.cpu * 1e-9;
         std::printf("  %-44s %9.1f %9.1f %8.1f %8.1f %6.0f%% %6.0f%%%s", b16 ? "    bf16" : what,
-                    t.wall * 1e3, t.cpu * 1e3, flop / t.wall * 1e-9, per_cpu,
-                    100 * per_cpu / peak, 100 * per_cpu / gemm, ok ? "" : "  [FAILED]");
+                    t.wall * 1e3, t.cpu * 1e3, flop / t.wall * 1e-9, per_cpu, 100 * per_cpu / peak,
+                    100 * per_cpu / gemm, ok ? "" : "  [FAILED]");
         if (b16)
           std::printf("  fp32/bf16 %.2fx wall, %.2fx cpu", first.wall / t.wall, first.cpu / t.cpu);
         std::printf("\n");
         if (!b16) first = t;
+        last = t;
       }
       return first;
     };
     char label[160];
+    if (closeup) {
+      const int cgh = quick ? 34 : 67, cgw = quick ? 60 : 120, cn = cgh * cgw, crops = 9;
+      const int planes = 3;
+      std::vector<int32_t> cplane(static_cast<size_t>(cn)), crop_plane(crops);
+      std::vector<uint8_t> valid(size_t(crops) * cn);
+      for (int c = 0; c < crops; ++c) crop_plane[size_t(c)] = c / 3;
+      for (int y = 0; y < cgh; ++y)
+        for (int x = 0; x < cgw; ++x) {
+          cplane[size_t(y) * cgw + x] = plane_at(0, y, x, planes);
+          for (int c = 0; c < crops; ++c)  // crops padded at a border of 3-19% of the width
+            valid[size_t(c) * cn + size_t(y) * cgw + x] = x >= (c + 2) * cgw / 48;
+        }
+      auto m = macro_closeup_mask(cn, planes, cplane, crop_plane, valid);
+      if (!m.is_ok()) {
+        std::fprintf(stderr, "bench attention: %s\n", m.status().message().c_str());
+        return 1;
+      }
+      const int total = cn * (crops + 1);
+      Buffers cbuf = make_buffers(total, uheads * d);
+      std::snprintf(label, sizeof label, "dense 1 view %d tok, %dx%d", cn, uheads, d);
+      const Timing one = time_case(label, cbuf, cn, uheads, nullptr, double(cn) * cn, d);
+      const Timing one_last = last;
+      const double allowed = double(m.value().allowed_pairs());
+      std::snprintf(label, sizeof label, "MACRO close-up L0 %d tok, K=P=3", total);
+      const Timing t = time_case(label, cbuf, total, uheads, &m.value(), allowed, d);
+      const double frac = allowed / (double(cn) * cn);
+      std::printf("    masked / (dense 1 view x %.2f allowed squares): fp32 wall %.2f, cpu %.2f",
+                  frac, t.wall / one.wall / frac, t.cpu / one.cpu / frac);
+      if (bf16)
+        std::printf("; bf16 wall %.2f, cpu %.2f", last.wall / one_last.wall / frac,
+                    last.cpu / one_last.cpu / frac);
+      std::printf("\n");
+      continue;
+    }
     std::snprintf(label, sizeof label, "MACRO L1 dense %d tok, %dx%d", n, heads, d);
     const Timing dense =
         unet_only ? Timing{} : time_case(label, buf, n, heads, nullptr, double(n) * n, d);
