@@ -1,27 +1,16 @@
 // AMX-BF16 GEMM micro-kernel: a 32x32 fp32 C block as 2x2 tiles of 16x16, with TDPBF16PS.
 //
-// UNTESTED ON THE DEVELOPMENT MACHINE (AMD EPYC, no AMX): this path is compiled, and selected only
-// when cpu_features().amx is true (AMX-TILE + AMX-BF16, OS tile state, XTILEDATA permission granted
-// in cpu.cpp); otherwise the AVX512-BF16 kernel is used. Its tests run wherever AMX is present.
-//
-// Tiles: 0-3 C (16 rows x 64 B), 4-5 A (16 rows x 32 bf16), 6-7 B (16 k-pairs x 16 cols x 2).
-// A panel layout kBf16Amx: [K/32][32 rows][32 bf16] -> tile rows are 64 B apart.
-// B panel layout kBf16Pairs with NR = 32: [K/2][32][2] -> per 32-k step 16 rows of 128 B; the
-// left 16 columns are the first 64 B of each row, the right 16 the next 64 B.
-// The tile configuration is loaded on every call (other code on the thread may use other shapes).
-//
-// Review by reading (2026-11-22; it cannot run here): CPUID.(7,0):EDX bits 22 (AMX-BF16) and 24
-// (AMX-TILE), XCR0 bits 17-18 (XTILECFG, XTILEDATA) and arch_prctl(ARCH_REQ_XCOMP_PERM = 0x1023,
-// XFEATURE_XTILEDATA = 18), process-wide, are all checked in cpu.cpp before this table is filled;
-// refused permission or an older kernel (< 5.16, EINVAL) leaves cpu_features().amx false, and
-// MACRO_ISA=amx then prints "MACRO_ISA=amx is not supported by this CPU; using avx512bf16" and
-// runs that path (checked on this machine). Tile shapes: C 16 x 64 B fp32, A 16 rows x 32 bf16
-// (stride 64 B), B 16 k-pairs x 16 columns (stride 128 B, the pairs panel's half rows): consistent
-// with TDPBF16PS's (M x K) . (K/2 x 2N) -> M x N and with the kBf16Amx / kBf16Pairs packers; K is
-// padded to 32 (k_align) and every K block starts on a multiple of 32. Open points: no
-// TILERELEASE after the last call (the tile state stays live until the thread exits, which costs
-// an 8 KB XSAVE area per context switch), and LDTILECFG on every micro-tile call costs some
-// throughput; both want measuring on AMX hardware.
+// Selected only when cpu_features().amx is true (AMX-TILE + AMX-BF16, OS tile state, XTILEDATA
+// permission granted in cpu.cpp); otherwise the AVX512-BF16 kernel is used. Its tests (the
+// [kernels] and [gemm] cases run it against the scalar twin) run wherever AMX is present; they
+// passed on an Intel Xeon with AMX on 2026-12-02. Refused permission or an older kernel (< 5.16)
+// leaves cpu_features().amx false, and MACRO_ISA=amx then says so and runs avx512bf16.
+// Tile shapes: C 16 x 64 B fp32, A 16 rows x 32 bf16 (stride 64 B), B 16 k-pairs x 16 columns
+// (stride 128 B, the pairs panel's half rows), as TDPBF16PS's (M x K) . (K/2 x 2N) -> M x N and
+// the kBf16Amx / kBf16Pairs packers need; K is padded to 32 (k_align) and every K block starts on
+// a multiple of 32. The tile configuration is loaded once per thread (load_config). Open point:
+// no TILERELEASE after the last call (the tile state stays live until the thread exits, which
+// costs an 8 KB XSAVE area per context switch).
 // GCC 12's AVX-512 headers trip -W(maybe-)uninitialized on their own _mm512_undefined_*() idiom.
 #pragma GCC diagnostic ignored "-Wuninitialized"
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
@@ -45,7 +34,15 @@ struct alignas(64) TileConfig {
   uint8_t rows[16] = {};
 };
 
+// Whether this thread's tile configuration is the one below. Nothing else in the engine
+// configures or releases tiles (probe_amx releases them and clears the flag), and the
+// configuration survives context switches (XSAVE), so it is loaded once per thread rather than
+// once per micro-tile (LDTILECFG costs as much as several TDPBF16PS).
+thread_local bool t_tiles_configured = false;
+
 inline void load_config() {
+  if (t_tiles_configured) return;
+  t_tiles_configured = true;
   TileConfig cfg;
   for (int i = 0; i < 8; ++i) {
     cfg.colsb[i] = 64;
@@ -107,6 +104,7 @@ double probe_amx(int64_t iters) {
   alignas(64) float out[16 * 16];
   _tile_stored(0, out, 64);
   _tile_release();
+  t_tiles_configured = false;
   volatile float sink = out[0];
   (void)sink;
   return double(iters) * 4 * 16 * 16 * 32 * 2;
