@@ -426,14 +426,16 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, bool bf16_ok, 
 static_assert(kAttnBlockQ == kAttnBlockK, "the causal split assumes square tiles");
 
 const AttentionKernels& scalar_kernels() {
-  static const AttentionKernels k{Isa::kScalar,      1, blocks_scalar,      score_tile_scalar,
-                                  fma_peak_scalar,   blocks_scalar_bf16, 2, to_bf16_scalar};
+  static const AttentionKernels k{
+      Isa::kScalar,       1, blocks_scalar, score_tile_scalar, fma_peak_scalar,
+      blocks_scalar_bf16, 2, to_bf16_scalar};
   return k;
 }
 
 const AttentionKernels& kernels_for(Isa isa) {
   switch (isa) {
     case Isa::kAmx:
+      return amx_kernels();
     case Isa::kAvx512Bf16:
       return avx512bf16_kernels();
     case Isa::kAvx512:

@@ -23,7 +23,7 @@
 //
 // Paths: scalar twin (any D), AVX2 (D % 8 == 0), AVX-512 (D % 16 == 0), chosen from active_isa()
 // at each call (a head dim the path cannot take falls back to the next narrower path; the
-// avx512bf16 and amx paths use the fp32 AVX-512 kernel unless bf16 is asked for). All paths run
+// avx512bf16 path uses the fp32 AVX-512 kernel unless bf16 is asked for, amx always). All paths run
 // the same algorithm; they differ only in rounding (exp2 polynomial, summation order, Q pre-scaled
 // in the SIMD paths).
 //
@@ -31,9 +31,10 @@
 // bf16 operands with fp32 accumulation (vdpbf16ps: 32 products per instruction instead of 16
 // FMAs); the scores, the online softmax, the running sum l and the output stay fp32. Rounded to
 // bf16 (nearest even): K and V once per call, scale * log2(e) * Q when a query block is packed,
-// and the probabilities P of each tile. Paths: avx512bf16 and amx (D % 32 == 0) and the scalar
-// twin (same roundings, reference for the tests); on avx2 / avx512 without bf16 dot products, or a
-// head dim the kernel cannot take, the request is ignored and attention runs in fp32.
+// and the probabilities P of each tile. Paths: avx512bf16 (D % 32 == 0) and the scalar twin (same
+// roundings, reference for the tests); on avx2 / avx512 without bf16 dot products, on amx (whose
+// CPUs run bf16 dot products slower than fp32 FMAs), or a head dim the kernel cannot take, the
+// request is ignored and attention runs in fp32.
 #pragma once
 
 #include <cstddef>
@@ -58,7 +59,7 @@ struct AttentionArgs {
   float scale = 0;   // 0 = 1 / sqrt(D)
   bool causal = false;
   const BlockSparseMask* mask = nullptr;  // nq x nk, or null for full attention
-  bool bf16 = false;  // bf16 products where the path has them (see above)
+  bool bf16 = false;                      // bf16 products where the path has them (see above)
 };
 
 // Checks shapes (errors name the argument), then computes out. Empty problems (nq == 0) succeed.
@@ -155,6 +156,7 @@ const AttentionKernels& scalar_kernels();
 const AttentionKernels& avx2_kernels();
 const AttentionKernels& avx512_kernels();
 const AttentionKernels& avx512bf16_kernels();  // the fp32 AVX-512 kernel + the bf16 one
+const AttentionKernels& amx_kernels();  // the fp32 AVX-512 kernel for every request (see the .cpp)
 
 }  // namespace attention_detail
 }  // namespace macro
