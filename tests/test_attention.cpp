@@ -445,7 +445,7 @@ void check_bf16_paths(const Problem& p, const BlockSparseMask* mask, const uint8
     const size_t n = ref.size();
     CHECK(out[n] == -7.0f);
     REQUIRE(attention_with_isa(args_for(p, out32, mask, causal), isa).is_ok());
-    // The path's own table decides (avx512bf16 and amx share the bf16 kernel).
+    // The path's own table decides (amx answers bf16 requests with its fp32 kernel).
     const auto& table = attention_detail::kernels_for(isa);
     const bool has_bf16 = table.block_bf16 && p.d % table.bf16_d_multiple == 0;
     if (!has_bf16) {

@@ -288,8 +288,8 @@ const AttentionKernels& avx512bf16_kernels() {
   return k;
 }
 
-// AMX CPUs (Intel Sapphire Rapids and later) run VDPBF16PS at a fraction of the FMA rate: on the
-// Xeon of docs/PERFORMANCE.md's AMX section the bf16 dot-product loop reached 72 GFLOP/s per core
+// The AMX CPU measured so far ran VDPBF16PS at a fraction of the FMA rate: on the Xeon of
+// docs/PERFORMANCE.md's AMX section the bf16 dot-product loop reached 72 GFLOP/s per core
 // against 138 for fp32 FMAs, and this kernel ran the close-up's level-0 attention 1.3x slower than
 // the fp32 one. So the amx path answers bf16 requests with the fp32 kernel (more exact, faster).
 const AttentionKernels& amx_kernels() {
