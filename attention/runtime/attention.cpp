@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <memory>
@@ -287,24 +288,52 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, bool bf16_ok, 
   const ScratchLayout layout(d, bf16);
   const uint16_t* k16 = nullptr;
   const uint16_t* v16 = nullptr;
+  const bool tiles = bf16 && kern.bf16_tiles;
+  // Tile layouts: whole key blocks of mask columns (zero past nk).
+  const size_t ncol = tiles ? size_t(nkb) * kBK : size_t(a.nk);
   if (bf16 && a.nk > 0) {
     std::vector<uint16_t>& buf = kv16_buffer();
-    const size_t need = 2 * size_t(a.nk) * c;
+    const size_t need = 2 * ncol * c;
     if (buf.size() < need) buf.resize(need);
     uint16_t* kb16 = buf.data();
-    uint16_t* vb16 = kb16 + size_t(a.nk) * c;
-    pool.parallel_for(size_t(a.nk), [&](size_t begin, size_t end, int) {
-      for (size_t j = begin; j < end; ++j) {
-        kern.to_bf16(a.k + j * a.k_stride, kb16 + j * c, c);
-        kern.to_bf16(a.v + j * a.v_stride, vb16 + j * c, c);
-      }
-    });
+    uint16_t* vb16 = kb16 + ncol * c;
+    if (!tiles) {
+      pool.parallel_for(size_t(a.nk), [&](size_t begin, size_t end, int) {
+        for (size_t j = begin; j < end; ++j) {
+          kern.to_bf16(a.k + j * a.k_stride, kb16 + j * c, c);
+          kern.to_bf16(a.v + j * a.v_stride, vb16 + j * c, c);
+        }
+      });
+    } else {
+      // K row of mask column j, and V transposed per key block:
+      // vb16[(kb * c + i) * BK + jj] = V[token of column kb * BK + jj][i].
+      const int32_t* key_index = mask && !mask->key_index.empty() ? mask->key_index.data() : nullptr;
+      pool.parallel_for(size_t(nkb), [&](size_t begin, size_t end, int) {
+        std::vector<uint16_t> row(c);
+        for (size_t kb = begin; kb < end; ++kb) {
+          uint16_t* vt = vb16 + kb * c * kBK;
+          for (size_t jj = 0; jj < size_t(kBK); ++jj) {
+            const size_t j = kb * kBK + jj;
+            if (j >= size_t(a.nk)) {
+              std::fill(kb16 + j * c, kb16 + (j + 1) * c, uint16_t(0));
+              for (size_t i = 0; i < c; ++i) vt[i * kBK + jj] = 0;
+              continue;
+            }
+            const size_t t = key_index ? size_t(key_index[j]) : j;
+            kern.to_bf16(a.k + t * a.k_stride, kb16 + j * c, c);
+            kern.to_bf16(a.v + t * a.v_stride, row.data(), c);
+            for (size_t i = 0; i < c; ++i) vt[i * kBK + jj] = row[i];
+          }
+        }
+      });
+    }
     k16 = kb16;
     v16 = vb16;
   }
   // Query blocks per work item: the group's blocks share each K/V block while it is in cache.
   // Keep the group's scratch near 256 KiB (L2 holds it with the K/V blocks).
-  const int group = std::clamp(int((256u << 10) / (layout.total * sizeof(float))), 1, kMaxGroup);
+  int group = std::clamp(int((256u << 10) / (layout.total * sizeof(float))), 1, kMaxGroup);
+  if (const char* e = std::getenv("XX_GROUP")) group = std::atoi(e);
   const int groups = (nqb + group - 1) / group;
   // Per worker and group slot: floats (layout), entry lists, row pointers, one causal tile.
   struct Slot {
@@ -388,7 +417,7 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, bool bf16_ok, 
     job.key_index = mask && !mask->key_index.empty() ? mask->key_index.data() : nullptr;
     job.nk = a.nk;
     job.k16 = k16 ? k16 + size_t(h) * d : nullptr;
-    job.v16 = v16 ? v16 + size_t(h) * d : nullptr;
+    job.v16 = v16 ? v16 + (tiles ? size_t(h) * d * kBK : size_t(h) * d) : nullptr;
     job.kv16_stride = c;
   };
 

@@ -23,8 +23,7 @@
 //
 // Paths: scalar twin (any D), AVX2 (D % 8 == 0), AVX-512 (D % 16 == 0), chosen from active_isa()
 // at each call (a head dim the path cannot take falls back to the next narrower path; the
-// avx512bf16 path uses the fp32 AVX-512 kernel unless bf16 is asked for, the amx path for every
-// request). All paths run the same algorithm; they differ only in rounding (exp2 polynomial,
+// avx512bf16 and amx paths use the fp32 AVX-512 kernel unless bf16 is asked for). All paths run the same algorithm; they differ only in rounding (exp2 polynomial,
 // summation order, Q pre-scaled in the SIMD paths).
 //
 // bf16 (AttentionArgs::bf16, set by networks running in bf16): the two products Q K^T and P V take
@@ -32,9 +31,10 @@
 // FMAs); the scores, the online softmax, the running sum l and the output stay fp32. Rounded to
 // bf16 (nearest even): K and V once per call, scale * log2(e) * Q when a query block is packed,
 // and the probabilities P of each tile. Paths: avx512bf16 (D % 32 == 0) and the scalar twin (same
-// roundings, reference for the tests); on avx2 / avx512 without bf16 dot products, on amx (whose
-// CPUs run bf16 dot products slower than fp32 FMAs), or a head dim the kernel cannot take, the
-// request is ignored and attention runs in fp32.
+// roundings, reference for the tests), amx (D % 32 == 0: both products on tiles with TDPBF16PS,
+// K in mask column order and V transposed, see AttentionKernels::bf16_tiles); on avx2 / avx512
+// without bf16 dot products, or a head dim the kernel cannot take, the request is ignored and
+// attention runs in fp32.
 #pragma once
 
 #include <cstddef>
@@ -91,6 +91,10 @@ struct BlockJob {
   const int32_t* key_index = nullptr;  // mask column -> key token, or null = identity
   int nk = 0;
   // bf16 kernels: K and V rounded to bf16, head slice of row 0 (token j at k16 + j * kv16_stride).
+  // With AttentionKernels::bf16_tiles: k16 holds mask column j (not token j) at k16 + j *
+  // kv16_stride, and v16 is V transposed per key block, [key block][C][BK]: channel i of this
+  // head and column kb * BK + c at v16 + (kb * kv16_stride + i) * BK + c (rows of a tile 128 bytes
+  // apart, not a whole sequence); both are zero past nk up to a whole key block.
   const uint16_t* k16 = nullptr;
   const uint16_t* v16 = nullptr;
   size_t kv16_stride = 0;
@@ -148,6 +152,10 @@ struct AttentionKernels {
   BlockFn block_bf16 = nullptr;  // null: this path computes bf16 requests in fp32
   int bf16_d_multiple = 1;
   ToBf16Fn to_bf16 = nullptr;
+  // The bf16 K / V layouts of BlockJob: false = token rows; true = K rows in mask column order
+  // and V transposed per key block, zero-padded to whole key blocks (so a key block of either is
+  // read by strided AMX tile loads: the amx kernel).
+  bool bf16_tiles = false;
 };
 
 // The table for a path (the scalar table for paths without their own kernels).
@@ -156,7 +164,7 @@ const AttentionKernels& scalar_kernels();
 const AttentionKernels& avx2_kernels();
 const AttentionKernels& avx512_kernels();
 const AttentionKernels& avx512bf16_kernels();  // the fp32 AVX-512 kernel + the bf16 one
-const AttentionKernels& amx_kernels();  // the fp32 AVX-512 kernel for every request (see the .cpp)
+const AttentionKernels& amx_kernels();  // the fp32 AVX-512 kernel + the AMX bf16 one
 
 }  // namespace attention_detail
 }  // namespace macro

@@ -9,6 +9,7 @@
 // Score tile: 6 keys x 4 zmm (64 queries) = 24 accumulators; P V: 6 query rows x 4 zmm (64
 // channels), as in the fp32 kernel, with half the instructions per product.
 #include "attention/runtime/attention_avx512_traits.h"
+#include "attention/runtime/attention_bf16_simd.h"
 
 #include <cstring>
 #include <limits>
@@ -17,49 +18,6 @@
 
 namespace macro::attention_detail {
 namespace {
-
-inline uint32_t load_word(const uint16_t* p) {
-  uint32_t w;
-  std::memcpy(&w, p, 4);
-  return w;
-}
-
-inline __m512 dot(__m512 acc, __m512i a, __m512i b) {
-  return _mm512_dpbf16_ps(acc, reinterpret_cast<__m512bh>(a), reinterpret_cast<__m512bh>(b));
-}
-
-// 16 words whose low halves are bf16(lo[i]) and high halves bf16(hi[i]).
-inline __m512i pair_words(__m512 lo, __m512 hi) {
-  const __m512i l = _mm512_cvtepu16_epi32(reinterpret_cast<__m256i>(_mm512_cvtneps_pbh(lo)));
-  const __m512i h = _mm512_cvtepu16_epi32(reinterpret_cast<__m256i>(_mm512_cvtneps_pbh(hi)));
-  return _mm512_or_si512(l, _mm512_slli_epi32(h, 16));
-}
-
-// 16 words from two bf16 rows: low halves a[i], high halves b[i].
-inline __m512i pair_words(const uint16_t* a, const uint16_t* b) {
-  const __m512i l = _mm512_cvtepu16_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(a)));
-  const __m512i h = _mm512_cvtepu16_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(b)));
-  return _mm512_or_si512(l, _mm512_slli_epi32(h, 16));
-}
-
-// qp[e][r] = (bf16(s Q[r][2e]), bf16(s Q[r][2e+1])), zero for r >= rows.
-void pack_q_pairs(const BlockJob& job, uint32_t* qp) {
-  const int d2 = job.d / 2;
-  const __m512 sc = _mm512_set1_ps(job.scale_log2e);
-  alignas(64) float even[16], odd[16];
-  for (int r0 = 0; r0 < kTileQ; r0 += 16) {
-    const int n = std::max(0, std::min(16, job.rows - r0));
-    for (int e = 0; e < d2; ++e) {
-      for (int i = 0; i < 16; ++i) {
-        even[i] = i < n ? job.q_rows[r0 + i][2 * e] : 0.0f;
-        odd[i] = i < n ? job.q_rows[r0 + i][2 * e + 1] : 0.0f;
-      }
-      const __m512i w = pair_words(_mm512_mul_ps(_mm512_load_ps(even), sc),
-                                   _mm512_mul_ps(_mm512_load_ps(odd), sc));
-      _mm512_storeu_si512(qp + size_t(e) * kTileQ + r0, w);
-    }
-  }
-}
 
 // S^T[c][0..64) for R keys: sum over pairs e of K[c] pair e . qp[e][r].
 template <int R>
@@ -105,62 +63,6 @@ void score_tile_bf16(const uint16_t* const* k_rows, int keys, const uint32_t* qp
   int c = 0;
   for (; c + R <= keys; c += R) score_rows_bf16<R>(k_rows + c, qp, d2, s + size_t(c) * kTileQ);
   if (c < keys) score_tail_bf16<R - 1>(keys - c, k_rows + c, qp, d2, s + size_t(c) * kTileQ);
-}
-
-// 2^x for x <= 0 (a score minus its running max): 2^round(x) by vscalefps times a degree-5
-// polynomial in f = x - round(x), |f| <= 1/2, fitted for relative error with p(0) = 1 exactly
-// (max relative error 1.8e-7, against 6e-9 for the degree-7 fp32 kernel's: the probabilities are
-// rounded to bf16, 2^-9, right after). x < -126, -inf and NaN give exactly 0.
-inline __m512 exp2_bf16(__m512 x) {
-  const __mmask16 live = _mm512_cmp_ps_mask(x, _mm512_set1_ps(-126.0f), _CMP_GE_OQ);
-  const __m512 n = _mm512_roundscale_ps(x, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
-  const __m512 f = _mm512_sub_ps(x, n);
-  __m512 p = _mm512_set1_ps(0.0013218672247603536f);
-  p = _mm512_fmadd_ps(p, f, _mm512_set1_ps(0.009671698324382305f));
-  p = _mm512_fmadd_ps(p, f, _mm512_set1_ps(0.05550893023610115f));
-  p = _mm512_fmadd_ps(p, f, _mm512_set1_ps(0.24022237956523895f));
-  p = _mm512_fmadd_ps(p, f, _mm512_set1_ps(0.6931468844413757f));
-  p = _mm512_fmadd_ps(p, f, _mm512_set1_ps(1.0f));
-  return _mm512_maskz_scalef_ps(live, p, n);
-}
-
-// The online softmax of one key block (softmax_tile in attention_simd.h, with exp2_bf16) fused
-// with the packing of the probabilities: per query vector,
-// m' = max(m, max_c S), alpha = 2^(m - m'), P = 2^(S - m') summed into l in key order and written
-// straight into pair words pp[c][r] = (bf16(P[2c][r]), bf16(P[2c+1][r])), a missing odd key as 0.
-// The fp32 P never goes back to memory.
-void softmax_pack_bf16(const float* s, int cols, float* m, float* l, float* alpha, uint32_t* pp) {
-  // cvtne2ps(hi, lo) gives [bf16(lo) x 16, bf16(hi) x 16]; word i needs (lo[i], hi[i]).
-  alignas(64) static const uint16_t kInterleave[32] = {0,  16, 1,  17, 2,  18, 3,  19, 4,  20, 5,
-                                                       21, 6,  22, 7,  23, 8,  24, 9,  25, 10, 26,
-                                                       11, 27, 12, 28, 13, 29, 14, 30, 15, 31};
-  const __m512i idx = _mm512_load_si512(kInterleave);
-  const __m512 zero = _mm512_setzero_ps();
-  for (int r0 = 0; r0 < kTileQ; r0 += 16) {
-    __m512 mx = _mm512_set1_ps(-std::numeric_limits<float>::infinity());
-    for (int c = 0; c < cols; ++c)
-      mx = _mm512_max_ps(mx, _mm512_loadu_ps(s + size_t(c) * kTileQ + r0));
-    const __m512 m_old = _mm512_loadu_ps(m + r0);
-    const __m512 m_new = _mm512_max_ps(_mm512_max_ps(m_old, mx),
-                                       _mm512_set1_ps(std::numeric_limits<float>::lowest()));
-    const __m512 a = exp2_bf16(_mm512_sub_ps(m_old, m_new));
-    __m512 sum = zero;
-    for (int c = 0; 2 * c < cols; ++c) {
-      const float* sc = s + size_t(2 * c) * kTileQ + r0;
-      const __m512 lo = exp2_bf16(_mm512_sub_ps(_mm512_loadu_ps(sc), m_new));
-      sum = _mm512_add_ps(sum, lo);
-      __m512 hi = zero;
-      if (2 * c + 1 < cols) {
-        hi = exp2_bf16(_mm512_sub_ps(_mm512_loadu_ps(sc + kTileQ), m_new));
-        sum = _mm512_add_ps(sum, hi);
-      }
-      const __m512i w = _mm512_permutexvar_epi16(idx, (__m512i)_mm512_cvtne2ps_pbh(hi, lo));
-      _mm512_storeu_si512(pp + size_t(c) * kTileQ + r0, w);
-    }
-    _mm512_storeu_ps(l + r0, _mm512_fmadd_ps(_mm512_loadu_ps(l + r0), a, sum));
-    _mm512_storeu_ps(m + r0, m_new);
-    _mm512_storeu_ps(alpha + r0, a);
-  }
 }
 
 // vp[c][i] = (V[2c][i], V[2c+1][i]); a missing odd key pairs with 0.
@@ -235,6 +137,7 @@ void pv_tile_bf16(int rows, const uint32_t* pp, int cols, const uint32_t* vp, fl
 
 struct Bf16Blocks {
   using Row = uint16_t;
+  static constexpr bool kWholeBlocks = false;
   static const uint16_t* k(const BlockJob& j) { return j.k16; }
   static const uint16_t* v(const BlockJob& j) { return j.v16; }
   static size_t k_stride(const BlockJob& j) { return j.kv16_stride; }
@@ -245,7 +148,7 @@ struct Bf16Blocks {
   }
   // The V pairs of a whole key block are packed once and shared by the group's jobs (`shared`);
   // a partial tile with dropped keys packs its own.
-  static void step(const BlockJob& j, const BlockScratch& sc, const uint16_t* const* k_rows,
+  static void step(const BlockJob& j, const BlockScratch& sc, int, const uint16_t* const* k_rows,
                    const uint16_t* const* v_rows, int cols, const uint8_t* tile,
                    const void** shared) {
     score_tile_bf16(k_rows, cols, reinterpret_cast<const uint32_t*>(sc.qt), j.d, sc.s);
@@ -283,19 +186,6 @@ const AttentionKernels& avx512bf16_kernels() {
     t.block_bf16 = blocks_bf16;
     t.bf16_d_multiple = 32;
     t.to_bf16 = to_bf16_avx512;
-    return t;
-  }();
-  return k;
-}
-
-// The AMX CPU measured so far ran VDPBF16PS at a fraction of the FMA rate: on the Xeon of
-// docs/PERFORMANCE.md's AMX section the bf16 dot-product loop reached 72 GFLOP/s per core
-// against 138 for fp32 FMAs, and this kernel ran the close-up's level-0 attention 1.3x slower than
-// the fp32 one. So the amx path answers bf16 requests with the fp32 kernel (more exact, faster).
-const AttentionKernels& amx_kernels() {
-  static const AttentionKernels k = [] {
-    AttentionKernels t = avx512_kernels();
-    t.isa = Isa::kAmx;
     return t;
   }();
   return k;

@@ -255,7 +255,12 @@ void block_finish(const BlockJob& job, const BlockScratch& sc) {
 // own blocks in its own order (results do not depend on the grouping).
 // Kern supplies the element type of the K / V rows and the per-block operations:
 //   using Row; k(job), v(job), k_stride(job), v_stride(job): head slice of token 0 and row strides;
-//   init(job, sc); step(job, sc, k_rows, v_rows, cols, tile, shared); finish(job, sc).
+//   init(job, sc); step(job, sc, kb, k_rows, v_rows, cols, tile, shared); finish(job, sc);
+//   kWholeBlocks: false for kernels that read K / V through the row pointers (a partial tile's
+//   dead keys are then dropped before the step); true for a kernel that reads whole key blocks
+//   from its own layouts by their index kb (the AMX kernel: no row pointers are built, partial
+//   tiles keep their dead keys, whose probabilities the mask zeroes, and Kern::prefetch(job, kb)
+//   asks for the next block).
 // `shared` is null for a partial tile whose dead keys were dropped; for a whole key block it
 // points to one slot per key block, reset to null before the block's first job, where a kernel
 // may leave what it derived from the block (the bf16 kernel's V pairs) for the group's other jobs.
@@ -281,17 +286,23 @@ void blocks_walk(const BlockJob* jobs, int count, const BlockScratch* scratch) {
   const size_t ks = Kern::k_stride(j0), vs = Kern::v_stride(j0);
   for (int kb = next_block(pos); kb != INT32_MAX;) {
     const int cols = std::min(kTileK, j0.nk - kb * kTileK);
-    key_block_rows(j0, kb, cols, kbase, vbase, ks, vs, k_rows, v_rows);
+    if constexpr (!Kern::kWholeBlocks)
+      key_block_rows(j0, kb, cols, kbase, vbase, ks, vs, k_rows, v_rows);
     for (int g = 0; g < count; ++g)
       if (pos[g] < jobs[g].entries && jobs[g].key_blocks[pos[g]] == kb) ++pos[g];
     const int next = next_block(pos);
-    if (next != INT32_MAX) prefetch_key_block(j0, kbase, vbase, ks, vs, next);
+    if (next != INT32_MAX) {
+      if constexpr (Kern::kWholeBlocks)
+        Kern::prefetch(j0, next);
+      else
+        prefetch_key_block(j0, kbase, vbase, ks, vs, next);
+    }
     const void* shared = nullptr;
     for (int g = 0; g < count; ++g) {
       if (pos[g] == 0 || jobs[g].key_blocks[pos[g] - 1] != kb) continue;
       const uint8_t* tile = jobs[g].tiles[pos[g] - 1];
       if (!tile) {
-        Kern::step(jobs[g], scratch[g], k_rows, v_rows, cols, nullptr, &shared);
+        Kern::step(jobs[g], scratch[g], kb, k_rows, v_rows, cols, nullptr, &shared);
         continue;
       }
       // Partial tile: drop the keys no query of this block may see (they would only add exact
@@ -306,15 +317,21 @@ void blocks_walk(const BlockJob* jobs, int count, const BlockScratch* scratch) {
           any |= w;
         }
         if (!any) continue;
+        if constexpr (Kern::kWholeBlocks) {
+          live = 1;  // one live key is enough: the step takes the whole block
+          break;
+        }
         live_k[live] = k_rows[c];
         live_v[live] = v_rows[c];
         std::memcpy(live_tile + size_t(live) * kTileQ, col, kTileQ);
         ++live;
       }
-      if (live == cols) {
-        Kern::step(jobs[g], scratch[g], k_rows, v_rows, cols, tile, &shared);
+      if (Kern::kWholeBlocks) {
+        if (live > 0) Kern::step(jobs[g], scratch[g], kb, k_rows, v_rows, cols, tile, nullptr);
+      } else if (live == cols) {
+        Kern::step(jobs[g], scratch[g], kb, k_rows, v_rows, cols, tile, &shared);
       } else if (live > 0) {
-        Kern::step(jobs[g], scratch[g], live_k, live_v, live, live_tile, nullptr);
+        Kern::step(jobs[g], scratch[g], kb, live_k, live_v, live, live_tile, nullptr);
       }
     }
     kb = next;
@@ -326,12 +343,13 @@ void blocks_walk(const BlockJob* jobs, int count, const BlockScratch* scratch) {
 template <typename T>
 struct F32Blocks {
   using Row = float;
+  static constexpr bool kWholeBlocks = false;
   static const float* k(const BlockJob& j) { return j.k; }
   static const float* v(const BlockJob& j) { return j.v; }
   static size_t k_stride(const BlockJob& j) { return j.k_stride; }
   static size_t v_stride(const BlockJob& j) { return j.v_stride; }
   static void init(const BlockJob& j, const BlockScratch& sc) { block_init<T>(j, sc); }
-  static void step(const BlockJob& j, const BlockScratch& sc, const float* const* k_rows,
+  static void step(const BlockJob& j, const BlockScratch& sc, int, const float* const* k_rows,
                    const float* const* v_rows, int cols, const uint8_t* tile, const void**) {
     block_step<T>(j, sc, k_rows, v_rows, cols, tile);
   }

@@ -8,7 +8,7 @@
 // Tile shapes: C 16 x 64 B fp32, A 16 rows x 32 bf16 (stride 64 B), B 16 k-pairs x 16 columns
 // (stride 128 B, the pairs panel's half rows), as TDPBF16PS's (M x K) . (K/2 x 2N) -> M x N and
 // the kBf16Amx / kBf16Pairs packers need; K is padded to 32 (k_align) and every K block starts on
-// a multiple of 32. The tile configuration is loaded once per thread (load_config). Open point:
+// a multiple of 32. The tile configuration is loaded once per thread (amx_tiles.h). Open point:
 // no TILERELEASE after the last call (the tile state stays live until the thread exits, which
 // costs an 8 KB XSAVE area per context switch).
 // GCC 12's AVX-512 headers trip -W(maybe-)uninitialized on their own _mm512_undefined_*() idiom.
@@ -18,13 +18,13 @@
 
 #include <cstring>
 
+#include "attention/runtime/amx_tiles.h"
 #include "attention/runtime/gemm_store_avx512.h"
 #include "attention/runtime/kernels.h"
 
 namespace macro {
+namespace detail {
 namespace {
-
-constexpr int kMr = 32, kNr = 32;
 
 struct alignas(64) TileConfig {
   uint8_t palette = 1;
@@ -34,13 +34,13 @@ struct alignas(64) TileConfig {
   uint8_t rows[16] = {};
 };
 
-// Whether this thread's tile configuration is the one below. Nothing else in the engine
-// configures or releases tiles (probe_amx releases them and clears the flag), and the
-// configuration survives context switches (XSAVE), so it is loaded once per thread rather than
-// once per micro-tile (LDTILECFG costs as much as several TDPBF16PS).
+// Whether this thread holds the configuration below (LDTILECFG costs as much as several
+// TDPBF16PS, so it is not repeated per micro-tile).
 thread_local bool t_tiles_configured = false;
 
-inline void load_config() {
+}  // namespace
+
+void amx_tiles_ready() {
   if (t_tiles_configured) return;
   t_tiles_configured = true;
   TileConfig cfg;
@@ -48,11 +48,26 @@ inline void load_config() {
     cfg.colsb[i] = 64;
     cfg.rows[i] = 16;
   }
+  // GCC (12) does not treat LDTILECFG as a read of its operand and drops the stores above as dead
+  // (the tiles are then left unconfigured and the first tile instruction faults): a compiler
+  // barrier that takes the block's address keeps them.
+  __asm__ __volatile__("" : : "r"(&cfg) : "memory");
   _tile_loadconfig(&cfg);
 }
 
+void amx_tiles_release() {
+  _tile_release();
+  t_tiles_configured = false;
+}
+
+}  // namespace detail
+
+namespace {
+
+constexpr int kMr = 32, kNr = 32;
+
 void micro_amx(const MicroTile& t) {
-  load_config();
+  detail::amx_tiles_ready();
   const uint16_t* a = static_cast<const uint16_t*>(t.a);
   const uint16_t* b = static_cast<const uint16_t*>(t.b);
   _tile_zero(0);
@@ -84,9 +99,37 @@ void micro_amx(const MicroTile& t) {
   store_tile<kMr>(t, c0, c1);
 }
 
+// A panel [kcp/32][w][32] bf16 (row-major 16 x 32 tiles) from row-major fp32 rows: each row is read
+// front to back, 32 floats -> 32 bf16 with one vcvtne2ps2bf16 (nearest even; fp32 denormal inputs
+// become zero, as in the AVX512-BF16 packer) and stored as one 64-byte line of its tile row.
+void pack_a_amx(const float* src, int64_t ld, int valid_rows, int64_t valid_k, int64_t kcp, int w,
+                void* dst) {
+  uint16_t* d = static_cast<uint16_t*>(dst);
+  const int64_t steps = kcp / 32;
+  for (int r = 0; r < w; ++r) {
+    uint16_t* dr = d + r * 32;
+    if (r >= valid_rows) {
+      for (int64_t q = 0; q < steps; ++q) _mm512_storeu_si512(dr + q * w * 32, _mm512_setzero_si512());
+      continue;
+    }
+    const float* s = src + r * ld;
+    for (int64_t q = 0; q < steps; ++q) {
+      const int64_t left = valid_k - 32 * q;
+      const int64_t n0 = left <= 0 ? 0 : (left >= 16 ? 16 : left);
+      const int64_t n1 = left <= 16 ? 0 : (left >= 32 ? 16 : left - 16);
+      const __mmask16 m0 = n0 == 16 ? __mmask16(0xffff) : __mmask16((1u << n0) - 1);
+      const __mmask16 m1 = n1 == 16 ? __mmask16(0xffff) : __mmask16((1u << n1) - 1);
+      const float* sk = s + 32 * q;
+      const __m512i v = (__m512i)_mm512_cvtne2ps_pbh(_mm512_maskz_loadu_ps(m1, sk + 16),
+                                                     _mm512_maskz_loadu_ps(m0, sk));
+      _mm512_storeu_si512(dr + q * w * 32, v);
+    }
+  }
+}
+
 // Four independent TDPBF16PS chains over fixed tiles: 16 x 16 x 32 MACs each.
 double probe_amx(int64_t iters) {
-  load_config();
+  detail::amx_tiles_ready();
   alignas(64) uint16_t ones[16 * 32];
   for (auto& v : ones) v = 0x3f80;  // 1.0
   _tile_loadd(4, ones, 64);
@@ -103,8 +146,7 @@ double probe_amx(int64_t iters) {
   }
   alignas(64) float out[16 * 16];
   _tile_stored(0, out, 64);
-  _tile_release();
-  t_tiles_configured = false;
+  detail::amx_tiles_release();
   volatile float sink = out[0];
   (void)sink;
   return double(iters) * 4 * 16 * 16 * 32 * 2;
@@ -115,7 +157,8 @@ double probe_amx(int64_t iters) {
 namespace detail {
 void fill_amx_kernels(KernelTable& t) {
   fill_avx512bf16_kernels(t);
-  t.bf16 = GemmKernel{kMr, kNr, 32, 384, PackLayout::kBf16Amx, micro_amx, "amx bf16 32x32"};
+  t.bf16 = GemmKernel{kMr,       kNr,           32,        384, PackLayout::kBf16Amx,
+                      micro_amx, "amx bf16 32x32", pack_a_amx};
   t.probe_bf16 = probe_amx;
 }
 }  // namespace detail
