@@ -359,6 +359,7 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
       const int64_t kc = std::min(KC, K - pc);
       const int64_t kcp = round_up(kc, kern.k_align);
       const bool first = pc == 0, last = pc + kc >= K;
+      const bool terms = kern.terms_first ? first : last;  // this block adds bias and residual
       const unsigned char* abase;
       int64_t a_stride;  // bytes between A micro-panels
       if (a.prepacked) {
@@ -396,14 +397,14 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
           const int64_t i = i0 + ir;
           mt.a = abase + (ir / mr) * a_stride;
           mt.m = int(std::min<int64_t>(mr, i1 - i));
-          mt.bias_m = last && p.bias_m ? p.bias_m + i : nullptr;
+          mt.bias_m = terms && p.bias_m ? p.bias_m + i : nullptr;
           for (int64_t jr = 0; jr < ncols; jr += nr) {
             const int64_t j = jc + jr;
             mt.b = bbase + (jr / nr) * b_stride;
             mt.n = int(std::min<int64_t>(nr, j1 - j));
             mt.c = s.C + i * s.ldc + j;
-            mt.bias_n = last && p.bias_n ? p.bias_n + j : nullptr;
-            mt.res = last && p.residual ? p.residual + i * p.ldr + j : nullptr;
+            mt.bias_n = terms && p.bias_n ? p.bias_n + j : nullptr;
+            mt.res = terms && p.residual ? p.residual + i * p.ldr + j : nullptr;
             mt.relu = last && p.relu;
             kern.micro(mt);
           }

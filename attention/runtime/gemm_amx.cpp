@@ -66,14 +66,46 @@ namespace {
 
 constexpr int kMr = 32, kNr = 32;
 
+// C tiles 0-3 (rows 0-15 / 16-31 x columns 0-15 / 16-31) loaded from the four given blocks of
+// 16 rows `stride` bytes apart (stride 0 repeats one row).
+inline void seed_tiles(const float* c00, const float* c01, const float* c10, const float* c11,
+                       int64_t stride) {
+  _tile_loadd(0, c00, stride);
+  _tile_loadd(1, c01, stride);
+  _tile_loadd(2, c10, stride);
+  _tile_loadd(3, c11, stride);
+}
+
+// A whole 32 x 32 tile whose epilogue is at most one added term (C itself with beta 1, the
+// residual, the bias row or the bias column; alpha 1, no ReLU) runs "direct": the C tiles start
+// from that term, the products accumulate onto it, and the tiles are stored straight into C. The
+// driver hands the terms to the first K block (GemmKernel::terms_first), so the later blocks of
+// a long K seed from C and stay direct too. Anything else takes the general epilogue from the
+// tiles' fp32 sums (store_tile_from).
 void micro_amx(const MicroTile& t) {
   detail::amx_tiles_ready();
   const uint16_t* a = static_cast<const uint16_t*>(t.a);
   const uint16_t* b = static_cast<const uint16_t*>(t.b);
-  _tile_zero(0);
-  _tile_zero(1);
-  _tile_zero(2);
-  _tile_zero(3);
+  const int terms = int(t.load_c) + int(t.res != nullptr) + int(t.bias_n != nullptr) +
+                    int(t.bias_m != nullptr);
+  const bool direct = t.m == kMr && t.n == kNr && t.alpha == 1.0f && !t.relu && terms <= 1 &&
+                      (!t.load_c || t.beta == 1.0f);
+  alignas(64) float rows_bias[kMr * 16];  // bias_m: row r holds bias_m[r] 16 times
+  if (!direct || terms == 0) {
+    _tile_zero(0);
+    _tile_zero(1);
+    _tile_zero(2);
+    _tile_zero(3);
+  } else if (t.load_c) {
+    seed_tiles(t.c, t.c + 16, t.c + 16 * t.ldc, t.c + 16 * t.ldc + 16, t.ldc * 4);
+  } else if (t.res) {
+    seed_tiles(t.res, t.res + 16, t.res + 16 * t.ldr, t.res + 16 * t.ldr + 16, t.ldr * 4);
+  } else if (t.bias_n) {
+    seed_tiles(t.bias_n, t.bias_n + 16, t.bias_n, t.bias_n + 16, 0);
+  } else {
+    for (int r = 0; r < kMr; ++r) _mm512_store_ps(rows_bias + r * 16, _mm512_set1_ps(t.bias_m[r]));
+    seed_tiles(rows_bias, rows_bias, rows_bias + 256, rows_bias + 256, 64);
+  }
   for (int64_t k = 0; k < t.kc; k += 32) {
     const uint16_t* ak = a + k * kMr;  // [32 rows][32]
     const uint16_t* bk = b + k * kNr;  // [16 pairs][32 cols][2]
@@ -86,17 +118,20 @@ void micro_amx(const MicroTile& t) {
     _tile_dpbf16ps(2, 5, 6);
     _tile_dpbf16ps(3, 5, 7);
   }
+  if (direct) {
+    const int64_t stride = t.ldc * 4;
+    _tile_stored(0, t.c, stride);
+    _tile_stored(1, t.c + 16, stride);
+    _tile_stored(2, t.c + 16 * t.ldc, stride);
+    _tile_stored(3, t.c + 16 * t.ldc + 16, stride);
+    return;
+  }
   alignas(64) float acc[kMr * kNr];
   _tile_stored(0, acc, kNr * 4);
   _tile_stored(1, acc + 16, kNr * 4);
   _tile_stored(2, acc + 16 * kNr, kNr * 4);
   _tile_stored(3, acc + 16 * kNr + 16, kNr * 4);
-  __m512 c0[kMr], c1[kMr];  // the two 16-column halves of each row
-  for (int r = 0; r < kMr; ++r) {
-    c0[r] = _mm512_load_ps(acc + r * kNr);
-    c1[r] = _mm512_load_ps(acc + r * kNr + 16);
-  }
-  store_tile<kMr>(t, c0, c1);
+  store_tile_from<kMr>(t, [&](int r, int half) { return _mm512_load_ps(acc + r * kNr + 16 * half); });
 }
 
 // A panel [kcp/32][w][32] bf16 (row-major 16 x 32 tiles) from row-major fp32 rows: each row is read
@@ -158,7 +193,7 @@ namespace detail {
 void fill_amx_kernels(KernelTable& t) {
   fill_avx512bf16_kernels(t);
   t.bf16 = GemmKernel{kMr,       kNr,           32,        384, PackLayout::kBf16Amx,
-                      micro_amx, "amx bf16 32x32", pack_a_amx};
+                      micro_amx, "amx bf16 32x32", pack_a_amx, /*terms_first=*/true};
   t.probe_bf16 = probe_amx;
 }
 }  // namespace detail

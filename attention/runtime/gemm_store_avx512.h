@@ -29,9 +29,10 @@ inline void for_rows(const MicroTile& t, F&& f) {
   (std::make_integer_sequence<int, MR - 1>{});
 }
 
-// C = alpha*acc + beta*C (if load_c) + bias_n + bias_m + res, masked to t.n columns, t.m rows.
-template <int MR>
-inline void store_tile(const MicroTile& t, const __m512* c0, const __m512* c1) {
+// C = alpha*acc + beta*C (if load_c) + bias_n + bias_m + res, masked to t.n columns, t.m rows;
+// acc(r, 0) and acc(r, 1) give the two 16-column halves of row r's sums.
+template <int MR, typename Acc>
+inline void store_tile_from(const MicroTile& t, Acc&& acc) {
   const __mmask16 k0 = t.n >= 16 ? __mmask16(0xffff) : __mmask16((1u << t.n) - 1);
   const __mmask16 k1 = t.n >= 32   ? __mmask16(0xffff)
                        : t.n <= 16 ? __mmask16(0)
@@ -47,8 +48,11 @@ inline void store_tile(const MicroTile& t, const __m512* c0, const __m512* c1) {
   for (int r = 0; r < MR; ++r) {
     if (r >= t.m) break;
     float* c = t.c + r * t.ldc;
-    __m512 v0 = scale ? _mm512_mul_ps(c0[r], alpha) : c0[r];
-    __m512 v1 = scale ? _mm512_mul_ps(c1[r], alpha) : c1[r];
+    __m512 v0 = acc(r, 0), v1 = acc(r, 1);
+    if (scale) {
+      v0 = _mm512_mul_ps(v0, alpha);
+      v1 = _mm512_mul_ps(v1, alpha);
+    }
     if (t.load_c) {
       v0 = _mm512_fmadd_ps(beta, _mm512_maskz_loadu_ps(k0, c), v0);
       v1 = _mm512_fmadd_ps(beta, _mm512_maskz_loadu_ps(k1, c + 16), v1);
@@ -74,6 +78,12 @@ inline void store_tile(const MicroTile& t, const __m512* c0, const __m512* c1) {
     _mm512_mask_storeu_ps(c, k0, v0);
     _mm512_mask_storeu_ps(c + 16, k1, v1);
   }
+}
+
+// The same from register arrays: c0[r], c1[r] are row r's halves.
+template <int MR>
+inline void store_tile(const MicroTile& t, const __m512* c0, const __m512* c1) {
+  store_tile_from<MR>(t, [&](int r, int half) { return half ? c1[r] : c0[r]; });
 }
 
 // Transposed store of four rows of 16 32-bit elements (fp32 values, or bf16 pair words):

@@ -27,6 +27,7 @@ enum class PackLayout { kF32, kBf16Pairs, kBf16Amx };
 // One call of a micro-kernel: C[0:m, 0:n] (m <= MR, n <= NR) =
 //   alpha * (A_panel . B_panel) + (load_c ? beta * C : 0) + bias_n[j] + bias_m[i] + res[i, j]
 // where the optional terms are skipped when their pointer is null (already offset to this tile).
+// The sum's order (and so its last bits) is the kernel's own.
 struct MicroTile {
   int64_t kc = 0;           // reduction length of this call, a multiple of k_align
   const void* a = nullptr;  // packed A micro-panel, slice start
@@ -81,6 +82,11 @@ struct GemmKernel {
   MicroKernel micro = nullptr;
   const char* name = "";
   PackPanelF32 pack_a_f32 = nullptr;
+  // Where the driver hands the added terms (bias_n, bias_m, res) when K runs in several blocks:
+  // false = with the last block (after all the products), true = with the first (the AMX kernel
+  // seeds its C tiles with them, so its later blocks only add products onto C). ReLU always goes
+  // with the last block.
+  bool terms_first = false;
 };
 
 struct KernelTable {
