@@ -457,7 +457,8 @@ void pack_matrix(const void* ctx, const GemmKernel& kern, bool is_a, int64_t r0,
   // B panels are always in the pairs layout; only A uses the AMX tile layout.
   PackLayout l = kern.layout;
   if (!is_a && l == PackLayout::kBf16Amx) l = PackLayout::kBf16Pairs;
-  if (is_a && !m.bf16 && !m.transposed && kern.pack_a_f32) {
+  const PackPanelF32 fast = m.transposed ? kern.pack_a_f32_t : kern.pack_a_f32;
+  if (is_a && !m.bf16 && fast) {
     const float* src = static_cast<const float*>(m.p);
     const int64_t valid_k = std::clamp<int64_t>(m.K - k0, 0, kc);
     const int64_t rend = std::min(r0 + rows, m.R);
@@ -465,8 +466,8 @@ void pack_matrix(const void* ctx, const GemmKernel& kern, bool is_a, int64_t r0,
     for (int64_t p = 0; p * w < rows; ++p) {
       const int64_t pr0 = r0 + p * w;
       const int valid_r = int(std::clamp<int64_t>(rend - pr0, 0, w));
-      kern.pack_a_f32(src + pr0 * m.ld + k0, m.ld, valid_r, valid_k, kcp, w,
-                      static_cast<unsigned char*>(dst) + p * panel_bytes);
+      const float* s = m.transposed ? src + k0 * m.ld + pr0 : src + pr0 * m.ld + k0;
+      fast(s, m.ld, valid_r, valid_k, kcp, w, static_cast<unsigned char*>(dst) + p * panel_bytes);
     }
     return;
   }

@@ -19,6 +19,7 @@
 #include <cstring>
 
 #include "attention/runtime/amx_tiles.h"
+#include "attention/runtime/bf16_pairs_avx512.h"
 #include "attention/runtime/gemm_store_avx512.h"
 #include "attention/runtime/kernels.h"
 
@@ -162,6 +163,33 @@ void pack_a_amx(const float* src, int64_t ld, int valid_rows, int64_t valid_k, i
   }
 }
 
+// The same from a transposed source (row r, column k at src[k * ld + r]): per 16 rows and 32 k,
+// 16 pair words of k (2i, 2i + 1) for the 16 rows, transposed in registers into the rows' lines.
+void pack_a_amx_t(const float* src, int64_t ld, int valid_rows, int64_t valid_k, int64_t kcp,
+                  int w, void* dst) {
+  uint16_t* d = static_cast<uint16_t*>(dst);
+  const int64_t steps = kcp / 32;
+  for (int r0 = 0; r0 < w; r0 += 16) {
+    const int nr = valid_rows - r0 <= 0 ? 0 : (valid_rows - r0 >= 16 ? 16 : valid_rows - r0);
+    const __mmask16 rm = nr == 16 ? __mmask16(0xffff) : __mmask16((1u << nr) - 1);
+    for (int64_t q = 0; q < steps; ++q) {
+      __m512i v[16];
+      for (int i = 0; i < 16; ++i) {
+        const int64_t k = 32 * q + 2 * i;
+        const __m512 lo = k < valid_k && nr ? _mm512_maskz_loadu_ps(rm, src + k * ld + r0)
+                                            : _mm512_setzero_ps();
+        const __m512 hi = k + 1 < valid_k && nr
+                              ? _mm512_maskz_loadu_ps(rm, src + (k + 1) * ld + r0)
+                              : _mm512_setzero_ps();
+        v[i] = bf16_pair_words(lo, hi);
+      }
+      transpose_16x16_words(v);
+      uint16_t* dq = d + q * w * 32 + r0 * 32;
+      for (int r = 0; r < 16; ++r) _mm512_storeu_si512(dq + r * 32, v[r]);
+    }
+  }
+}
+
 // Four independent TDPBF16PS chains over fixed tiles: 16 x 16 x 32 MACs each.
 double probe_amx(int64_t iters) {
   detail::amx_tiles_ready();
@@ -193,7 +221,8 @@ namespace detail {
 void fill_amx_kernels(KernelTable& t) {
   fill_avx512bf16_kernels(t);
   t.bf16 = GemmKernel{kMr,       kNr,           32,        384, PackLayout::kBf16Amx,
-                      micro_amx, "amx bf16 32x32", pack_a_amx, /*terms_first=*/true};
+                      micro_amx, "amx bf16 32x32", pack_a_amx, pack_a_amx_t,
+                      /*terms_first=*/true};
   t.probe_bf16 = probe_amx;
 }
 }  // namespace detail

@@ -5,6 +5,7 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include <immintrin.h>
 
+#include "attention/runtime/bf16_pairs_avx512.h"
 #include "attention/runtime/gemm_store_avx512.h"
 #include "attention/runtime/kernels.h"
 
@@ -82,6 +83,28 @@ void pack_a_pairs(const float* src, int64_t ld, int valid_rows, int64_t valid_k,
   }
 }
 
+// The same from a transposed source (row r, column k at src[k * ld + r]): pair q of 16 rows is
+// one vector of pair words built from source rows 2q and 2q + 1, stored as is (no transpose).
+void pack_a_pairs_t(const float* src, int64_t ld, int valid_rows, int64_t valid_k, int64_t kcp,
+                    int w, void* dst) {
+  uint32_t* d = static_cast<uint32_t*>(dst);
+  const int64_t pairs = kcp / 2;
+  for (int r0 = 0; r0 < w; r0 += 16) {
+    const int n = w - r0 < 16 ? w - r0 : 16;  // lanes of this panel part (14-row panels: 14)
+    const int nr = valid_rows - r0 <= 0 ? 0 : (valid_rows - r0 >= n ? n : valid_rows - r0);
+    const __mmask16 rm = __mmask16((1u << nr) - 1);
+    const __mmask16 wm = __mmask16((1u << n) - 1);
+    for (int64_t q = 0; q < pairs; ++q) {
+      const int64_t k = 2 * q;
+      const __m512 lo =
+          k < valid_k ? _mm512_maskz_loadu_ps(rm, src + k * ld + r0) : _mm512_setzero_ps();
+      const __m512 hi =
+          k + 1 < valid_k ? _mm512_maskz_loadu_ps(rm, src + (k + 1) * ld + r0) : _mm512_setzero_ps();
+      _mm512_mask_storeu_epi32(d + q * w + r0, wm, bf16_pair_words(lo, hi));
+    }
+  }
+}
+
 // 24 independent vdpbf16ps chains; each does 16 lanes x 2 products x 2 flops.
 double probe_bf16(int64_t iters) {
   __m512 x[24];
@@ -105,7 +128,8 @@ namespace detail {
 void fill_avx512bf16_kernels(KernelTable& t) {
   fill_avx512_kernels(t);
   t.bf16 = GemmKernel{
-      kMr, kNr, 2, 384, PackLayout::kBf16Pairs, micro_bf16, "avx512bf16 14x32", pack_a_pairs};
+      kMr,        kNr, 2, 384, PackLayout::kBf16Pairs, micro_bf16, "avx512bf16 14x32", pack_a_pairs,
+      pack_a_pairs_t};
   t.probe_bf16 = probe_bf16;
 }
 }  // namespace detail
