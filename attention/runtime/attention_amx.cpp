@@ -19,7 +19,6 @@
 #pragma GCC diagnostic ignored "-Wuninitialized"
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include <immintrin.h>
-#include <cstdlib>
 
 #include "attention/runtime/amx_tiles.h"
 #include "attention/runtime/attention_avx512_traits.h"
@@ -81,8 +80,8 @@ void rescale_ot(float* o, int d, const float* alpha) {
 }
 
 // O^T += V^T P^T over the key block's first `cols` keys (whole 32-key steps; pp rows past the
-// live pairs are zeroed first, and V^T is zero past nk).
-void pv_amx(const BlockJob& job, int kb, int cols, uint32_t* pp, float* o) {
+// live pairs are zeroed first, and V^T is zero past nk); `first`: O^T = V^T P^T.
+void pv_amx(const BlockJob& job, int kb, int cols, uint32_t* pp, float* o, bool first) {
   const int steps = (cols + 31) / 32;
   for (int c = (cols + 1) / 2; c < steps * 16; ++c)
     for (int v = 0; v < 4; ++v) _mm512_storeu_si512(pp + size_t(c) * kTileQ + 16 * v,
@@ -94,10 +93,17 @@ void pv_amx(const BlockJob& job, int kb, int cols, uint32_t* pp, float* o) {
     const uint16_t* v1 = v0 + size_t(16) * kTileK;
     for (int qg = 0; qg < kTileQ; qg += 32) {
       float* c = o + size_t(cg) * kTileQ + qg;
-      _tile_loadd(0, c, kQRowBytes);
-      _tile_loadd(1, c + 16, kQRowBytes);
-      _tile_loadd(2, c + 16 * kTileQ, kQRowBytes);
-      _tile_loadd(3, c + 16 * kTileQ + 16, kQRowBytes);
+      if (first) {
+        _tile_zero(0);
+        _tile_zero(1);
+        _tile_zero(2);
+        _tile_zero(3);
+      } else {
+        _tile_loadd(0, c, kQRowBytes);
+        _tile_loadd(1, c + 16, kQRowBytes);
+        _tile_loadd(2, c + 16 * kTileQ, kQRowBytes);
+        _tile_loadd(3, c + 16 * kTileQ + 16, kQRowBytes);
+      }
       for (int st = 0; st < steps; ++st) {
         _tile_loadd(4, v0 + 32 * st, vstride);
         _tile_loadd(5, v1 + 32 * st, vstride);
@@ -125,47 +131,37 @@ struct AmxBlocks {
   static size_t k_stride(const BlockJob& j) { return j.kv16_stride; }
   static size_t v_stride(const BlockJob& j) { return j.kv16_stride; }
 
+  // O^T is not cleared: the first step (m still -inf) starts its tiles from zero instead of O^T.
   static void init(const BlockJob& j, const BlockScratch& sc) {
     detail::amx_tiles_ready();
     for (int r = 0; r < kTileQ; r += 16) {
       _mm512_storeu_ps(sc.m + r, _mm512_set1_ps(-std::numeric_limits<float>::infinity()));
       _mm512_storeu_ps(sc.l + r, _mm512_setzero_ps());
     }
-    for (size_t i = 0; i < size_t(j.d) * kTileQ; i += 16)
-      _mm512_storeu_ps(sc.o + i, _mm512_setzero_ps());
     pack_q_pairs(j, reinterpret_cast<uint32_t*>(sc.qt));
   }
 
-  // The next key block's K rows and V^T rows, to L2.
-  static void prefetch(const BlockJob& j, int kb) {
-    static const int mode = getenv("XX_PF") ? atoi(getenv("XX_PF")) : 1;
-    if (mode == 0) return;
-    if (mode == 2) {
-    const uint16_t* k = j.k16 + size_t(kb) * kTileK * j.kv16_stride;
-    for (int c = 0; c < kTileK; ++c)
-      for (int i = 0; i < j.d; i += 32) _mm_prefetch(k + size_t(c) * j.kv16_stride + i, _MM_HINT_T0);
-    const uint16_t* v = j.v16 + size_t(kb) * j.kv16_stride * kTileK;
-    for (int i = 0; i < j.d * kTileK; i += 32) _mm_prefetch(v + i, _MM_HINT_T0);
-    return;
-    }
-    const uint16_t* k = j.k16 + size_t(kb) * kTileK * j.kv16_stride;
-    for (int c = 0; c < kTileK; ++c)
-      for (int i = 0; i < j.d; i += 32) _mm_prefetch(k + size_t(c) * j.kv16_stride + i, _MM_HINT_T1);
-    const uint16_t* v = j.v16 + size_t(kb) * j.kv16_stride * kTileK;
-    for (int i = 0; i < j.d * kTileK; i += 32) _mm_prefetch(v + i, _MM_HINT_T1);
-  }
+  // No software prefetch: asking for the next key block's K and V^T lines (to L1 or L2) cost more
+  // issue slots than it saved (U-Net level 0, 2026-12-04).
+  static void prefetch(const BlockJob&, int) {}
 
   static void step(const BlockJob& j, const BlockScratch& sc, int kb, const uint16_t* const*,
                    const uint16_t* const*, int cols, const uint8_t* tile, const void**) {
+    const bool first = sc.m[0] == -std::numeric_limits<float>::infinity();
     scores_amx(j, kb, reinterpret_cast<const uint32_t*>(sc.qt), sc.s);
     mask_scores<Avx512>(sc.s, cols, tile);
     softmax_pack_bf16(sc.s, cols, sc.m, sc.l, sc.alpha, sc.pp);
-    rescale_ot(sc.o, j.d, sc.alpha);
-    pv_amx(j, kb, cols, sc.pp, sc.o);
+    if (!first) rescale_ot(sc.o, j.d, sc.alpha);
+    pv_amx(j, kb, cols, sc.pp, sc.o, first);
   }
 
   // out[r][i] = O^T[i][r] / l[r] (0 for a row that saw no key).
   static void finish(const BlockJob& j, const BlockScratch& sc) {
+    if (sc.m[0] == -std::numeric_limits<float>::infinity()) {  // no key block at all
+      for (int r = 0; r < j.rows; ++r)
+        for (int i = 0; i < j.d; i += 16) _mm512_storeu_ps(j.out_rows[r] + i, _mm512_setzero_ps());
+      return;
+    }
     const __m512i lanes = _mm512_mullo_epi32(
         _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0),
         _mm512_set1_epi32(kTileQ));

@@ -13,6 +13,7 @@
 #include <limits>
 
 #include "attention/runtime/attention_avx512_traits.h"
+#include "attention/runtime/bf16_pairs_avx512.h"
 
 namespace macro::attention_detail {
 namespace {
@@ -41,21 +42,27 @@ inline __m512i pair_words(const uint16_t* a, const uint16_t* b) {
   return _mm512_or_si512(l, _mm512_slli_epi32(h, 16));
 }
 
-// qp[e][r] = (bf16(s Q[r][2e]), bf16(s Q[r][2e+1])), zero for r >= rows.
+// qp[e][r] = (bf16(s Q[r][2e]), bf16(s Q[r][2e+1])), zero for r >= rows (D % 32 == 0). Per 16
+// rows and 32 channels: each row's 32 scaled channels are 16 pair words in channel order (one
+// vcvtne2ps2bf16), and a 16 x 16 word transpose turns the rows into query lanes.
 inline void pack_q_pairs(const BlockJob& job, uint32_t* qp) {
-  const int d2 = job.d / 2;
   const __m512 sc = _mm512_set1_ps(job.scale_log2e);
-  alignas(64) float even[16], odd[16];
   for (int r0 = 0; r0 < kTileQ; r0 += 16) {
     const int n = std::max(0, std::min(16, job.rows - r0));
-    for (int e = 0; e < d2; ++e) {
+    for (int c0 = 0; c0 < job.d; c0 += 32) {
+      __m512i w[16];
       for (int i = 0; i < 16; ++i) {
-        even[i] = i < n ? job.q_rows[r0 + i][2 * e] : 0.0f;
-        odd[i] = i < n ? job.q_rows[r0 + i][2 * e + 1] : 0.0f;
+        if (i >= n) {
+          w[i] = _mm512_setzero_si512();
+          continue;
+        }
+        const float* q = job.q_rows[r0 + i] + c0;
+        w[i] = (__m512i)_mm512_cvtne2ps_pbh(_mm512_mul_ps(_mm512_loadu_ps(q + 16), sc),
+                                            _mm512_mul_ps(_mm512_loadu_ps(q), sc));
       }
-      const __m512i w = pair_words(_mm512_mul_ps(_mm512_load_ps(even), sc),
-                                   _mm512_mul_ps(_mm512_load_ps(odd), sc));
-      _mm512_storeu_si512(qp + size_t(e) * kTileQ + r0, w);
+      transpose_16x16_words(w);
+      for (int e = 0; e < 16; ++e)
+        _mm512_storeu_si512(qp + size_t(c0 / 2 + e) * kTileQ + r0, w[e]);
     }
   }
 }
