@@ -189,6 +189,53 @@ TEST_CASE("gemm: fused ReLU after bias and residual, K split in blocks, every pa
   }
 }
 
+TEST_CASE("gemm_bf16: each added term alone and together, one and several K blocks, every path",
+          "[kernels][gemm]") {
+  // The AMX kernel seeds its C tiles with the one added term of a whole 32 x 32 tile (C itself,
+  // the residual, the bias row or the bias column) and hands the terms to the first K block; the
+  // other paths add them after the products of the last block. Whole tiles (M, N multiples of
+  // 32) and ragged edges, K in one block (320) and in several (1000), against the bf16-rounded
+  // double reference.
+  IsaGuard guard;
+  for (const Shape& s : {Shape{64, 96, 320}, Shape{64, 96, 1000}, Shape{45, 70, 1000}}) {
+    const int64_t ldc = s.n + 3, ldr = s.n + 5;
+    auto A = random_vec(size_t(s.m * s.k), 31);
+    auto B = random_vec(size_t(s.n * s.k), 32);
+    std::vector<uint16_t> B16(B.size());
+    for (size_t i = 0; i < B.size(); ++i) B16[i] = f32_to_bf16(B[i]);
+    auto C0 = random_vec(size_t(s.m * ldc), 33);
+    auto bn = random_vec(size_t(s.n), 34);
+    auto bm = random_vec(size_t(s.m), 35);
+    auto res = random_vec(size_t(s.m * ldr), 36);
+    for (int terms = 0; terms < 32; ++terms) {
+      // bits: 1 beta = 1, 2 bias_n, 4 bias_m, 8 residual, 16 beta = 0.5 (never C-seeded)
+      if ((terms & 1) && (terms & 16)) continue;
+      GemmParams p;
+      p.trans_b = true;
+      p.beta = terms & 1 ? 1.0f : terms & 16 ? 0.5f : 0.0f;
+      p.bias_n = terms & 2 ? bn.data() : nullptr;
+      p.bias_m = terms & 4 ? bm.data() : nullptr;
+      if (terms & 8) {
+        p.residual = res.data();
+        p.ldr = ldr;
+      }
+      RefArgs ra{s.m, s.n, s.k, A.data(), s.k, false, B.data(), s.k, true, C0.data(), ldc, p};
+      ra.round_bf16 = true;
+      const auto ref = reference(ra);
+      for (Isa isa : supported_isas()) {
+        REQUIRE(set_isa(isa));
+        INFO(isa_name(isa) << " " << kernels().bf16.name << " M=" << s.m << " N=" << s.n
+                           << " K=" << s.k << " terms=" << terms);
+        auto C = C0;
+        gemm_bf16(s.m, s.n, s.k, A.data(), s.k, B16.data(), s.k, C.data(), ldc, p);
+        REQUIRE(max_rel_err(C, ref, s.m, s.n, ldc) <= 1e-5);
+        for (int64_t i = 0; i < s.m; ++i)
+          for (int64_t j = s.n; j < ldc; ++j) REQUIRE(C[i * ldc + j] == C0[i * ldc + j]);
+      }
+    }
+  }
+}
+
 TEST_CASE("gemm_f32: residual aliasing C is C += A.B", "[kernels][gemm]") {
   IsaGuard guard;
   const int64_t M = 20, N = 45, K = 600;  // K spans several K blocks
