@@ -14,7 +14,8 @@
 //   O^T [D][BQ] fp32 accumulator: C tiles of 16 channels x 16 queries, so O^T += V^T P^T
 // Every operand is read in place, so nothing is packed per key block. The online softmax's rescale
 // of O^T by alpha runs only when some query's running maximum moved (alpha != 1).
-// C tiles are taken 2 x 2 (tiles 0-3), with two A tiles (4, 5) and two B tiles (6, 7) per step.
+// C tiles are taken 2 x 2 (tiles 0-3), with two A tiles (4, 5) and two B tiles (6, 7) per step
+// (amx_step_2x2).
 // GCC 12's AVX-512 headers trip -W(maybe-)uninitialized on their own _mm512_undefined_*() idiom.
 #pragma GCC diagnostic ignored "-Wuninitialized"
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
@@ -38,26 +39,10 @@ void scores_amx(const BlockJob& job, int kb, const uint32_t* qp, float* s) {
     const uint16_t* k0 = kblock + size_t(kg) * job.kv16_stride;
     const uint16_t* k1 = k0 + size_t(16) * job.kv16_stride;
     for (int qg = 0; qg < kTileQ; qg += 32) {
-      _tile_zero(0);
-      _tile_zero(1);
-      _tile_zero(2);
-      _tile_zero(3);
-      for (int e = 0; e < job.d; e += 32) {
-        _tile_loadd(4, k0 + e, kstride);
-        _tile_loadd(5, k1 + e, kstride);
-        const uint32_t* q = qp + size_t(e / 2) * kTileQ + qg;
-        _tile_loadd(6, q, kQRowBytes);
-        _tile_loadd(7, q + 16, kQRowBytes);
-        _tile_dpbf16ps(0, 4, 6);
-        _tile_dpbf16ps(1, 4, 7);
-        _tile_dpbf16ps(2, 5, 6);
-        _tile_dpbf16ps(3, 5, 7);
-      }
-      float* c = s + size_t(kg) * kTileQ + qg;
-      _tile_stored(0, c, kQRowBytes);
-      _tile_stored(1, c + 16, kQRowBytes);
-      _tile_stored(2, c + 16 * kTileQ, kQRowBytes);
-      _tile_stored(3, c + 16 * kTileQ + 16, kQRowBytes);
+      detail::amx_zero_c_2x2();
+      for (int e = 0; e < job.d; e += 32)
+        detail::amx_step_2x2(k0 + e, k1 + e, kstride, qp + size_t(e / 2) * kTileQ + qg, kQRowBytes);
+      detail::amx_store_c_2x2(s + size_t(kg) * kTileQ + qg, kTileQ);
     }
   }
 }
@@ -93,32 +78,14 @@ void pv_amx(const BlockJob& job, int kb, int cols, uint32_t* pp, float* o, bool 
     const uint16_t* v1 = v0 + size_t(16) * kTileK;
     for (int qg = 0; qg < kTileQ; qg += 32) {
       float* c = o + size_t(cg) * kTileQ + qg;
-      if (first) {
-        _tile_zero(0);
-        _tile_zero(1);
-        _tile_zero(2);
-        _tile_zero(3);
-      } else {
-        _tile_loadd(0, c, kQRowBytes);
-        _tile_loadd(1, c + 16, kQRowBytes);
-        _tile_loadd(2, c + 16 * kTileQ, kQRowBytes);
-        _tile_loadd(3, c + 16 * kTileQ + 16, kQRowBytes);
-      }
-      for (int st = 0; st < steps; ++st) {
-        _tile_loadd(4, v0 + 32 * st, vstride);
-        _tile_loadd(5, v1 + 32 * st, vstride);
-        const uint32_t* p = pp + size_t(16 * st) * kTileQ + qg;
-        _tile_loadd(6, p, kQRowBytes);
-        _tile_loadd(7, p + 16, kQRowBytes);
-        _tile_dpbf16ps(0, 4, 6);
-        _tile_dpbf16ps(1, 4, 7);
-        _tile_dpbf16ps(2, 5, 6);
-        _tile_dpbf16ps(3, 5, 7);
-      }
-      _tile_stored(0, c, kQRowBytes);
-      _tile_stored(1, c + 16, kQRowBytes);
-      _tile_stored(2, c + 16 * kTileQ, kQRowBytes);
-      _tile_stored(3, c + 16 * kTileQ + 16, kQRowBytes);
+      if (first)
+        detail::amx_zero_c_2x2();
+      else
+        detail::amx_load_c_2x2(c, kTileQ);
+      for (int st = 0; st < steps; ++st)
+        detail::amx_step_2x2(v0 + 32 * st, v1 + 32 * st, vstride, pp + size_t(16 * st) * kTileQ + qg,
+                             kQRowBytes);
+      detail::amx_store_c_2x2(c, kTileQ);
     }
   }
 }

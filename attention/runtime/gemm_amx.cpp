@@ -93,14 +93,11 @@ void micro_amx(const MicroTile& t) {
                       (!t.load_c || t.beta == 1.0f);
   alignas(64) float rows_bias[kMr * 16];  // bias_m: row r holds bias_m[r] 16 times
   if (!direct || terms == 0) {
-    _tile_zero(0);
-    _tile_zero(1);
-    _tile_zero(2);
-    _tile_zero(3);
+    detail::amx_zero_c_2x2();
   } else if (t.load_c) {
-    seed_tiles(t.c, t.c + 16, t.c + 16 * t.ldc, t.c + 16 * t.ldc + 16, t.ldc * 4);
+    detail::amx_load_c_2x2(t.c, t.ldc);
   } else if (t.res) {
-    seed_tiles(t.res, t.res + 16, t.res + 16 * t.ldr, t.res + 16 * t.ldr + 16, t.ldr * 4);
+    detail::amx_load_c_2x2(t.res, t.ldr);
   } else if (t.bias_n) {
     seed_tiles(t.bias_n, t.bias_n + 16, t.bias_n, t.bias_n + 16, 0);
   } else {
@@ -110,28 +107,14 @@ void micro_amx(const MicroTile& t) {
   for (int64_t k = 0; k < t.kc; k += 32) {
     const uint16_t* ak = a + k * kMr;  // [32 rows][32]
     const uint16_t* bk = b + k * kNr;  // [16 pairs][32 cols][2]
-    _tile_loadd(4, ak, 64);
-    _tile_loadd(5, ak + 16 * 32, 64);
-    _tile_loadd(6, bk, 128);
-    _tile_loadd(7, bk + 32, 128);
-    _tile_dpbf16ps(0, 4, 6);
-    _tile_dpbf16ps(1, 4, 7);
-    _tile_dpbf16ps(2, 5, 6);
-    _tile_dpbf16ps(3, 5, 7);
+    detail::amx_step_2x2(ak, ak + 16 * 32, 64, bk, 128);
   }
   if (direct) {
-    const int64_t stride = t.ldc * 4;
-    _tile_stored(0, t.c, stride);
-    _tile_stored(1, t.c + 16, stride);
-    _tile_stored(2, t.c + 16 * t.ldc, stride);
-    _tile_stored(3, t.c + 16 * t.ldc + 16, stride);
+    detail::amx_store_c_2x2(t.c, t.ldc);
     return;
   }
   alignas(64) float acc[kMr * kNr];
-  _tile_stored(0, acc, kNr * 4);
-  _tile_stored(1, acc + 16, kNr * 4);
-  _tile_stored(2, acc + 16 * kNr, kNr * 4);
-  _tile_stored(3, acc + 16 * kNr + 16, kNr * 4);
+  detail::amx_store_c_2x2(acc, kNr);
   store_tile_from<kMr>(t, [&](int r, int half) { return _mm512_load_ps(acc + r * kNr + 16 * half); });
 }
 
