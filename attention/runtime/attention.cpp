@@ -13,7 +13,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <memory>
@@ -332,8 +331,7 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, bool bf16_ok, 
   }
   // Query blocks per work item: the group's blocks share each K/V block while it is in cache.
   // Keep the group's scratch near 256 KiB (L2 holds it with the K/V blocks).
-  int group = std::clamp(int((256u << 10) / (layout.total * sizeof(float))), 1, kMaxGroup);
-  if (const char* e = std::getenv("XX_GROUP")) group = std::atoi(e);
+  const int group = std::clamp(int((256u << 10) / (layout.total * sizeof(float))), 1, kMaxGroup);
   const int groups = (nqb + group - 1) / group;
   // Per worker and group slot: floats (layout), entry lists, row pointers, one causal tile.
   struct Slot {
