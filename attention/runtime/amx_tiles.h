@@ -32,7 +32,7 @@ inline void amx_step_2x2(const void* a0, const void* a1, int64_t a_stride, const
 }
 
 // C tiles 0-3 from / to a row-major fp32 block at c (row stride ld floats): tile 0 at c, 1 at
-// c + 16, 2 at c + 16 ld, 3 at c + 16 ld + 16.
+// c + 16, 2 at c + 16 ld, 3 at c + 16 ld + 16 (a load with ld 0 repeats the row at c).
 inline void amx_load_c_2x2(const float* c, int64_t ld) {
   _tile_loadd(0, c, ld * 4);
   _tile_loadd(1, c + 16, ld * 4);

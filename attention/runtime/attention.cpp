@@ -306,7 +306,8 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, bool bf16_ok, 
     } else {
       // K row of mask column j, and V transposed per key block:
       // vb16[(kb * c + i) * BK + jj] = V[token of column kb * BK + jj][i].
-      const int32_t* key_index = mask && !mask->key_index.empty() ? mask->key_index.data() : nullptr;
+      const int32_t* key_index =
+          mask && !mask->key_index.empty() ? mask->key_index.data() : nullptr;
       pool.parallel_for(size_t(nkb), [&](size_t begin, size_t end, int) {
         std::vector<uint16_t> row(c);
         for (size_t kb = begin; kb < end; ++kb) {

@@ -23,8 +23,9 @@
 //
 // Paths: scalar twin (any D), AVX2 (D % 8 == 0), AVX-512 (D % 16 == 0), chosen from active_isa()
 // at each call (a head dim the path cannot take falls back to the next narrower path; the
-// avx512bf16 and amx paths use the fp32 AVX-512 kernel unless bf16 is asked for). All paths run the same algorithm; they differ only in rounding (exp2 polynomial,
-// summation order, Q pre-scaled in the SIMD paths).
+// avx512bf16 and amx paths use the fp32 AVX-512 kernel unless bf16 is asked for). All paths run the
+// same algorithm; they differ only in rounding (exp2 polynomial, summation order, Q pre-scaled in
+// the SIMD paths).
 //
 // bf16 (AttentionArgs::bf16, set by networks running in bf16): the two products Q K^T and P V take
 // bf16 operands with fp32 accumulation (vdpbf16ps: 32 products per instruction instead of 16
@@ -164,7 +165,7 @@ const AttentionKernels& scalar_kernels();
 const AttentionKernels& avx2_kernels();
 const AttentionKernels& avx512_kernels();
 const AttentionKernels& avx512bf16_kernels();  // the fp32 AVX-512 kernel + the bf16 one
-const AttentionKernels& amx_kernels();  // the fp32 AVX-512 kernel + the AMX bf16 one
+const AttentionKernels& amx_kernels();         // the fp32 AVX-512 kernel + the AMX bf16 one
 
 }  // namespace attention_detail
 }  // namespace macro

@@ -69,8 +69,8 @@ void rescale_ot(float* o, int d, const float* alpha) {
 void pv_amx(const BlockJob& job, int kb, int cols, uint32_t* pp, float* o, bool first) {
   const int steps = (cols + 31) / 32;
   for (int c = (cols + 1) / 2; c < steps * 16; ++c)
-    for (int v = 0; v < 4; ++v) _mm512_storeu_si512(pp + size_t(c) * kTileQ + 16 * v,
-                                                    _mm512_setzero_si512());
+    for (int v = 0; v < 4; ++v)
+      _mm512_storeu_si512(pp + size_t(c) * kTileQ + 16 * v, _mm512_setzero_si512());
   constexpr size_t vstride = kTileK * 2;
   const uint16_t* vblock = job.v16 + size_t(kb) * job.kv16_stride * kTileK;
   for (int cg = 0; cg < job.d; cg += 32) {
@@ -83,8 +83,8 @@ void pv_amx(const BlockJob& job, int kb, int cols, uint32_t* pp, float* o, bool 
       else
         detail::amx_load_c_2x2(c, kTileQ);
       for (int st = 0; st < steps; ++st)
-        detail::amx_step_2x2(v0 + 32 * st, v1 + 32 * st, vstride, pp + size_t(16 * st) * kTileQ + qg,
-                             kQRowBytes);
+        detail::amx_step_2x2(v0 + 32 * st, v1 + 32 * st, vstride,
+                             pp + size_t(16 * st) * kTileQ + qg, kQRowBytes);
       detail::amx_store_c_2x2(c, kTileQ);
     }
   }
@@ -129,9 +129,9 @@ struct AmxBlocks {
         for (int i = 0; i < j.d; i += 16) _mm512_storeu_ps(j.out_rows[r] + i, _mm512_setzero_ps());
       return;
     }
-    const __m512i lanes = _mm512_mullo_epi32(
-        _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0),
-        _mm512_set1_epi32(kTileQ));
+    const __m512i lanes =
+        _mm512_mullo_epi32(_mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0),
+                           _mm512_set1_epi32(kTileQ));
     for (int r = 0; r < j.rows; ++r) {
       const __m512 inv = _mm512_set1_ps(sc.l[r] > 0 ? 1.0f / sc.l[r] : 0.0f);
       for (int i = 0; i < j.d; i += 16) {

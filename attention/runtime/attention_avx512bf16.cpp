@@ -19,6 +19,23 @@
 namespace macro::attention_detail {
 namespace {
 
+inline uint32_t load_word(const uint16_t* p) {
+  uint32_t w;
+  std::memcpy(&w, p, 4);
+  return w;
+}
+
+inline __m512 dot(__m512 acc, __m512i a, __m512i b) {
+  return _mm512_dpbf16_ps(acc, reinterpret_cast<__m512bh>(a), reinterpret_cast<__m512bh>(b));
+}
+
+// 16 words from two bf16 rows: low halves a[i], high halves b[i].
+inline __m512i pair_words(const uint16_t* a, const uint16_t* b) {
+  const __m512i l = _mm512_cvtepu16_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(a)));
+  const __m512i h = _mm512_cvtepu16_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(b)));
+  return _mm512_or_si512(l, _mm512_slli_epi32(h, 16));
+}
+
 // S^T[c][0..64) for R keys: sum over pairs e of K[c] pair e . qp[e][r].
 template <int R>
 inline void score_rows_bf16(const uint16_t* const* k_rows, const uint32_t* qp, int d2, float* s) {

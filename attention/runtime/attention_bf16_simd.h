@@ -9,7 +9,6 @@
 //   pp [BK/2][BQ] P pairs (keys 2c, 2c+1) per query lane, built from S^T after the softmax
 #pragma once
 
-#include <cstring>
 #include <limits>
 
 #include "attention/runtime/attention_avx512_traits.h"
@@ -17,30 +16,6 @@
 
 namespace macro::attention_detail {
 namespace {
-
-inline uint32_t load_word(const uint16_t* p) {
-  uint32_t w;
-  std::memcpy(&w, p, 4);
-  return w;
-}
-
-inline __m512 dot(__m512 acc, __m512i a, __m512i b) {
-  return _mm512_dpbf16_ps(acc, reinterpret_cast<__m512bh>(a), reinterpret_cast<__m512bh>(b));
-}
-
-// 16 words whose low halves are bf16(lo[i]) and high halves bf16(hi[i]).
-inline __m512i pair_words(__m512 lo, __m512 hi) {
-  const __m512i l = _mm512_cvtepu16_epi32(reinterpret_cast<__m256i>(_mm512_cvtneps_pbh(lo)));
-  const __m512i h = _mm512_cvtepu16_epi32(reinterpret_cast<__m256i>(_mm512_cvtneps_pbh(hi)));
-  return _mm512_or_si512(l, _mm512_slli_epi32(h, 16));
-}
-
-// 16 words from two bf16 rows: low halves a[i], high halves b[i].
-inline __m512i pair_words(const uint16_t* a, const uint16_t* b) {
-  const __m512i l = _mm512_cvtepu16_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(a)));
-  const __m512i h = _mm512_cvtepu16_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(b)));
-  return _mm512_or_si512(l, _mm512_slli_epi32(h, 16));
-}
 
 // qp[e][r] = (bf16(s Q[r][2e]), bf16(s Q[r][2e+1])), zero for r >= rows (D % 32 == 0). Per 16
 // rows and 32 channels: each row's 32 scaled channels are 16 pair words in channel order (one
@@ -61,8 +36,7 @@ inline void pack_q_pairs(const BlockJob& job, uint32_t* qp) {
                                             _mm512_mul_ps(_mm512_loadu_ps(q), sc));
       }
       transpose_16x16_words(w);
-      for (int e = 0; e < 16; ++e)
-        _mm512_storeu_si512(qp + size_t(c0 / 2 + e) * kTileQ + r0, w[e]);
+      for (int e = 0; e < 16; ++e) _mm512_storeu_si512(qp + size_t(c0 / 2 + e) * kTileQ + r0, w[e]);
     }
   }
 }
@@ -89,12 +63,8 @@ inline __m512 exp2_bf16(__m512 x) {
 // m' = max(m, max_c S), alpha = 2^(m - m'), P = 2^(S - m') summed into l in key order and written
 // straight into pair words pp[c][r] = (bf16(P[2c][r]), bf16(P[2c+1][r])), a missing odd key as 0.
 // The fp32 P never goes back to memory.
-inline void softmax_pack_bf16(const float* s, int cols, float* m, float* l, float* alpha, uint32_t* pp) {
-  // cvtne2ps(hi, lo) gives [bf16(lo) x 16, bf16(hi) x 16]; word i needs (lo[i], hi[i]).
-  alignas(64) static const uint16_t kInterleave[32] = {0,  16, 1,  17, 2,  18, 3,  19, 4,  20, 5,
-                                                       21, 6,  22, 7,  23, 8,  24, 9,  25, 10, 26,
-                                                       11, 27, 12, 28, 13, 29, 14, 30, 15, 31};
-  const __m512i idx = _mm512_load_si512(kInterleave);
+inline void softmax_pack_bf16(const float* s, int cols, float* m, float* l, float* alpha,
+                              uint32_t* pp) {
   const __m512 zero = _mm512_setzero_ps();
   for (int r0 = 0; r0 < kTileQ; r0 += 16) {
     __m512 mx = _mm512_set1_ps(-std::numeric_limits<float>::infinity());
@@ -114,8 +84,7 @@ inline void softmax_pack_bf16(const float* s, int cols, float* m, float* l, floa
         hi = exp2_bf16(_mm512_sub_ps(_mm512_loadu_ps(sc + kTileQ), m_new));
         sum = _mm512_add_ps(sum, hi);
       }
-      const __m512i w = _mm512_permutexvar_epi16(idx, (__m512i)_mm512_cvtne2ps_pbh(hi, lo));
-      _mm512_storeu_si512(pp + size_t(c) * kTileQ + r0, w);
+      _mm512_storeu_si512(pp + size_t(c) * kTileQ + r0, bf16_pair_words(lo, hi));
     }
     _mm512_storeu_ps(l + r0, _mm512_fmadd_ps(_mm512_loadu_ps(l + r0), a, sum));
     _mm512_storeu_ps(m + r0, m_new);

@@ -1,6 +1,7 @@
-// bf16 pair words from fp32 vectors with one vcvtne2ps2bf16: the packers of the AVX512-BF16 and
-// AMX GEMM kernels (gemm_avx512bf16.cpp, gemm_amx.cpp). Include ONLY from files compiled with
-// AVX512-BF16 flags; internal linkage, like gemm_store_avx512.h.
+// bf16 pair words from fp32 vectors with one vcvtne2ps2bf16, and a 16 x 16 word transpose: the
+// A packers of the AVX512-BF16 and AMX GEMM kernels and the Q / P packing of the bf16 attention
+// kernels (attention_bf16_simd.h). Include ONLY from files compiled with AVX512-BF16 flags;
+// internal linkage, like gemm_store_avx512.h.
 #pragma once
 
 #include <immintrin.h>
@@ -14,8 +15,8 @@ namespace {
 // denormal inputs become zero, as the instruction treats them).
 inline __m512i bf16_pair_words(__m512 lo, __m512 hi) {
   // cvtne2ps(hi, lo) gives [bf16(lo) x 16, bf16(hi) x 16]; word i needs (lo[i], hi[i]).
-  const __m512i idx = _mm512_set_epi16(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24,
-                                       8, 23, 7, 22, 6, 21, 5, 20, 4, 19, 3, 18, 2, 17, 1, 16, 0);
+  const __m512i idx = _mm512_set_epi16(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24, 8,
+                                       23, 7, 22, 6, 21, 5, 20, 4, 19, 3, 18, 2, 17, 1, 16, 0);
   return _mm512_permutexvar_epi16(idx, (__m512i)_mm512_cvtne2ps_pbh(hi, lo));
 }
 

@@ -67,16 +67,6 @@ namespace {
 
 constexpr int kMr = 32, kNr = 32;
 
-// C tiles 0-3 (rows 0-15 / 16-31 x columns 0-15 / 16-31) loaded from the four given blocks of
-// 16 rows `stride` bytes apart (stride 0 repeats one row).
-inline void seed_tiles(const float* c00, const float* c01, const float* c10, const float* c11,
-                       int64_t stride) {
-  _tile_loadd(0, c00, stride);
-  _tile_loadd(1, c01, stride);
-  _tile_loadd(2, c10, stride);
-  _tile_loadd(3, c11, stride);
-}
-
 // A whole 32 x 32 tile whose epilogue is at most one added term (C itself with beta 1, the
 // residual, the bias row or the bias column; alpha 1, no ReLU) runs "direct": the C tiles start
 // from that term, the products accumulate onto it, and the tiles are stored straight into C. The
@@ -87,11 +77,10 @@ void micro_amx(const MicroTile& t) {
   detail::amx_tiles_ready();
   const uint16_t* a = static_cast<const uint16_t*>(t.a);
   const uint16_t* b = static_cast<const uint16_t*>(t.b);
-  const int terms = int(t.load_c) + int(t.res != nullptr) + int(t.bias_n != nullptr) +
-                    int(t.bias_m != nullptr);
+  const int terms =
+      int(t.load_c) + int(t.res != nullptr) + int(t.bias_n != nullptr) + int(t.bias_m != nullptr);
   const bool direct = t.m == kMr && t.n == kNr && t.alpha == 1.0f && !t.relu && terms <= 1 &&
                       (!t.load_c || t.beta == 1.0f);
-  alignas(64) float rows_bias[kMr * 16];  // bias_m: row r holds bias_m[r] 16 times
   if (!direct || terms == 0) {
     detail::amx_zero_c_2x2();
   } else if (t.load_c) {
@@ -99,10 +88,15 @@ void micro_amx(const MicroTile& t) {
   } else if (t.res) {
     detail::amx_load_c_2x2(t.res, t.ldr);
   } else if (t.bias_n) {
-    seed_tiles(t.bias_n, t.bias_n + 16, t.bias_n, t.bias_n + 16, 0);
+    detail::amx_load_c_2x2(t.bias_n, 0);  // row stride 0: every row is the bias row
   } else {
-    for (int r = 0; r < kMr; ++r) _mm512_store_ps(rows_bias + r * 16, _mm512_set1_ps(t.bias_m[r]));
-    seed_tiles(rows_bias, rows_bias, rows_bias + 256, rows_bias + 256, 64);
+    alignas(64) float rows_bias[kMr * kNr];  // row r: bias_m[r] in every column
+    for (int r = 0; r < kMr; ++r) {
+      const __m512 v = _mm512_set1_ps(t.bias_m[r]);
+      _mm512_store_ps(rows_bias + r * kNr, v);
+      _mm512_store_ps(rows_bias + r * kNr + 16, v);
+    }
+    detail::amx_load_c_2x2(rows_bias, kNr);
   }
   for (int64_t k = 0; k < t.kc; k += 32) {
     const uint16_t* ak = a + k * kMr;  // [32 rows][32]
@@ -115,7 +109,8 @@ void micro_amx(const MicroTile& t) {
   }
   alignas(64) float acc[kMr * kNr];
   detail::amx_store_c_2x2(acc, kNr);
-  store_tile_from<kMr>(t, [&](int r, int half) { return _mm512_load_ps(acc + r * kNr + 16 * half); });
+  store_tile_from<kMr>(t,
+                       [&](int r, int half) { return _mm512_load_ps(acc + r * kNr + 16 * half); });
 }
 
 // A panel [kcp/32][w][32] bf16 (row-major 16 x 32 tiles) from row-major fp32 rows: each row is read
@@ -128,7 +123,8 @@ void pack_a_amx(const float* src, int64_t ld, int valid_rows, int64_t valid_k, i
   for (int r = 0; r < w; ++r) {
     uint16_t* dr = d + r * 32;
     if (r >= valid_rows) {
-      for (int64_t q = 0; q < steps; ++q) _mm512_storeu_si512(dr + q * w * 32, _mm512_setzero_si512());
+      for (int64_t q = 0; q < steps; ++q)
+        _mm512_storeu_si512(dr + q * w * 32, _mm512_setzero_si512());
       continue;
     }
     const float* s = src + r * ld;
@@ -148,8 +144,8 @@ void pack_a_amx(const float* src, int64_t ld, int valid_rows, int64_t valid_k, i
 
 // The same from a transposed source (row r, column k at src[k * ld + r]): per 16 rows and 32 k,
 // 16 pair words of k (2i, 2i + 1) for the 16 rows, transposed in registers into the rows' lines.
-void pack_a_amx_t(const float* src, int64_t ld, int valid_rows, int64_t valid_k, int64_t kcp,
-                  int w, void* dst) {
+void pack_a_amx_t(const float* src, int64_t ld, int valid_rows, int64_t valid_k, int64_t kcp, int w,
+                  void* dst) {
   uint16_t* d = static_cast<uint16_t*>(dst);
   const int64_t steps = kcp / 32;
   for (int r0 = 0; r0 < w; r0 += 16) {
@@ -159,11 +155,10 @@ void pack_a_amx_t(const float* src, int64_t ld, int valid_rows, int64_t valid_k,
       __m512i v[16];
       for (int i = 0; i < 16; ++i) {
         const int64_t k = 32 * q + 2 * i;
-        const __m512 lo = k < valid_k && nr ? _mm512_maskz_loadu_ps(rm, src + k * ld + r0)
-                                            : _mm512_setzero_ps();
-        const __m512 hi = k + 1 < valid_k && nr
-                              ? _mm512_maskz_loadu_ps(rm, src + (k + 1) * ld + r0)
-                              : _mm512_setzero_ps();
+        const __m512 lo =
+            k < valid_k && nr ? _mm512_maskz_loadu_ps(rm, src + k * ld + r0) : _mm512_setzero_ps();
+        const __m512 hi = k + 1 < valid_k && nr ? _mm512_maskz_loadu_ps(rm, src + (k + 1) * ld + r0)
+                                                : _mm512_setzero_ps();
         v[i] = bf16_pair_words(lo, hi);
       }
       transpose_16x16_words(v);
@@ -203,8 +198,15 @@ double probe_amx(int64_t iters) {
 namespace detail {
 void fill_amx_kernels(KernelTable& t) {
   fill_avx512bf16_kernels(t);
-  t.bf16 = GemmKernel{kMr,       kNr,           32,        384, PackLayout::kBf16Amx,
-                      micro_amx, "amx bf16 32x32", pack_a_amx, pack_a_amx_t,
+  t.bf16 = GemmKernel{kMr,
+                      kNr,
+                      32,
+                      384,
+                      PackLayout::kBf16Amx,
+                      micro_amx,
+                      "amx bf16 32x32",
+                      pack_a_amx,
+                      pack_a_amx_t,
                       /*terms_first=*/true};
   t.probe_bf16 = probe_amx;
 }

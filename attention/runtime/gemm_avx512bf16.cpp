@@ -98,8 +98,8 @@ void pack_a_pairs_t(const float* src, int64_t ld, int valid_rows, int64_t valid_
       const int64_t k = 2 * q;
       const __m512 lo =
           k < valid_k ? _mm512_maskz_loadu_ps(rm, src + k * ld + r0) : _mm512_setzero_ps();
-      const __m512 hi =
-          k + 1 < valid_k ? _mm512_maskz_loadu_ps(rm, src + (k + 1) * ld + r0) : _mm512_setzero_ps();
+      const __m512 hi = k + 1 < valid_k ? _mm512_maskz_loadu_ps(rm, src + (k + 1) * ld + r0)
+                                        : _mm512_setzero_ps();
       _mm512_mask_storeu_epi32(d + q * w + r0, wm, bf16_pair_words(lo, hi));
     }
   }
@@ -128,8 +128,8 @@ namespace detail {
 void fill_avx512bf16_kernels(KernelTable& t) {
   fill_avx512_kernels(t);
   t.bf16 = GemmKernel{
-      kMr,        kNr, 2, 384, PackLayout::kBf16Pairs, micro_bf16, "avx512bf16 14x32", pack_a_pairs,
-      pack_a_pairs_t};
+      kMr,          kNr,           2, 384, PackLayout::kBf16Pairs, micro_bf16, "avx512bf16 14x32",
+      pack_a_pairs, pack_a_pairs_t};
   t.probe_bf16 = probe_bf16;
 }
 }  // namespace detail

@@ -50,9 +50,6 @@ using MicroKernel = void (*)(const MicroTile& t);
 // of k_align). When null the generic packer in gemm.cpp is used.
 using PackPanelF32 = void (*)(const float* src, int64_t ld, int valid_rows, int64_t valid_k,
                               int64_t kcp, int w, void* dst);
-// The same from a transposed source: row r, column k at src[k * ld + r] (NCHW activations read as
-// tokens, e.g. a transformer block's proj_in).
-using PackPanelF32T = PackPanelF32;
 
 // Stride-1 conv im2col rows (conv.cpp) for a B panel of 32 columns of 32-bit elements (fp32 bits,
 // or bf16 channel-pair words): output pixels split into runs on one output row (ConvSegment), and
@@ -85,7 +82,9 @@ struct GemmKernel {
   MicroKernel micro = nullptr;
   const char* name = "";
   PackPanelF32 pack_a_f32 = nullptr;
-  PackPanelF32T pack_a_f32_t = nullptr;  // null: the generic packer for transposed A
+  // The same for a transposed source: row r, column k at src[k * ld + r] (NCHW activations read
+  // as tokens, e.g. a transformer block's proj_in); null: the generic packer.
+  PackPanelF32 pack_a_f32_t = nullptr;
   // Where the driver hands the added terms (bias_n, bias_m, res) when K runs in several blocks:
   // false = with the last block (after all the products), true = with the first (the AMX kernel
   // seeds its C tiles with them, so its later blocks only add products onto C). ReLU always goes
