@@ -125,7 +125,7 @@ TEST_CASE("camera models: SIMPLE_RADIAL, RADIAL, FULL_OPENCV in COLMAP and the J
              Contains("camera 'a.png': RADIAL takes at most 2 distortion parameters, found 3"));
 }
 
-TEST_CASE("non-strict loading: a bad entry is left out and named; strict refuses the file",
+TEST_CASE("non-strict loading: a bad entry is left out and named, strict refuses the file",
           "[cameras]") {
   test::TempDir tmp("camera-entries");
   CameraLoadOptions strict;
@@ -225,7 +225,7 @@ TEST_CASE("CameraSet::find: a name without its extension, unless ambiguous", "[c
   CHECK(set.index_of("frame_00002.jpg") == 2);
 }
 
-TEST_CASE("describe_cameras lists name, size, model and centre; the distortion guard",
+TEST_CASE("describe_cameras lists name, size, model and centre, the distortion guard",
           "[cameras]") {
   CameraSet set;
   set.source = "scene/sparse/0";

@@ -11,6 +11,7 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <vector>
 
@@ -191,11 +192,11 @@ TEST_CASE("gemm: fused ReLU after bias and residual, K split in blocks, every pa
 
 TEST_CASE("gemm_bf16: each added term alone and together, one and several K blocks, every path",
           "[kernels][gemm]") {
-  // The AMX kernel seeds its C tiles with the one added term of a whole 32 x 32 tile (C itself,
+  // The AMX kernel seeds its C tiles with the one added term of a tile (C itself,
   // the residual, the bias row or the bias column) and hands the terms to the first K block; the
   // other paths add them after the products of the last block. Whole tiles (M, N multiples of
   // 32) and ragged edges, K in one block (320) and in several (1000), against the bf16-rounded
-  // double reference.
+  // double reference; and in row and column bands, to the same bits as in one call.
   IsaGuard guard;
   for (const Shape& s : {Shape{64, 96, 320}, Shape{64, 96, 1000}, Shape{45, 70, 1000}}) {
     const int64_t ldc = s.n + 3, ldr = s.n + 5;
@@ -231,6 +232,29 @@ TEST_CASE("gemm_bf16: each added term alone and together, one and several K bloc
         REQUIRE(max_rel_err(C, ref, s.m, s.n, ldc) <= 1e-5);
         for (int64_t i = 0; i < s.m; ++i)
           for (int64_t j = s.n; j < ldc; ++j) REQUIRE(C[i * ldc + j] == C0[i * ldc + j]);
+        // The same GEMM in column bands and in row bands moves the tile edges; the bits must not
+        // move with them (banded callers, e.g. the VAE's row bands, rely on it).
+        for (const int64_t cut : {int64_t(20), int64_t(40)}) {
+          auto Cc = C0;
+          auto Cr = C0;
+          for (int half = 0; half < 2; ++half) {
+            const int64_t j0 = half ? cut : 0, nj = half ? s.n - cut : cut;
+            GemmParams pc = p;
+            if (pc.bias_n) pc.bias_n += j0;
+            if (pc.residual) pc.residual += j0;
+            gemm_bf16(s.m, nj, s.k, A.data(), s.k, B16.data() + j0 * s.k, s.k, Cc.data() + j0,
+                      ldc, pc);
+            const int64_t i0 = half ? cut : 0, mi = half ? s.m - cut : cut;
+            GemmParams pr = p;
+            if (pr.bias_m) pr.bias_m += i0;
+            if (pr.residual) pr.residual += i0 * ldr;
+            gemm_bf16(mi, s.n, s.k, A.data() + i0 * s.k, s.k, B16.data(), s.k,
+                      Cr.data() + i0 * ldc, ldc, pr);
+          }
+          INFO("cut " << cut);
+          REQUIRE(std::memcmp(Cc.data(), C.data(), C.size() * sizeof(float)) == 0);
+          REQUIRE(std::memcmp(Cr.data(), C.data(), C.size() * sizeof(float)) == 0);
+        }
       }
     }
   }

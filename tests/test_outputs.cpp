@@ -186,7 +186,7 @@ TEST_CASE("outputs: a symlink keeps pointing at its target, which gets the new b
         std::vector<std::string>{"dangling.png", "link.png", "link2.png", "real"});
 }
 
-TEST_CASE("outputs: a regular file is replaced whole; sockets, directories and loops are refused",
+TEST_CASE("outputs: a regular file is replaced whole, sockets, directories and loops are refused",
           "[outputs]") {
   test::TempDir tmp("out-refuse");
   const std::string file = tmp.file("a.txt");

@@ -292,7 +292,7 @@ TEST_CASE("a failed render job removes the outputs it already wrote", "[render][
   }
 }
 
-TEST_CASE("render outputs: /dev/null and a symlink survive a failed job; the CLI takes /dev/null",
+TEST_CASE("render outputs: /dev/null and a symlink survive a failed job, the CLI takes /dev/null",
           "[render][render_cli][outputs]") {
   struct stat st {};
   REQUIRE(::stat("/dev/null", &st) == 0);
@@ -363,7 +363,7 @@ TEST_CASE("macro render --out-tensors reproduces the raster goldens", "[render][
   }
 }
 
-TEST_CASE("macro render refuses a distorted camera; --ignore-distortion warns; bad entries warn",
+TEST_CASE("macro render refuses a distorted camera, --ignore-distortion warns, bad entries warn",
           "[render][render_cli]") {
   test::TempDir tmp("render-cli-distortion");
   // The default scene's cameras with train_00 made OPENCV k1 = 0.5 and an invalid entry added.

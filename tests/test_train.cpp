@@ -409,7 +409,7 @@ TEST_CASE("train: the loss gradient agrees with central differences", "[train]")
   CHECK_FALSE(photometric_loss(x.data(), y.data(), 10, 40, nullptr, pool).is_ok());
 }
 
-TEST_CASE("train: the forward is the rasterizer's render; 1 and 2 threads give identical bits",
+TEST_CASE("train: the forward is the rasterizer's render, 1 and 2 threads give identical bits",
           "[train]") {
   RandomCase rc = random_case(11, 3000, 2, 96, 72);
   auto ref = render(to_cloud(rc.params), rc.view.camera);

@@ -246,7 +246,7 @@ TEST_CASE("train fast: every Adam path gives the scalar twin's bits", "[train][t
   }
 }
 
-TEST_CASE("train fast: --precision is validated by name; double runs the reference", "[train]") {
+TEST_CASE("train fast: --precision is validated by name, double runs the reference", "[train]") {
   test::TempDir tmp("train-precision");
   Scene s = random_scene(9, 200, 1, 40, 30);
   REQUIRE(write_splat_params(s.params, tmp.file("s.ply")).is_ok());

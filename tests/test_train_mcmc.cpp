@@ -109,7 +109,7 @@ TEST_CASE("mcmc: the relocation formula against hand-computed values", "[train]"
   CHECK(compute_relocation(0.5, 0).opacity == compute_relocation(0.5, 1).opacity);
 }
 
-TEST_CASE("mcmc: draws follow the weights; dead Gaussians become copies of drawn live ones",
+TEST_CASE("mcmc: draws follow the weights, dead Gaussians become copies of drawn live ones",
           "[train]") {
   // Frequencies of 200k draws with weights 1, 2, 7 (and a zero weight never drawn).
   uint64_t state = 11;

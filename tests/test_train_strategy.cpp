@@ -317,7 +317,7 @@ TEST_CASE("train schedule: means lr, SH degree and the per-epoch view order", "[
   CHECK(epochs_a != epochs_c);        // another seed, another order
 }
 
-TEST_CASE("train schedule: inactive SH bands get zero gradients; train() applies the schedules",
+TEST_CASE("train schedule: inactive SH bands get zero gradients, train() applies the schedules",
           "[train]") {
   // Ten Gaussians in front of an identity camera, SH degree 3 with non-zero rest coefficients.
   TrainView view;

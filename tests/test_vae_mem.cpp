@@ -84,7 +84,7 @@ TEST_CASE("vae: banded full-resolution level is bit-identical to whole images", 
   REQUIRE(set_isa(saved).is_ok());
 }
 
-TEST_CASE("vae: bf16 skips decode to the same bits; fp32 models refuse them", "[vae][mem]") {
+TEST_CASE("vae: bf16 skips decode to the same bits, fp32 models refuse them", "[vae][mem]") {
   const std::string dir = test::golden_dir() + "/vae-tiny";
   auto g = SafeTensors::open(dir + "/case-roundtrip.safetensors");
   REQUIRE(g.is_ok());

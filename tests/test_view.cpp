@@ -171,7 +171,7 @@ TEST_CASE("view API: close-ups saved to the split JSON and to a cameras JSON loa
   CHECK(exists);
 }
 
-TEST_CASE("view API: plan lists its images; one enhance at a time, the second refused", "[view]") {
+TEST_CASE("view API: plan lists its images, one enhance at a time, the second refused", "[view]") {
   test::TempDir dir("view-api-jobs");
   auto s = open_synthclose(dir);
   Reply r = handle_api(*s, "POST", "/api/plan", R"({"camera": "closeup_01.png"})");
@@ -205,7 +205,7 @@ TEST_CASE("view API: plan lists its images; one enhance at a time, the second re
   CHECK(test::compare(enhanced->data, render->data).max_abs > 0);  // the transfer changed it
 }
 
-TEST_CASE("macro view: HTTP errors keep the server up; SIGINT stops it cleanly", "[view]") {
+TEST_CASE("macro view: HTTP errors keep the server up, SIGINT stops it cleanly", "[view]") {
   test::TempDir dir("view-http");
   test::copy_synthclose(dir.file("scene"));
   test::ViewServer server;

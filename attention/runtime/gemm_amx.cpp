@@ -67,36 +67,51 @@ namespace {
 
 constexpr int kMr = 32, kNr = 32;
 
-// A whole 32 x 32 tile whose epilogue is at most one added term (C itself with beta 1, the
-// residual, the bias row or the bias column; alpha 1, no ReLU) runs "direct": the C tiles start
-// from that term, the products accumulate onto it, and the tiles are stored straight into C. The
-// driver hands the terms to the first K block (GemmKernel::terms_first), so the later blocks of
-// a long K seed from C and stay direct too. Anything else takes the general epilogue from the
-// tiles' fp32 sums (store_tile_from).
+// A tile whose epilogue is exactly one added term (C itself with beta 1, the residual, the bias
+// row or the bias column; alpha 1) is "seeded": the C tiles start from that term and the products
+// accumulate onto it. A whole 32 x 32 seeded tile without ReLU loads the term in place and stores
+// straight into C; a ragged or ReLU one stages the term in a padded block first, so every tile of
+// a GEMM sums in the same order and a result never depends on where the tile edges fall (row bands,
+// column bands). The driver hands the terms to the first K block (GemmKernel::terms_first), so the
+// later blocks of a long K seed from C. No term, or several, take the general epilogue from the
+// tiles' fp32 sums (store_tile_from), the same for whole and ragged tiles.
 void micro_amx(const MicroTile& t) {
   detail::amx_tiles_ready();
   const uint16_t* a = static_cast<const uint16_t*>(t.a);
   const uint16_t* b = static_cast<const uint16_t*>(t.b);
   const int terms =
       int(t.load_c) + int(t.res != nullptr) + int(t.bias_n != nullptr) + int(t.bias_m != nullptr);
-  const bool direct = t.m == kMr && t.n == kNr && t.alpha == 1.0f && !t.relu && terms <= 1 &&
-                      (!t.load_c || t.beta == 1.0f);
-  if (!direct || terms == 0) {
+  const bool seeded = terms == 1 && t.alpha == 1.0f && (!t.load_c || t.beta == 1.0f);
+  const bool direct = seeded && t.m == kMr && t.n == kNr && !t.relu;
+  alignas(64) float acc[kMr * kNr];
+  if (!seeded) {
     detail::amx_zero_c_2x2();
-  } else if (t.load_c) {
-    detail::amx_load_c_2x2(t.c, t.ldc);
-  } else if (t.res) {
-    detail::amx_load_c_2x2(t.res, t.ldr);
-  } else if (t.bias_n) {
-    detail::amx_load_c_2x2(t.bias_n, 0);  // row stride 0: every row is the bias row
-  } else {
-    alignas(64) float rows_bias[kMr * kNr];  // row r: bias_m[r] in every column
-    for (int r = 0; r < kMr; ++r) {
-      const __m512 v = _mm512_set1_ps(t.bias_m[r]);
-      _mm512_store_ps(rows_bias + r * kNr, v);
-      _mm512_store_ps(rows_bias + r * kNr + 16, v);
+  } else if (t.bias_m) {
+    for (int r = 0; r < kMr; ++r) {  // row r: bias_m[r] in every column (rows past m: zero)
+      const __m512 v = _mm512_set1_ps(r < t.m ? t.bias_m[r] : 0.0f);
+      _mm512_store_ps(acc + r * kNr, v);
+      _mm512_store_ps(acc + r * kNr + 16, v);
     }
-    detail::amx_load_c_2x2(rows_bias, kNr);
+    detail::amx_load_c_2x2(acc, kNr);
+  } else {
+    const float* src = t.load_c ? t.c : t.res ? t.res : t.bias_n;
+    const int64_t ld = t.load_c ? t.ldc : t.res ? t.ldr : 0;  // bias row: stride 0
+    if (direct) {
+      detail::amx_load_c_2x2(src, ld);
+    } else {
+      const __mmask16 k0 = t.n >= 16 ? __mmask16(0xffff) : __mmask16((1u << t.n) - 1);
+      const __mmask16 k1 = t.n >= 32   ? __mmask16(0xffff)
+                           : t.n <= 16 ? __mmask16(0)
+                                       : __mmask16((1u << (t.n - 16)) - 1);
+      for (int r = 0; r < kMr; ++r) {
+        const bool in = r < t.m;
+        _mm512_store_ps(acc + r * kNr, in ? _mm512_maskz_loadu_ps(k0, src + r * ld)
+                                          : _mm512_setzero_ps());
+        _mm512_store_ps(acc + r * kNr + 16, in ? _mm512_maskz_loadu_ps(k1, src + r * ld + 16)
+                                               : _mm512_setzero_ps());
+      }
+      detail::amx_load_c_2x2(acc, kNr);
+    }
   }
   for (int64_t k = 0; k < t.kc; k += 32) {
     const uint16_t* ak = a + k * kMr;  // [32 rows][32]
@@ -107,8 +122,17 @@ void micro_amx(const MicroTile& t) {
     detail::amx_store_c_2x2(t.c, t.ldc);
     return;
   }
-  alignas(64) float acc[kMr * kNr];
   detail::amx_store_c_2x2(acc, kNr);
+  if (seeded) {  // the sums already hold the term: only ReLU and the ragged store remain
+    MicroTile plain = t;
+    plain.load_c = false;
+    plain.res = nullptr;
+    plain.bias_n = nullptr;
+    plain.bias_m = nullptr;
+    store_tile_from<kMr>(
+        plain, [&](int r, int half) { return _mm512_load_ps(acc + r * kNr + 16 * half); });
+    return;
+  }
   store_tile_from<kMr>(t,
                        [&](int r, int half) { return _mm512_load_ps(acc + r * kNr + 16 * half); });
 }
