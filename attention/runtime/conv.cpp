@@ -33,7 +33,12 @@ struct Im2colCtx {
   int64_t cin2;        // bf16: Cin rounded up to even
   int64_t oh, ow;
   ConvGatherRows32 rows32;  // the path's vector gather (stride 1, 32-column panels), or null
+  bool split_cols = false;  // bf16 stride 2: each pair-plane row holds its even columns, then odd
 };
+
+// Stride 2 over rows whose even columns come first and odd columns after (split_cols): the
+// position in such a row of width W of column ix.
+inline int64_t split_col(int64_t ix, int64_t W) { return ix % 2 ? (W + 1) / 2 + ix / 2 : ix / 2; }
 
 using Segment = ConvSegment;  // one run of consecutive output pixels on the same output row
 
@@ -73,6 +78,13 @@ void fill_row(const Im2colCtx& c, const Segment* segs, int nseg, int count, int 
       const int64_t hi = std::clamp<int64_t>(W - ix0, lo, sg.len);
       for (int64_t i = 0; i < lo; ++i) out[i] = T(0);
       std::memcpy(out + lo, row + ix0 + lo, sizeof(T) * size_t(hi - lo));
+      for (int64_t i = hi; i < sg.len; ++i) out[i] = T(0);
+    } else if (c.split_cols) {
+      // Columns ix0, ix0 + 2, ... lie side by side in the split row: one copy between the pads.
+      const int64_t lo = std::clamp<int64_t>((-ix0 + 1) / 2, 0, sg.len);  // first ix >= 0
+      const int64_t hi = std::clamp<int64_t>((W - ix0 + 1) / 2, lo, sg.len);  // first ix >= W
+      for (int64_t i = 0; i < lo; ++i) out[i] = T(0);
+      if (hi > lo) std::memcpy(out + lo, row + split_col(ix0 + 2 * lo, W), sizeof(T) * size_t(hi - lo));
       for (int64_t i = hi; i < sg.len; ++i) out[i] = T(0);
     } else {
       for (int i = 0; i < sg.len; ++i) {
@@ -261,6 +273,7 @@ void conv_rows(const Conv2dShape& s, const float* xf, const uint32_t* xp, int64_
   b.pad_bottom = int(std::max<int64_t>(0, (oy1 - 1) * s.stride - s.pad_top + s.kh - iy1));
   MACRO_CHECK(b.pad_top >= 0 && b.out_h() == oy1 - oy0 && b.out_w() == ow);
   Im2colCtx ctx{&b, xf, xp, cin2, oy1 - oy0, ow, kernels_for(w.packed().isa()).conv_rows32};
+  ctx.split_cols = xp && s.stride == 2;  // convert_pairs split the rows
   detail::Operand oa{nullptr, nullptr, w.packed().panels(), w.packed().k_padded()};
   detail::Operand ob{pack_im2col, &ctx, nullptr, 0};
   detail::DriverShape ds;
@@ -293,20 +306,36 @@ void conv_rows(const Conv2dShape& s, const float* xf, const uint32_t* xp, int64_
   detail::run_gemm(kern, ds, oa, ob, p, pool);
 }
 
-// Input rows [iy0, iy1) of image xb [Cin, H, W] as pair words xp[Cin2/2][iy1 - iy0][W].
+// Input rows [iy0, iy1) of image xb [Cin, H, W] as pair words xp[Cin2/2][iy1 - iy0][W]. For a
+// stride-2 conv each row is stored split (split_cols): its even columns, then its odd ones, so
+// that the columns one output row reads under a tap lie side by side.
 void convert_pairs(const Conv2dShape& s, const float* xb, int64_t iy0, int64_t iy1, uint32_t* xp,
                    ThreadPool* pool) {
-  const int64_t HW = s.h * s.w, n = (iy1 - iy0) * s.w, cin2 = (s.c_in + 1) / 2 * 2;
+  const int64_t HW = s.h * s.w, W = s.w, n = (iy1 - iy0) * W, cin2 = (s.c_in + 1) / 2 * 2;
+  const bool split = s.stride == 2;
   auto convert = [&](size_t p0, size_t p1, int) {
     for (size_t cp = p0; cp < p1; ++cp) {
       const int64_t c0 = 2 * int64_t(cp), c1 = c0 + 1;
-      const float* x0 = xb + c0 * HW + iy0 * s.w;
-      const float* x1 = c1 < s.c_in ? xb + c1 * HW + iy0 * s.w : nullptr;
+      const float* x0 = xb + c0 * HW + iy0 * W;
+      const float* x1 = c1 < s.c_in ? xb + c1 * HW + iy0 * W : nullptr;
       uint32_t* dst = xp + cp * n;
-      if (x1) {
-        for (int64_t i = 0; i < n; ++i) dst[i] = bf16_bits(x0[i]) | (bf16_bits(x1[i]) << 16);
-      } else {
-        for (int64_t i = 0; i < n; ++i) dst[i] = bf16_bits(x0[i]);
+      auto word = [&](int64_t i) {
+        return x1 ? bf16_bits(x0[i]) | (bf16_bits(x1[i]) << 16) : bf16_bits(x0[i]);
+      };
+      if (!split) {
+        if (x1) {
+          for (int64_t i = 0; i < n; ++i) dst[i] = bf16_bits(x0[i]) | (bf16_bits(x1[i]) << 16);
+        } else {
+          for (int64_t i = 0; i < n; ++i) dst[i] = bf16_bits(x0[i]);
+        }
+        continue;
+      }
+      const int64_t even = (W + 1) / 2;
+      for (int64_t r = 0; r < iy1 - iy0; ++r) {
+        uint32_t* d = dst + r * W;
+        const int64_t row = r * W;
+        for (int64_t j = 0; j < even; ++j) d[j] = word(row + 2 * j);
+        for (int64_t j = 0; j < W / 2; ++j) d[even + j] = word(row + 2 * j + 1);
       }
     }
   };

@@ -228,6 +228,8 @@ int run(int argc, char** argv) {
         {128, 536, 960, 1, 1, 1, 1, 1, 3, "VAE 128ch 3x3 @536x960"},
         {512, 134, 240, 1, 1, 1, 1, 1, 3, "VAE 512ch 3x3 @134x240"},
         {256, 256, 256, 2, 0, 0, 1, 1, 3, "VAE enc downsample 256ch s2"},
+        {128, 536, 960, 2, 0, 0, 1, 1, 3, "VAE enc downsample 128ch s2 @536x960"},
+        {320, 67, 120, 2, 1, 1, 1, 1, 3, "UNet downsample 320ch s2 @67x120"},
         {512, 128, 128, 1, 0, 0, 0, 0, 1, "1x1 512ch @128x128"},
         // U-Net resnet convs at a 512x512 image (64x64 latent) and the 536x960 close-up.
         {320, 64, 64, 1, 1, 1, 1, 1, 3, "UNet 320ch 3x3 @64x64"},
