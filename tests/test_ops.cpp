@@ -6,11 +6,14 @@
 //   GELU / GEGLU                                             1e-6 relative, absolute below |y| = 1
 //   GroupNorm / LayerNorm (+SiLU)                            2e-6 relative to the output scale
 #include <catch2/catch.hpp>
+#include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <functional>
 #include <random>
 
 #include "attention/runtime/cpu.h"
+#include "attention/runtime/half.h"
 #include "attention/runtime/ops.h"
 #include "attention/runtime/thread_pool.h"
 
@@ -280,6 +283,43 @@ TEST_CASE("ops: every vector path matches the scalar reference", "[runtime][ops]
     layer_norm(y.data(), v.data(), gamma.data(), beta.data(), M, D, 1e-5f, &pool);
     return y;
   });
+}
+
+TEST_CASE("ops: bf16 pair words on every path are the scalar rounding's bits", "[runtime][ops]") {
+  // Random values, exact ties (odd and even bf16 mantissa), the largest finite values (which round
+  // to infinity), infinities, quiet and signalling NaNs of both signs, denormals and zeros; n odd
+  // so the vector paths run a tail; with and without the high half.
+  std::vector<uint32_t> bits;
+  std::mt19937 rng(21);
+  for (int i = 0; i < 700; ++i) bits.push_back(uint32_t(rng()));
+  for (uint32_t m : {0x3f808000u, 0x3f818000u, 0xbf808000u, 0xbf818000u, 0x7f7fffffu, 0xff7fffffu,
+                     0x7f800000u, 0xff800000u, 0x7fc00000u, 0xffc00001u, 0x7f800001u, 0xff800001u,
+                     0x7fbfffffu, 0x00000001u, 0x007fffffu, 0x80400000u, 0x00000000u,
+                     0x80000000u, 0x3f7fffffu, 0x4049fe00u})
+    for (int r = 0; r < 8; ++r) bits.push_back(m);
+  const int64_t n = int64_t(bits.size()) - 3;  // odd
+  std::vector<float> lo(bits.size()), hi(bits.size());
+  for (size_t i = 0; i < bits.size(); ++i) {
+    std::memcpy(&lo[i], &bits[i], 4);
+    std::memcpy(&hi[bits.size() - 1 - i], &bits[i], 4);
+  }
+  std::vector<uint32_t> want(static_cast<size_t>(n)), want_lo(static_cast<size_t>(n));
+  for (int64_t i = 0; i < n; ++i) {
+    want[size_t(i)] = uint32_t(f32_to_bf16(lo[size_t(i)])) |
+                      uint32_t(f32_to_bf16(hi[size_t(i)])) << 16;
+    want_lo[size_t(i)] = f32_to_bf16(lo[size_t(i)]);
+  }
+  std::vector<Isa> paths = vector_paths();
+  paths.insert(paths.begin(), Isa::kScalar);
+  for (Isa isa : paths) {
+    INFO(isa_name(isa) << " (" << ops_kernels_for(isa).name << ")");
+    std::vector<uint32_t> got(size_t(n) + 1, 0xdeadbeefu);
+    ops_kernels_for(isa).pair_words(got.data(), lo.data(), hi.data(), n);
+    REQUIRE(std::equal(want.begin(), want.end(), got.begin()));
+    REQUIRE(got[size_t(n)] == 0xdeadbeefu);  // nothing past n written
+    ops_kernels_for(isa).pair_words(got.data(), lo.data(), nullptr, n);
+    REQUIRE(std::equal(want_lo.begin(), want_lo.end(), got.begin()));
+  }
 }
 
 TEST_CASE("ops: group norm statistics match a double-precision evaluation", "[runtime][ops]") {

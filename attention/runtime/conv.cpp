@@ -18,9 +18,11 @@
 #include <algorithm>
 #include <cstring>
 #include <memory>
+#include <vector>
 
 #include "attention/runtime/conv_winograd.h"
 #include "attention/runtime/large_alloc.h"
+#include "attention/runtime/ops.h"
 #include "attention/runtime/status.h"
 
 namespace macro {
@@ -94,14 +96,6 @@ void fill_row(const Im2colCtx& c, const Segment* segs, int nseg, int count, int 
     }
   }
   if (count < w) std::memset(out_row + count, 0, sizeof(T) * size_t(w - count));
-}
-
-// Nearest-even bf16 of two floats as one pair word (low half = even k); branch-free, NaN quiet.
-inline uint32_t bf16_bits(float f) {
-  uint32_t u;
-  std::memcpy(&u, &f, 4);
-  const uint32_t r = (u + 0x7fffu + ((u >> 16) & 1u)) >> 16;
-  return (u & 0x7fffffffu) > 0x7f800000u ? ((u >> 16) | 0x40u) : r;
 }
 
 void pack_im2col(const void* ctx, const GemmKernel& kern, bool is_a, int64_t r0, int64_t rows,
@@ -306,36 +300,33 @@ void conv_rows(const Conv2dShape& s, const float* xf, const uint32_t* xp, int64_
   detail::run_gemm(kern, ds, oa, ob, p, pool);
 }
 
-// Input rows [iy0, iy1) of image xb [Cin, H, W] as pair words xp[Cin2/2][iy1 - iy0][W]. For a
-// stride-2 conv each row is stored split (split_cols): its even columns, then its odd ones, so
-// that the columns one output row reads under a tap lie side by side.
+// Input rows [iy0, iy1) of image xb [Cin, H, W] as pair words xp[Cin2/2][iy1 - iy0][W] (the
+// path's OpsKernels::pair_words). For a stride-2 conv each row is stored split (split_cols): its
+// even columns, then its odd ones, so that the columns one output row reads under a tap lie side
+// by side.
 void convert_pairs(const Conv2dShape& s, const float* xb, int64_t iy0, int64_t iy1, uint32_t* xp,
                    ThreadPool* pool) {
   const int64_t HW = s.h * s.w, W = s.w, n = (iy1 - iy0) * W, cin2 = (s.c_in + 1) / 2 * 2;
   const bool split = s.stride == 2;
+  const auto pair_words = ops_kernels().pair_words;
   auto convert = [&](size_t p0, size_t p1, int) {
+    std::vector<uint32_t> row_words(split ? size_t(W) : 0);
     for (size_t cp = p0; cp < p1; ++cp) {
       const int64_t c0 = 2 * int64_t(cp), c1 = c0 + 1;
       const float* x0 = xb + c0 * HW + iy0 * W;
       const float* x1 = c1 < s.c_in ? xb + c1 * HW + iy0 * W : nullptr;
       uint32_t* dst = xp + cp * n;
-      auto word = [&](int64_t i) {
-        return x1 ? bf16_bits(x0[i]) | (bf16_bits(x1[i]) << 16) : bf16_bits(x0[i]);
-      };
       if (!split) {
-        if (x1) {
-          for (int64_t i = 0; i < n; ++i) dst[i] = bf16_bits(x0[i]) | (bf16_bits(x1[i]) << 16);
-        } else {
-          for (int64_t i = 0; i < n; ++i) dst[i] = bf16_bits(x0[i]);
-        }
+        pair_words(dst, x0, x1, n);
         continue;
       }
       const int64_t even = (W + 1) / 2;
       for (int64_t r = 0; r < iy1 - iy0; ++r) {
         uint32_t* d = dst + r * W;
-        const int64_t row = r * W;
-        for (int64_t j = 0; j < even; ++j) d[j] = word(row + 2 * j);
-        for (int64_t j = 0; j < W / 2; ++j) d[even + j] = word(row + 2 * j + 1);
+        const uint32_t* w = row_words.data();
+        pair_words(row_words.data(), x0 + r * W, x1 ? x1 + r * W : nullptr, W);
+        for (int64_t j = 0; j < even; ++j) d[j] = w[2 * j];
+        for (int64_t j = 0; j < W / 2; ++j) d[even + j] = w[2 * j + 1];
       }
     }
   };

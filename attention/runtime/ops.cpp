@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "attention/runtime/half.h"
 #include "attention/runtime/status.h"
 
 namespace macro {
@@ -85,6 +86,11 @@ void axpby_ref(float* dst, float a, const float* x, float b, const float* y, int
   for (int64_t i = 0; i < n; ++i) dst[i] = a * x[i] + b * y[i];
 }
 
+void pair_words_ref(uint32_t* dst, const float* lo, const float* hi, int64_t n) {
+  for (int64_t i = 0; i < n; ++i)
+    dst[i] = uint32_t(f32_to_bf16(lo[i])) | (hi ? uint32_t(f32_to_bf16(hi[i])) << 16 : 0u);
+}
+
 OpsKernels make_table(Isa isa) {
   OpsKernels t;
   t.name = "scalar";
@@ -96,6 +102,7 @@ OpsKernels make_table(Isa isa) {
   t.softmax = softmax_ref;
   t.geglu = geglu_ref;
   t.axpby = axpby_ref;
+  t.pair_words = pair_words_ref;
   // Each path overrides what it vectorises; AMX adds nothing for these ops.
   if (isa >= Isa::kAvx2) detail::fill_ops_avx2(t);
   if (isa >= Isa::kAvx512) detail::fill_ops_avx512(t);

@@ -112,6 +112,9 @@ struct OpsKernels {
   // dst[i] = v[i] * GELU(g[i])
   void (*geglu)(float* dst, const float* v, const float* g, int64_t n) = nullptr;
   void (*axpby)(float* dst, float a, const float* x, float b, const float* y, int64_t n) = nullptr;
+  // bf16 channel-pair words: dst[i] = bf16(lo[i]) | bf16(hi[i]) << 16 (hi null: a zero high
+  // half), rounded as f32_to_bf16 (nearest even, NaN kept quiet, fp32 denormals kept).
+  void (*pair_words)(uint32_t* dst, const float* lo, const float* hi, int64_t n) = nullptr;
 };
 
 // The table for the active path; for a given supported path.
