@@ -280,7 +280,8 @@ TEST_CASE("winograd: the vector transforms equal the scalar twins bit for bit", 
             auto y1 = random_vec(size_t(cout * oh * ow), 34), y2 = y1;
             detail::WinoOutput out;
             out.m = m.data(), out.ldm = T, out.xi_stride = nco * T, out.co0 = co0, out.nco = nco;
-            out.bias = bias.data(), out.oh = oh, out.ow = ow, out.row_phase = phase;
+            out.bias = bias.data(), out.oh = oh, out.ow = ow, out.plane = oh * ow;
+            out.row_phase = phase;
             out.relu = relu, out.runs = runs.data(), out.nruns = int(runs.size());
             out.y = y1.data(), out.residual = with_res ? y1.data() : nullptr;
             sc.output(out);
@@ -291,6 +292,33 @@ TEST_CASE("winograd: the vector transforms equal the scalar twins bit for bit", 
           }
       }
   }
+}
+
+// Row bands of 3 rows of image 1 (each re-cut like Conv2d::forward_rows, row_origin its first
+// row) written straight into their rows of a whole-image output (Conv2dShape::y_plane), with that
+// output as the residual in place (it starts as the residual): the whole image's bits, base.
+void check_bands_in_place(const Conv2dShape& s, const std::vector<float>& x,
+                          const std::vector<float>& r, const ConvWeights& cw,
+                          const std::vector<float>& base, ThreadPool* pool) {
+  const int64_t oh = s.out_h(), ow = s.out_w(), rows = 3;
+  std::vector<float> yw(r.begin() + s.c_out * oh * ow, r.begin() + 2 * s.c_out * oh * ow);
+  for (int64_t y0 = 0; y0 < oh; y0 += rows) {
+    const int64_t y1 = std::min(oh, y0 + rows);
+    const int64_t iy0 = std::max<int64_t>(0, y0 - 1), iy1 = std::min(s.h, y1 + 1);
+    Conv2dShape bs = s;
+    bs.n = 1, bs.h = iy1 - iy0;
+    bs.pad_top = int(1 - (y0 - iy0)), bs.pad_bottom = int(1 - (iy1 - y1));
+    bs.row_origin = y0;
+    bs.y_plane = oh * ow;
+    std::vector<float> xb(size_t(s.c_in * bs.h * s.w));
+    for (int64_t c = 0; c < s.c_in; ++c)
+      std::memcpy(xb.data() + c * bs.h * s.w, x.data() + ((s.c_in + c) * s.h + iy0) * s.w,
+                  size_t(bs.h * s.w) * 4);
+    conv2d(bs, xb.data(), cw, yw.data() + y0 * ow, yw.data() + y0 * ow, pool);
+  }
+  INFO(isa_name(active_isa()) << (cw.type() == WeightType::kF32 ? " fp32" : " bf16")
+                              << (cw.winograd().empty() ? " direct" : " winograd"));
+  CHECK(std::memcmp(yw.data(), base.data() + s.c_out * oh * ow, yw.size() * 4) == 0);
 }
 
 TEST_CASE("winograd: bit-identical for 1 and 2 threads, any chunk size and row bands",
@@ -352,6 +380,42 @@ TEST_CASE("winograd: bit-identical for 1 and 2 threads, any chunk size and row b
           CHECK(same);
         }
       }
+      check_bands_in_place(s, x, r, cw, base, &pool);
+      // The same with the direct conv's weights (the GEMM writes the rows through its ldc).
+      conv2d_set_winograd(ConvWinograd::kOff);
+      ConvWeights direct = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3, type);
+      conv2d_set_winograd(ConvWinograd::kAlways);
+      REQUIRE(direct.winograd().empty());
+      std::vector<float> base_direct(ny);
+      conv2d(s, x.data(), direct, r.data(), base_direct.data(), &pool);
+      check_bands_in_place(s, x, r, direct, base_direct, &pool);
+    }
+}
+
+TEST_CASE("conv2d: direct rows in place over several K blocks keep a separate residual's bits",
+          "[winograd][conv]") {
+  // K = 9 x 96 = 864 spans several K blocks on every path, where the GEMM would fold a residual
+  // that aliases C into C (another summation order); conv2d reads it from a copy instead.
+  ModeGuard guard(ConvWinograd::kOff);
+  ThreadPool pool(2);
+  const Conv2dShape s = shape(2, 96, 9, 21, 20, 1);
+  auto x = random_vec(size_t(s.n * s.c_in * s.h * s.w), 61);
+  auto w = random_vec(size_t(s.c_out * s.c_in * 9), 62);
+  auto b = random_vec(size_t(s.c_out), 63);
+  const size_t ny = size_t(s.n * s.c_out * s.out_h() * s.out_w());
+  auto r = random_vec(ny, 64);
+  for (Isa isa : supported_isas())
+    for (WeightType type : {WeightType::kBf16, WeightType::kF32}) {
+      REQUIRE(set_isa(isa));
+      ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3, type);
+      REQUIRE(cw.winograd().empty());
+      std::vector<float> base(ny);
+      conv2d(s, x.data(), cw, r.data(), base.data(), &pool);
+      check_bands_in_place(s, x, r, cw, base, &pool);
+      std::vector<float> whole = r;  // and the whole call in place
+      conv2d(s, x.data(), cw, whole.data(), whole.data(), &pool);
+      INFO(isa_name(isa) << (type == WeightType::kF32 ? " fp32" : " bf16"));
+      CHECK(std::memcmp(whole.data(), base.data(), ny * 4) == 0);
     }
 }
 

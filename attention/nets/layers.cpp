@@ -339,7 +339,7 @@ void Conv2d::forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t
 
 void Conv2d::forward_scratch(const Run& r, float* x, int64_t n, int64_t h, int64_t w, float* y,
                              const float* residual, int stride, int pt, int pl, int pb, int pr,
-                             int64_t row_origin) const {
+                             int64_t row_origin, int64_t y_plane) const {
   if (r.planning()) return;
   const int64_t oh = (h + pt + pb - k) / stride + 1, ow = (w + pl + pr - k) / stride + 1;
   op_profile::OpScope prof(k == 1        ? "conv 1x1"
@@ -352,6 +352,7 @@ void Conv2d::forward_scratch(const Run& r, float* x, int64_t n, int64_t h, int64
   s.stride = stride;
   s.pad_top = pt, s.pad_left = pl, s.pad_bottom = pb, s.pad_right = pr;
   s.row_origin = row_origin;
+  s.y_plane = y_plane;
   conv2d(s, x, packed, residual, y, r.pool);
 }
 
@@ -367,6 +368,20 @@ void Conv2d::forward_rows(const Run& r, const float* x, int64_t h, int64_t w, in
     gather_rows(r, in, x, c_in, h, w, iy0, iy1);
   forward_scratch(r, in, 1, iy1 - iy0, w, y, residual, 1, int(hk - (y0 - iy0)), hk,
                   int(hk - (iy1 - y1)), hk, y0);
+}
+
+void Conv2d::forward_rows_into(const Run& r, const float* x, int64_t h, int64_t w, int64_t y0,
+                               int64_t y1, float* in, float* y, const float* residual,
+                               const GroupNorm::Stats* pre) const {
+  const int hk = k / 2;
+  const int64_t iy0 = std::max<int64_t>(0, y0 - hk), iy1 = std::min<int64_t>(h, y1 + hk);
+  if (r.planning()) return;
+  if (pre)
+    GroupNorm::apply(r, *pre, in, (iy1 - iy0) * w, x + iy0 * w, h * w, (iy1 - iy0) * w);
+  else
+    gather_rows(r, in, x, c_in, h, w, iy0, iy1);
+  forward_scratch(r, in, 1, iy1 - iy0, w, y + y0 * w, residual ? residual + y0 * w : nullptr, 1,
+                  int(hk - (y0 - iy0)), hk, int(hk - (iy1 - y1)), hk, y0, h * w);
 }
 
 // ---- norms -------------------------------------------------------------------------------------
@@ -555,20 +570,14 @@ void ResnetBlock2D::forward_lean(const Run& r, float* x, int64_t h, int64_t w, f
     conv2.forward_scratch(r, t, 1, h, w, x, /*residual=*/x, 1, 1, 1, 1, 1);  // x = shortcut + h
     return;
   }
-  float* yb = r.alloc(band);
-  for (int64_t y0 = 0; y0 < h; y0 += rows) {
-    const int64_t y1 = std::min(h, y0 + rows);
-    conv1.forward_rows(r, x, h, w, y0, y1, in, yb, nullptr, &g1);
-    scatter_rows(r, t2, yb, c_out, h, w, y0, y1);
-  }
-  norm2.forward(r, t2, t2, 1, hw, /*silu=*/true);
-  float* res = r.alloc(band);
-  for (int64_t y0 = 0; y0 < h; y0 += rows) {  // x rows are dead once their band is written
-    const int64_t y1 = std::min(h, y0 + rows);
-    gather_rows(r, res, x, c_out, h, w, y0, y1);
-    conv2.forward_rows(r, t2, h, w, y0, y1, in, yb, res);
-    scatter_rows(r, x, yb, c_out, h, w, y0, y1);
-  }
+  // Each band of conv1 goes straight into its rows of t2; conv2 reads its band of SiLU(GN2(t2))
+  // through GN2's whole-image statistics and adds into x's rows in place (x is not read again).
+  for (int64_t y0 = 0; y0 < h; y0 += rows)
+    conv1.forward_rows_into(r, x, h, w, y0, std::min(h, y0 + rows), in, t2, nullptr, &g1);
+  GroupNorm::Stats g2;
+  norm2.stats(r, t2, hw, /*silu=*/true, &g2);
+  for (int64_t y0 = 0; y0 < h; y0 += rows)
+    conv2.forward_rows_into(r, t2, h, w, y0, std::min(h, y0 + rows), in, x, /*residual=*/x, &g2);
 }
 
 // ---- resampling --------------------------------------------------------------------------------
@@ -621,7 +630,6 @@ void Upsample2D::forward_lean(const Run& r, const float* x, int64_t c, int64_t h
   const int64_t rows = std::min(band_rows, oh);
   ScratchFrame frame(r);
   float* in = r.alloc(c * (rows + 2) * ow);
-  float* yb = r.alloc(c * rows * ow);
   if (r.planning()) return;
   const bool twice = ow == 2 * w;
   for (int64_t y0 = 0; y0 < oh; y0 += rows) {
@@ -641,9 +649,8 @@ void Upsample2D::forward_lean(const Run& r, const float* x, int64_t c, int64_t h
           }
         }
     });
-    conv.forward_scratch(r, in, 1, n, ow, yb, nullptr, 1, int(1 - (y0 - iy0)), 1,
-                         int(1 - (iy1 - y1)), 1, y0);
-    scatter_rows(r, out, yb, c, oh, ow, y0, y1);
+    conv.forward_scratch(r, in, 1, n, ow, out + y0 * ow, nullptr, 1, int(1 - (y0 - iy0)), 1,
+                         int(1 - (iy1 - y1)), 1, y0, oh * ow);  // straight into out's rows
   }
 }
 

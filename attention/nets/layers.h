@@ -165,10 +165,11 @@ struct Conv2d {
   // (forward_scratch: x is the caller's scratch and may be modified).
   void forward(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* y,
                const float* residual, int stride, int pt, int pl, int pb, int pr) const;
-  // row_origin: whole-image index of output row 0 when called for a band of rows (conv.h).
+  // row_origin: whole-image index of output row 0 when called for a band of rows; y_plane:
+  // floats between the channel planes of y and residual, 0 for contiguous (conv.h).
   void forward_scratch(const Run& r, float* x, int64_t n, int64_t h, int64_t w, float* y,
                        const float* residual, int stride, int pt, int pl, int pb, int pr,
-                       int64_t row_origin = 0) const;
+                       int64_t row_origin = 0, int64_t y_plane = 0) const;
   // Same padding k/2 on all sides, stride 1.
   void forward_same(const Run& r, const float* x, int64_t n, int64_t h, int64_t w, float* y,
                     const float* residual = nullptr) const {
@@ -182,6 +183,11 @@ struct Conv2d {
   void forward_rows(const Run& r, const float* x, int64_t h, int64_t w, int64_t y0, int64_t y1,
                     float* in, float* y, const float* residual,
                     const GroupNorm::Stats* pre = nullptr) const;
+  // The same, written straight into rows [y0, y1) of a whole-image y [Cout, H, W] (residual, if
+  // given, is whole-image too and may alias y).
+  void forward_rows_into(const Run& r, const float* x, int64_t h, int64_t w, int64_t y0,
+                         int64_t y1, float* in, float* y, const float* residual,
+                         const GroupNorm::Stats* pre = nullptr) const;
 };
 
 struct LayerNorm {

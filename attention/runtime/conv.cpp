@@ -252,14 +252,15 @@ void input_rows(const Conv2dShape& s, int64_t oy0, int64_t oy1, int64_t* iy0, in
 // The GEMM over output rows [oy0, oy1) of image b, whose input rows [iy0, iy1) are in `xf` (fp32,
 // plane stride `plane`) or `xp` (bf16 pair words, plane stride `plane`): the shape is re-cut to
 // those rows, with the padding that falls inside the band. Each output pixel sums the same K in the
-// same blocks as an unbanded call (KC depends on K only), so banding changes no bit.
+// same blocks as an unbanded call (KC depends on K only), so banding changes no bit. y's channel
+// planes are s.out_plane() floats apart, the residual's res_plane.
 void conv_rows(const Conv2dShape& s, const float* xf, const uint32_t* xp, int64_t iy0, int64_t iy1,
-               int64_t oy0, int64_t oy1, const ConvWeights& w, const float* residual, float* y,
-               ConvAct act, ThreadPool* pool) {
+               int64_t oy0, int64_t oy1, const ConvWeights& w, const float* residual,
+               int64_t res_plane, float* y, ConvAct act, ThreadPool* pool) {
   const GemmKernel& kern = w.packed().kernel();
   const bool bf16 = w.type() == WeightType::kBf16;
   const int64_t cin2 = (s.c_in + 1) / 2 * 2;
-  const int64_t oh = s.out_h(), ow = s.out_w();
+  const int64_t ow = s.out_w();
   Conv2dShape b = s;
   b.n = 1;
   b.h = iy1 - iy0;
@@ -275,7 +276,7 @@ void conv_rows(const Conv2dShape& s, const float* xf, const uint32_t* xp, int64_
   ds.N = (oy1 - oy0) * ow;
   ds.K = bf16 ? cin2 * s.kh * s.kw : s.c_in * s.kh * s.kw;
   ds.C = y + oy0 * ow;
-  ds.ldc = oh * ow;
+  ds.ldc = s.out_plane();
   // All output channels in one task (the im2col panels are then gathered once), up to 512. When
   // the weights outweigh the im2col panels (Cout >= pixels: the 16x16 and 8x8 U-Net levels, where
   // K = 9 Cin is long), the threads split the output channels instead, each reading its share of
@@ -295,7 +296,7 @@ void conv_rows(const Conv2dShape& s, const float* xf, const uint32_t* xp, int64_
   p.relu = act == ConvAct::kRelu;
   if (residual) {
     p.residual = residual + oy0 * ow;
-    p.ldr = oh * ow;
+    p.ldr = res_plane;
   }
   detail::run_gemm(kern, ds, oa, ob, p, pool);
 }
@@ -351,13 +352,26 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
     return;
   }
   const int64_t cin2 = (s.c_in + 1) / 2 * 2;
-  const int64_t HW = s.h * s.w;
+  const int64_t HW = s.h * s.w, plane = s.out_plane();
+  // A residual that is y itself keeps the bits of a separate residual: where the GEMM would fold
+  // it into C (several K blocks, terms after the last), it is read from a copy instead.
+  const int64_t K = bf16 ? cin2 * s.kh * s.kw : s.c_in * s.kh * s.kw;
+  std::vector<float> res_copy;
+  const bool copy_res =
+      residual == y && detail::gemm_folds_aliased_residual(w.packed().kernel(), K);
   for (int64_t b = 0; b < s.n; ++b) {
     const float* xb = x + b * s.c_in * HW;
-    const float* rb = residual ? residual + b * s.c_out * oh * ow : nullptr;
-    float* yb = y + b * s.c_out * oh * ow;
+    const float* rb = residual ? residual + b * s.c_out * plane : nullptr;
+    float* yb = y + b * s.c_out * plane;
+    if (copy_res) {
+      res_copy.resize(size_t(s.c_out * oh * ow));
+      for (int64_t c = 0; c < s.c_out; ++c)
+        std::memcpy(res_copy.data() + c * oh * ow, rb + c * plane, size_t(oh * ow) * 4);
+      rb = res_copy.data();
+    }
+    const int64_t res_plane = copy_res ? oh * ow : plane;
     if (!bf16) {
-      conv_rows(s, xb, nullptr, 0, s.h, 0, oh, w, rb, yb, act, pool);
+      conv_rows(s, xb, nullptr, 0, s.h, 0, oh, w, rb, res_plane, yb, act, pool);
       continue;
     }
     // bf16: the input converted once into pair planes, by bands of output rows when the whole
@@ -376,7 +390,7 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
       const size_t words = size_t(cin2 / 2 * (iy1 - iy0) * s.w);
       if (xp.size() < words) xp.resize(words);
       convert_pairs(s, xb, iy0, iy1, xp.data(), pool);
-      conv_rows(s, nullptr, xp.data(), iy0, iy1, oy0, oy1, w, rb, yb, act, pool);
+      conv_rows(s, nullptr, xp.data(), iy0, iy1, oy0, oy1, w, rb, res_plane, yb, act, pool);
     }
   }
 }

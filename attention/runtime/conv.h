@@ -34,9 +34,13 @@ struct Conv2dShape {
   // Only the Winograd path reads it: its 2x2 tiles start on even whole-image rows, so bands give
   // the whole image's bits.
   int64_t row_origin = 0;
+  // Floats between output (and residual) channel planes; 0: out_h() * out_w() (contiguous). A
+  // band of output rows can then be written straight into its rows of a whole-image tensor.
+  int64_t y_plane = 0;
 
   int64_t out_h() const { return (h + pad_top + pad_bottom - kh) / stride + 1; }
   int64_t out_w() const { return (w + pad_left + pad_right - kw) / stride + 1; }
+  int64_t out_plane() const { return y_plane > 0 ? y_plane : out_h() * out_w(); }
   // Symmetric padding helper: conv(3x3, pad 1) is Conv2dShape::same(...).
   static Conv2dShape make(int64_t n, int64_t c_in, int64_t h, int64_t w, int64_t c_out, int k,
                           int stride, int pad) {

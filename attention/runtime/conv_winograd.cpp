@@ -141,8 +141,8 @@ void input_scalar(const detail::WinoInput& a) {
 void output_scalar(const detail::WinoOutput& a) {
   for (int64_t c = a.co0; c < a.co0 + a.nco; ++c) {
     const float* mc = a.m + (c - a.co0) * a.ldm;
-    float* yc = a.y + c * a.oh * a.ow;
-    const float* rc = a.residual ? a.residual + c * a.oh * a.ow : nullptr;
+    float* yc = a.y + c * a.plane;
+    const float* rc = a.residual ? a.residual + c * a.plane : nullptr;
     for (int r = 0; r < a.nruns; ++r) {
       const detail::WinoRun& run = a.runs[r];
       for (int l = 0; l < run.len; ++l) {
@@ -344,7 +344,7 @@ void conv2d_winograd(const Conv2dShape& s, const float* x, const ConvWeights& w,
     slots[size_t(i)].m.reserve(size_t(16 * xs_m));
     slots[size_t(i)].runs.reserve(max_runs);
   }
-  const int64_t hw = s.h * s.w, ohw = oh * ow;
+  const int64_t hw = s.h * s.w, ohw = s.out_plane();
 
   auto item = [&](int64_t it, int worker) {
     const int64_t part = it % parts, chunk = (it / parts) % chunks, b = it / (parts * chunks);
@@ -398,7 +398,7 @@ void conv2d_winograd(const Conv2dShape& s, const float* x, const ConvWeights& w,
       out.bias = w.bias();
       out.residual = residual ? residual + b * s.c_out * ohw : nullptr;
       out.y = y + b * s.c_out * ohw;
-      out.oh = oh, out.ow = ow, out.row_phase = phase;
+      out.oh = oh, out.ow = ow, out.plane = ohw, out.row_phase = phase;
       out.relu = act == ConvAct::kRelu;
       out.runs = runs, out.nruns = nruns;
       tr.output(out);

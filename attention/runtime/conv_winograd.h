@@ -78,9 +78,10 @@ struct WinoOutput {
   int64_t ldm = 0, xi_stride = 0;
   int64_t co0 = 0, nco = 0;
   const float* bias = nullptr;      // [Cout]
-  const float* residual = nullptr;  // [Cout, OH, OW]
-  float* y = nullptr;               // [Cout, OH, OW]
+  const float* residual = nullptr;  // [Cout, OH, OW], planes `plane` floats apart
+  float* y = nullptr;               // [Cout, OH, OW], planes `plane` floats apart
   int64_t oh = 0, ow = 0;
+  int64_t plane = 0;  // floats between channel planes of y and residual (>= OH * OW)
   int row_phase = 0;
   bool relu = false;
   const WinoRun* runs = nullptr;

@@ -92,8 +92,8 @@ inline void output_avx512(const detail::WinoOutput& a) {
   const __m512 zero = _mm512_setzero_ps();
   for (int64_t c = a.co0; c < a.co0 + a.nco; ++c) {
     const float* mc = a.m + (c - a.co0) * a.ldm;
-    float* yc = a.y + c * a.oh * a.ow;
-    const float* rc = a.residual ? a.residual + c * a.oh * a.ow : nullptr;
+    float* yc = a.y + c * a.plane;
+    const float* rc = a.residual ? a.residual + c * a.plane : nullptr;
     const __m512 bias = a.bias ? _mm512_set1_ps(a.bias[c]) : zero;
     for (int r = 0; r < a.nruns; ++r) {
       const detail::WinoRun& run = a.runs[r];
@@ -124,11 +124,11 @@ inline void output_avx512(const detail::WinoOutput& a) {
         __m512 hi = _mm512_permutex2var_ps(y0, hi_idx, y1);
         const int64_t off = oy * a.ow + ox0;
         if (c + 1 < a.co0 + a.nco) {  // the next channel's lines of this run (as the input's)
-          const char* ny = reinterpret_cast<const char*>(yc + a.oh * a.ow + off);
+          const char* ny = reinterpret_cast<const char*>(yc + a.plane + off);
           _mm_prefetch(ny, _MM_HINT_T0);
           _mm_prefetch(ny + 64, _MM_HINT_T0);
           if (rc) {
-            const char* nr = reinterpret_cast<const char*>(rc + a.oh * a.ow + off);
+            const char* nr = reinterpret_cast<const char*>(rc + a.plane + off);
             _mm_prefetch(nr, _MM_HINT_T0);
             _mm_prefetch(nr + 64, _MM_HINT_T0);
           }

@@ -287,13 +287,28 @@ void pack_panels_bf16(const uint16_t* src, int64_t ld, bool transposed, int64_t 
   }
 }
 
+int64_t gemm_k_block(const GemmKernel& kern, int64_t K) {
+  const Tuning& tun = tuning();
+  const int64_t kc_max = tun.kc > 0 ? round_up(tun.kc, kern.k_align) : kern.kc;
+  const int64_t k_blocks = std::max<int64_t>(1, (K + kc_max - 1) / kc_max);
+  return round_up((K + k_blocks - 1) / k_blocks, kern.k_align);
+}
+
+bool gemm_folds_aliased_residual(const GemmKernel& kern, int64_t K) {
+  return !kern.terms_first && gemm_k_block(kern, K) < K;
+}
+
 void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, const Operand& b,
               const GemmParams& p_in, ThreadPool* pool) {
   const int64_t M = s.M, N = s.N, K = s.K;
   if (M <= 0 || N <= 0) return;
   GemmParams p = p_in;
-  // A residual that is C itself: fold it into beta so the K blocks do not read a half-written C.
-  if (p.residual == s.C && p.ldr == s.ldc && p.beta == 0.0f) {
+  // A residual that is C itself, added after the last of several K blocks: fold it into beta so
+  // that block does not read a C the earlier blocks overwrote. Added with the first block (or in
+  // the only one), each tile reads it before it writes C, so it stays a residual and the sums
+  // keep the order of a separate residual.
+  if (p.residual == s.C && p.ldr == s.ldc && p.beta == 0.0f &&
+      gemm_folds_aliased_residual(kern, K)) {
     p.residual = nullptr;
     p.beta = 1.0f;
   }
@@ -303,9 +318,7 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
   // K blocks of equal length (K = 1280 runs as 4 x 320, not 3 x 384 + 128: a short last block
   // pays the C read-back and the epilogue for few FMAs). KC depends on K only, never on the thread
   // count, so every split below gives bit-identical results.
-  const int64_t kc_max = tun.kc > 0 ? round_up(tun.kc, kern.k_align) : kern.kc;
-  const int64_t k_blocks = std::max<int64_t>(1, (K + kc_max - 1) / kc_max);
-  const int64_t KC = round_up((K + k_blocks - 1) / k_blocks, kern.k_align);
+  const int64_t KC = gemm_k_block(kern, K);
   const int64_t threads = pool ? pool->size() : 1;
   // B block KC x NC (streamed through L2 once per MR rows): about 448 KB, half of a 1 MB L2,
   // leaving room for the A block (MC x KC, <= ~300 KB) and C.

@@ -133,6 +133,14 @@ struct DriverShape {
 void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, const Operand& b,
               const GemmParams& p, ThreadPool* pool);
 
+// The K block run_gemm uses for a reduction of length K (equal blocks of at most the kernel's
+// KC; it depends on K only).
+int64_t gemm_k_block(const GemmKernel& kern, int64_t K);
+// Whether run_gemm reads a residual that aliases C as C itself (beta 1) rather than as a
+// residual: when the terms go with the last of several K blocks, whose earlier blocks overwrite
+// C. Its sums then add in another order than with a separate residual of the same values.
+bool gemm_folds_aliased_residual(const GemmKernel& kern, int64_t K);
+
 // Element size of packed operands for a layout (4 for fp32, 2 for bf16).
 inline int packed_elem_bytes(PackLayout l) {
   return l == PackLayout::kF32 ? 4 : 2;
