@@ -294,6 +294,33 @@ TEST_CASE("winograd: the vector transforms equal the scalar twins bit for bit", 
   }
 }
 
+// A 3x3 conv's random input, weights, bias and residual (seeds seed .. seed + 3).
+struct ConvCase {
+  Conv2dShape s;
+  std::vector<float> x, w, b, r;
+};
+ConvCase make_case(const Conv2dShape& s, unsigned seed) {
+  return {s, random_vec(size_t(s.n * s.c_in * s.h * s.w), seed),
+          random_vec(size_t(s.c_out * s.c_in * 9), seed + 1), random_vec(size_t(s.c_out), seed + 2),
+          random_vec(size_t(s.n * s.c_out * s.out_h() * s.out_w()), seed + 3)};
+}
+
+// Output rows [y0, y1) of image 1 of s as their own conv, re-cut like Conv2d::forward_rows
+// (row_origin its first row): the band's shape, and its input rows gathered into xb.
+Conv2dShape band_of_image1(const Conv2dShape& s, const std::vector<float>& x, int64_t y0,
+                           int64_t y1, std::vector<float>* xb) {
+  const int64_t iy0 = std::max<int64_t>(0, y0 - 1), iy1 = std::min(s.h, y1 + 1);
+  Conv2dShape bs = s;
+  bs.n = 1, bs.h = iy1 - iy0;
+  bs.pad_top = int(1 - (y0 - iy0)), bs.pad_bottom = int(1 - (iy1 - y1));
+  bs.row_origin = y0;
+  xb->resize(size_t(s.c_in * bs.h * s.w));
+  for (int64_t c = 0; c < s.c_in; ++c)
+    std::memcpy(xb->data() + c * bs.h * s.w, x.data() + ((s.c_in + c) * s.h + iy0) * s.w,
+                size_t(bs.h * s.w) * 4);
+  return bs;
+}
+
 // Row bands of 3 rows of image 1 (each re-cut like Conv2d::forward_rows, row_origin its first
 // row) written straight into their rows of a whole-image output (Conv2dShape::y_plane), with that
 // output as the residual in place (it starts as the residual): the whole image's bits, base.
@@ -302,18 +329,10 @@ void check_bands_in_place(const Conv2dShape& s, const std::vector<float>& x,
                           const std::vector<float>& base, ThreadPool* pool) {
   const int64_t oh = s.out_h(), ow = s.out_w(), rows = 3;
   std::vector<float> yw(r.begin() + s.c_out * oh * ow, r.begin() + 2 * s.c_out * oh * ow);
+  std::vector<float> xb;
   for (int64_t y0 = 0; y0 < oh; y0 += rows) {
-    const int64_t y1 = std::min(oh, y0 + rows);
-    const int64_t iy0 = std::max<int64_t>(0, y0 - 1), iy1 = std::min(s.h, y1 + 1);
-    Conv2dShape bs = s;
-    bs.n = 1, bs.h = iy1 - iy0;
-    bs.pad_top = int(1 - (y0 - iy0)), bs.pad_bottom = int(1 - (iy1 - y1));
-    bs.row_origin = y0;
+    Conv2dShape bs = band_of_image1(s, x, y0, std::min(oh, y0 + rows), &xb);
     bs.y_plane = oh * ow;
-    std::vector<float> xb(size_t(s.c_in * bs.h * s.w));
-    for (int64_t c = 0; c < s.c_in; ++c)
-      std::memcpy(xb.data() + c * bs.h * s.w, x.data() + ((s.c_in + c) * s.h + iy0) * s.w,
-                  size_t(bs.h * s.w) * 4);
     conv2d(bs, xb.data(), cw, yw.data() + y0 * ow, yw.data() + y0 * ow, pool);
   }
   INFO(isa_name(active_isa()) << (cw.type() == WeightType::kF32 ? " fp32" : " bf16")
@@ -325,13 +344,11 @@ TEST_CASE("winograd: bit-identical for 1 and 2 threads, any chunk size and row b
           "[winograd]") {
   ModeGuard guard(ConvWinograd::kAlways);
   ThreadPool pool(2);
-  const Conv2dShape s = shape(2, 40, 23, 37, 30, 1);
-  auto x = random_vec(size_t(s.n * s.c_in * s.h * s.w), 41);
-  auto w = random_vec(size_t(s.c_out * s.c_in * 9), 42);
-  auto b = random_vec(size_t(s.c_out), 43);
+  const ConvCase cc = make_case(shape(2, 40, 23, 37, 30, 1), 41);
+  const Conv2dShape& s = cc.s;
+  const std::vector<float>&x = cc.x, &w = cc.w, &b = cc.b, &r = cc.r;
   const int64_t oh = s.out_h(), ow = s.out_w();
-  const size_t ny = size_t(s.n * s.c_out * oh * ow);
-  auto r = random_vec(ny, 44);
+  const size_t ny = r.size();
   for (Isa isa : supported_isas())
     for (WeightType type : {WeightType::kBf16, WeightType::kF32}) {
       REQUIRE(set_isa(isa));
@@ -356,16 +373,9 @@ TEST_CASE("winograd: bit-identical for 1 and 2 threads, any chunk size and row b
       for (int64_t rows : {3, 4}) {
         for (int64_t y0 = 0; y0 < oh; y0 += rows) {
           const int64_t y1 = std::min(oh, y0 + rows);
-          const int64_t iy0 = std::max<int64_t>(0, y0 - 1), iy1 = std::min(s.h, y1 + 1);
-          Conv2dShape bs = s;
-          bs.n = 1, bs.h = iy1 - iy0;
-          bs.pad_top = int(1 - (y0 - iy0)), bs.pad_bottom = int(1 - (iy1 - y1));
-          bs.row_origin = y0;
+          std::vector<float> xb, rb(size_t(s.c_out * (y1 - y0) * ow));
+          const Conv2dShape bs = band_of_image1(s, x, y0, y1, &xb);
           REQUIRE(bs.out_h() == y1 - y0);
-          std::vector<float> xb(size_t(s.c_in * bs.h * s.w)), rb(size_t(s.c_out * (y1 - y0) * ow));
-          for (int64_t c = 0; c < s.c_in; ++c)
-            std::memcpy(xb.data() + c * bs.h * s.w, x.data() + ((s.c_in + c) * s.h + iy0) * s.w,
-                        size_t(bs.h * s.w) * 4);
           for (int64_t c = 0; c < s.c_out; ++c)
             std::memcpy(rb.data() + c * (y1 - y0) * ow, r.data() + ((s.c_out + c) * oh + y0) * ow,
                         size_t((y1 - y0) * ow) * 4);
@@ -398,24 +408,19 @@ TEST_CASE("conv2d: direct rows in place over several K blocks keep a separate re
   // that aliases C into C (another summation order); conv2d reads it from a copy instead.
   ModeGuard guard(ConvWinograd::kOff);
   ThreadPool pool(2);
-  const Conv2dShape s = shape(2, 96, 9, 21, 20, 1);
-  auto x = random_vec(size_t(s.n * s.c_in * s.h * s.w), 61);
-  auto w = random_vec(size_t(s.c_out * s.c_in * 9), 62);
-  auto b = random_vec(size_t(s.c_out), 63);
-  const size_t ny = size_t(s.n * s.c_out * s.out_h() * s.out_w());
-  auto r = random_vec(ny, 64);
-  for (Isa isa : supported_isas())
-    for (WeightType type : {WeightType::kBf16, WeightType::kF32}) {
+  const ConvCase cc = make_case(shape(2, 96, 9, 21, 20, 1), 61);
+  for (WeightType type : {WeightType::kBf16, WeightType::kF32})
+    for (Isa isa : supported_isas()) {
       REQUIRE(set_isa(isa));
-      ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3, type);
-      REQUIRE(cw.winograd().empty());
-      std::vector<float> base(ny);
-      conv2d(s, x.data(), cw, r.data(), base.data(), &pool);
-      check_bands_in_place(s, x, r, cw, base, &pool);
-      std::vector<float> whole = r;  // and the whole call in place
-      conv2d(s, x.data(), cw, whole.data(), whole.data(), &pool);
       INFO(isa_name(isa) << (type == WeightType::kF32 ? " fp32" : " bf16"));
-      CHECK(std::memcmp(whole.data(), base.data(), ny * 4) == 0);
+      ConvWeights cw =
+          ConvWeights::pack(cc.w.data(), cc.b.data(), cc.s.c_out, cc.s.c_in, 3, 3, type);
+      REQUIRE(cw.winograd().empty());
+      std::vector<float> base(cc.r.size()), whole = cc.r;
+      conv2d(cc.s, cc.x.data(), cw, cc.r.data(), base.data(), &pool);
+      check_bands_in_place(cc.s, cc.x, cc.r, cw, base, &pool);
+      conv2d(cc.s, cc.x.data(), cw, whole.data(), whole.data(), &pool);  // the whole call in place
+      CHECK(std::memcmp(whole.data(), base.data(), base.size() * 4) == 0);
     }
 }
 

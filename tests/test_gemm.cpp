@@ -242,14 +242,14 @@ TEST_CASE("gemm_bf16: each added term alone and together, one and several K bloc
             GemmParams pc = p;
             if (pc.bias_n) pc.bias_n += j0;
             if (pc.residual) pc.residual += j0;
-            gemm_bf16(s.m, nj, s.k, A.data(), s.k, B16.data() + j0 * s.k, s.k, Cc.data() + j0,
-                      ldc, pc);
+            gemm_bf16(s.m, nj, s.k, A.data(), s.k, B16.data() + j0 * s.k, s.k, Cc.data() + j0, ldc,
+                      pc);
             const int64_t i0 = half ? cut : 0, mi = half ? s.m - cut : cut;
             GemmParams pr = p;
             if (pr.bias_m) pr.bias_m += i0;
             if (pr.residual) pr.residual += i0 * ldr;
-            gemm_bf16(mi, s.n, s.k, A.data() + i0 * s.k, s.k, B16.data(), s.k,
-                      Cr.data() + i0 * ldc, ldc, pr);
+            gemm_bf16(mi, s.n, s.k, A.data() + i0 * s.k, s.k, B16.data(), s.k, Cr.data() + i0 * ldc,
+                      ldc, pr);
           }
           INFO("cut " << cut);
           REQUIRE(std::memcmp(Cc.data(), C.data(), C.size() * sizeof(float)) == 0);

@@ -5,8 +5,8 @@
 //   SiLU, tanh, softmax                                      4e-7 relative (exp ~2 ulp + division)
 //   GELU / GEGLU                                             1e-6 relative, absolute below |y| = 1
 //   GroupNorm / LayerNorm (+SiLU)                            2e-6 relative to the output scale
-#include <catch2/catch.hpp>
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <cstring>
 #include <functional>
@@ -292,10 +292,10 @@ TEST_CASE("ops: bf16 pair words on every path are the scalar rounding's bits", "
   std::vector<uint32_t> bits;
   std::mt19937 rng(21);
   for (int i = 0; i < 700; ++i) bits.push_back(uint32_t(rng()));
-  for (uint32_t m : {0x3f808000u, 0x3f818000u, 0xbf808000u, 0xbf818000u, 0x7f7fffffu, 0xff7fffffu,
-                     0x7f800000u, 0xff800000u, 0x7fc00000u, 0xffc00001u, 0x7f800001u, 0xff800001u,
-                     0x7fbfffffu, 0x00000001u, 0x007fffffu, 0x80400000u, 0x00000000u,
-                     0x80000000u, 0x3f7fffffu, 0x4049fe00u})
+  for (uint32_t m :
+       {0x3f808000u, 0x3f818000u, 0xbf808000u, 0xbf818000u, 0x7f7fffffu, 0xff7fffffu, 0x7f800000u,
+        0xff800000u, 0x7fc00000u, 0xffc00001u, 0x7f800001u, 0xff800001u, 0x7fbfffffu, 0x00000001u,
+        0x007fffffu, 0x80400000u, 0x00000000u, 0x80000000u, 0x3f7fffffu, 0x4049fe00u})
     for (int r = 0; r < 8; ++r) bits.push_back(m);
   const int64_t n = int64_t(bits.size()) - 3;  // odd
   std::vector<float> lo(bits.size()), hi(bits.size());
@@ -305,8 +305,8 @@ TEST_CASE("ops: bf16 pair words on every path are the scalar rounding's bits", "
   }
   std::vector<uint32_t> want(static_cast<size_t>(n)), want_lo(static_cast<size_t>(n));
   for (int64_t i = 0; i < n; ++i) {
-    want[size_t(i)] = uint32_t(f32_to_bf16(lo[size_t(i)])) |
-                      uint32_t(f32_to_bf16(hi[size_t(i)])) << 16;
+    want[size_t(i)] = uint32_t(f32_to_bf16(lo[size_t(i)])) | uint32_t(f32_to_bf16(hi[size_t(i)]))
+                                                                 << 16;
     want_lo[size_t(i)] = f32_to_bf16(lo[size_t(i)]);
   }
   std::vector<Isa> paths = vector_paths();

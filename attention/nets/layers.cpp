@@ -359,20 +359,18 @@ void Conv2d::forward_scratch(const Run& r, float* x, int64_t n, int64_t h, int64
 void Conv2d::forward_rows(const Run& r, const float* x, int64_t h, int64_t w, int64_t y0,
                           int64_t y1, float* in, float* y, const float* residual,
                           const GroupNorm::Stats* pre) const {
-  const int hk = k / 2;
-  const int64_t iy0 = std::max<int64_t>(0, y0 - hk), iy1 = std::min<int64_t>(h, y1 + hk);
-  if (r.planning()) return;
-  if (pre)
-    GroupNorm::apply(r, *pre, in, (iy1 - iy0) * w, x + iy0 * w, h * w, (iy1 - iy0) * w);
-  else
-    gather_rows(r, in, x, c_in, h, w, iy0, iy1);
-  forward_scratch(r, in, 1, iy1 - iy0, w, y, residual, 1, int(hk - (y0 - iy0)), hk,
-                  int(hk - (iy1 - y1)), hk, y0);
+  rows(r, x, h, w, y0, y1, in, y, residual, pre, /*into_whole=*/false);
 }
 
 void Conv2d::forward_rows_into(const Run& r, const float* x, int64_t h, int64_t w, int64_t y0,
                                int64_t y1, float* in, float* y, const float* residual,
                                const GroupNorm::Stats* pre) const {
+  rows(r, x, h, w, y0, y1, in, y, residual, pre, /*into_whole=*/true);
+}
+
+void Conv2d::rows(const Run& r, const float* x, int64_t h, int64_t w, int64_t y0, int64_t y1,
+                  float* in, float* y, const float* residual, const GroupNorm::Stats* pre,
+                  bool into_whole) const {
   const int hk = k / 2;
   const int64_t iy0 = std::max<int64_t>(0, y0 - hk), iy1 = std::min<int64_t>(h, y1 + hk);
   if (r.planning()) return;
@@ -380,8 +378,9 @@ void Conv2d::forward_rows_into(const Run& r, const float* x, int64_t h, int64_t 
     GroupNorm::apply(r, *pre, in, (iy1 - iy0) * w, x + iy0 * w, h * w, (iy1 - iy0) * w);
   else
     gather_rows(r, in, x, c_in, h, w, iy0, iy1);
-  forward_scratch(r, in, 1, iy1 - iy0, w, y + y0 * w, residual ? residual + y0 * w : nullptr, 1,
-                  int(hk - (y0 - iy0)), hk, int(hk - (iy1 - y1)), hk, y0, h * w);
+  const int64_t off = into_whole ? y0 * w : 0;  // a whole-image y: the band's rows, planes h*w
+  forward_scratch(r, in, 1, iy1 - iy0, w, y + off, residual ? residual + off : nullptr, 1,
+                  int(hk - (y0 - iy0)), hk, int(hk - (iy1 - y1)), hk, y0, into_whole ? h * w : 0);
 }
 
 // ---- norms -------------------------------------------------------------------------------------

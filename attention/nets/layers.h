@@ -185,9 +185,13 @@ struct Conv2d {
                     const GroupNorm::Stats* pre = nullptr) const;
   // The same, written straight into rows [y0, y1) of a whole-image y [Cout, H, W] (residual, if
   // given, is whole-image too and may alias y).
-  void forward_rows_into(const Run& r, const float* x, int64_t h, int64_t w, int64_t y0,
-                         int64_t y1, float* in, float* y, const float* residual,
+  void forward_rows_into(const Run& r, const float* x, int64_t h, int64_t w, int64_t y0, int64_t y1,
+                         float* in, float* y, const float* residual,
                          const GroupNorm::Stats* pre = nullptr) const;
+
+ private:
+  void rows(const Run& r, const float* x, int64_t h, int64_t w, int64_t y0, int64_t y1, float* in,
+            float* y, const float* residual, const GroupNorm::Stats* pre, bool into_whole) const;
 };
 
 struct LayerNorm {

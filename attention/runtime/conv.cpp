@@ -40,7 +40,9 @@ struct Im2colCtx {
 
 // Stride 2 over rows whose even columns come first and odd columns after (split_cols): the
 // position in such a row of width W of column ix.
-inline int64_t split_col(int64_t ix, int64_t W) { return ix % 2 ? (W + 1) / 2 + ix / 2 : ix / 2; }
+inline int64_t split_col(int64_t ix, int64_t W) {
+  return ix % 2 ? (W + 1) / 2 + ix / 2 : ix / 2;
+}
 
 using Segment = ConvSegment;  // one run of consecutive output pixels on the same output row
 
@@ -83,10 +85,11 @@ void fill_row(const Im2colCtx& c, const Segment* segs, int nseg, int count, int 
       for (int64_t i = hi; i < sg.len; ++i) out[i] = T(0);
     } else if (c.split_cols) {
       // Columns ix0, ix0 + 2, ... lie side by side in the split row: one copy between the pads.
-      const int64_t lo = std::clamp<int64_t>((-ix0 + 1) / 2, 0, sg.len);  // first ix >= 0
+      const int64_t lo = std::clamp<int64_t>((-ix0 + 1) / 2, 0, sg.len);      // first ix >= 0
       const int64_t hi = std::clamp<int64_t>((W - ix0 + 1) / 2, lo, sg.len);  // first ix >= W
       for (int64_t i = 0; i < lo; ++i) out[i] = T(0);
-      if (hi > lo) std::memcpy(out + lo, row + split_col(ix0 + 2 * lo, W), sizeof(T) * size_t(hi - lo));
+      if (hi > lo)
+        std::memcpy(out + lo, row + split_col(ix0 + 2 * lo, W), sizeof(T) * size_t(hi - lo));
       for (int64_t i = hi; i < sg.len; ++i) out[i] = T(0);
     } else {
       for (int i = 0; i < sg.len; ++i) {

@@ -105,10 +105,10 @@ void micro_amx(const MicroTile& t) {
                                        : __mmask16((1u << (t.n - 16)) - 1);
       for (int r = 0; r < kMr; ++r) {
         const bool in = r < t.m;
-        _mm512_store_ps(acc + r * kNr, in ? _mm512_maskz_loadu_ps(k0, src + r * ld)
-                                          : _mm512_setzero_ps());
-        _mm512_store_ps(acc + r * kNr + 16, in ? _mm512_maskz_loadu_ps(k1, src + r * ld + 16)
-                                               : _mm512_setzero_ps());
+        _mm512_store_ps(acc + r * kNr,
+                        in ? _mm512_maskz_loadu_ps(k0, src + r * ld) : _mm512_setzero_ps());
+        _mm512_store_ps(acc + r * kNr + 16,
+                        in ? _mm512_maskz_loadu_ps(k1, src + r * ld + 16) : _mm512_setzero_ps());
       }
       detail::amx_load_c_2x2(acc, kNr);
     }

@@ -281,8 +281,8 @@ inline __m512i bf16_lanes(__m512 x) {
   const __m512i lsb = _mm512_and_si512(_mm512_srli_epi32(u, 16), _mm512_set1_epi32(1));
   const __m512i r =
       _mm512_srli_epi32(_mm512_add_epi32(u, _mm512_add_epi32(lsb, _mm512_set1_epi32(0x7fff))), 16);
-  const __mmask16 nan = _mm512_cmpgt_epu32_mask(
-      _mm512_and_si512(u, _mm512_set1_epi32(0x7fffffff)), _mm512_set1_epi32(0x7f800000));
+  const __mmask16 nan = _mm512_cmpgt_epu32_mask(_mm512_and_si512(u, _mm512_set1_epi32(0x7fffffff)),
+                                                _mm512_set1_epi32(0x7f800000));
   const __m512i q = _mm512_or_si512(_mm512_srli_epi32(u, 16), _mm512_set1_epi32(0x40));
   return _mm512_mask_blend_epi32(nan, r, q);
 }
@@ -292,8 +292,7 @@ void pair_words512(uint32_t* dst, const float* lo, const float* hi, int64_t n) {
     const __mmask16 m = tail_mask(n - i);
     __m512i w = bf16_lanes(_mm512_maskz_loadu_ps(m, lo + i));
     if (hi)
-      w = _mm512_or_si512(w,
-                          _mm512_slli_epi32(bf16_lanes(_mm512_maskz_loadu_ps(m, hi + i)), 16));
+      w = _mm512_or_si512(w, _mm512_slli_epi32(bf16_lanes(_mm512_maskz_loadu_ps(m, hi + i)), 16));
     _mm512_mask_storeu_epi32(dst + i, m, w);
   }
 }
