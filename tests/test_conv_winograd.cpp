@@ -421,6 +421,12 @@ TEST_CASE("conv2d: direct rows in place over several K blocks keep a separate re
       check_bands_in_place(cc.s, cc.x, cc.r, cw, base, &pool);
       conv2d(cc.s, cc.x.data(), cw, whole.data(), whole.data(), &pool);  // the whole call in place
       CHECK(std::memcmp(whole.data(), base.data(), base.size() * 4) == 0);
+      // ... and by bands of one output row (the copied residual rows and the bf16 pair planes).
+      const size_t old_band = conv2d_set_pair_band(64);
+      whole = cc.r;
+      conv2d(cc.s, cc.x.data(), cw, whole.data(), whole.data(), &pool);
+      conv2d_set_pair_band(old_band);
+      CHECK(std::memcmp(whole.data(), base.data(), base.size() * 4) == 0);
     }
 }
 

@@ -2,11 +2,13 @@
 //
 // Bounds (vector path vs scalar reference, relative to max(|ref|, floor)):
 //   exact ops (ReLU, add, scale, broadcast adds, upsample)   bit-identical
+//   bf16 pair words                                          bit-identical
 //   SiLU, tanh, softmax                                      4e-7 relative (exp ~2 ulp + division)
 //   GELU / GEGLU                                             1e-6 relative, absolute below |y| = 1
 //   GroupNorm / LayerNorm (+SiLU)                            2e-6 relative to the output scale
-#include <algorithm>
 #include <catch2/catch.hpp>
+
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <functional>
@@ -319,6 +321,7 @@ TEST_CASE("ops: bf16 pair words on every path are the scalar rounding's bits", "
     REQUIRE(got[size_t(n)] == 0xdeadbeefu);  // nothing past n written
     ops_kernels_for(isa).pair_words(got.data(), lo.data(), nullptr, n);
     REQUIRE(std::equal(want_lo.begin(), want_lo.end(), got.begin()));
+    REQUIRE(got[size_t(n)] == 0xdeadbeefu);
   }
 }
 

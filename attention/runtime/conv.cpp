@@ -35,6 +35,7 @@ struct Im2colCtx {
   int64_t cin2;        // bf16: Cin rounded up to even
   int64_t oh, ow;
   ConvGatherRows32 rows32;  // the path's vector gather (stride 1, 32-column panels), or null
+  int64_t x_plane = 0;      // elements between the input planes of x / xp
   bool split_cols = false;  // bf16 stride 2: each pair-plane row holds its even columns, then odd
 };
 
@@ -109,7 +110,7 @@ void pack_im2col(const void* ctx, const GemmKernel& kern, bool is_a, int64_t r0,
   const int w = kern.nr;
   MACRO_CHECK(w <= 64);
   const int64_t kcp = detail::round_up(kc, kern.k_align);
-  const int64_t HW = s.h * s.w;
+  const int64_t HW = c.x_plane;
   Segment segs[64];
   const int64_t panels = (rows + w - 1) / w;
   for (int64_t p = 0; p < panels; ++p) {
@@ -226,10 +227,13 @@ size_t ConvWeights::bytes() const {
 // bf16 channel-pair planes: grown once per calling thread to at most one band, reused by every
 // call.
 thread_local std::vector<uint32_t> t_pair_planes;
+// Rows of a residual that aliases the output, copied per band (conv2d); grown once per thread.
+thread_local std::vector<float> t_residual_rows;
 size_t g_pair_band_words = size_t(4) << 20;  // 16 MB of pair words per band (conv2d_set_pair_band)
 
 void conv2d_release_scratch() {
   std::vector<uint32_t>().swap(t_pair_planes);
+  std::vector<float>().swap(t_residual_rows);
   detail::winograd_release_scratch();
 }
 
@@ -252,11 +256,12 @@ void input_rows(const Conv2dShape& s, int64_t oy0, int64_t oy1, int64_t* iy0, in
   *iy1 = std::clamp<int64_t>((oy1 - 1) * s.stride - s.pad_top + s.kh, *iy0, s.h);
 }
 
-// The GEMM over output rows [oy0, oy1) of image b, whose input rows [iy0, iy1) are in `xf` (fp32,
-// plane stride `plane`) or `xp` (bf16 pair words, plane stride `plane`): the shape is re-cut to
-// those rows, with the padding that falls inside the band. Each output pixel sums the same K in the
-// same blocks as an unbanded call (KC depends on K only), so banding changes no bit. y's channel
-// planes are s.out_plane() floats apart, the residual's res_plane.
+// The GEMM over output rows [oy0, oy1) of image b, whose input rows [iy0, iy1) start at `xf` (fp32,
+// the image's planes: H * W apart) or `xp` (bf16 pair words, the band's planes: (iy1 - iy0) * W
+// apart): the shape is re-cut to those rows, with the padding that falls inside the band. Each
+// output pixel sums the same K in the same blocks as an unbanded call (KC depends on K only), so
+// banding changes no bit. y is the image's output (planes s.out_plane() apart); `residual` starts
+// at the band's row oy0, its planes res_plane apart.
 void conv_rows(const Conv2dShape& s, const float* xf, const uint32_t* xp, int64_t iy0, int64_t iy1,
                int64_t oy0, int64_t oy1, const ConvWeights& w, const float* residual,
                int64_t res_plane, float* y, ConvAct act, ThreadPool* pool) {
@@ -272,6 +277,7 @@ void conv_rows(const Conv2dShape& s, const float* xf, const uint32_t* xp, int64_
   MACRO_CHECK(b.pad_top >= 0 && b.out_h() == oy1 - oy0 && b.out_w() == ow);
   Im2colCtx ctx{&b, xf, xp, cin2, oy1 - oy0, ow, kernels_for(w.packed().isa()).conv_rows32};
   ctx.split_cols = xp && s.stride == 2;  // convert_pairs split the rows
+  ctx.x_plane = xf ? s.h * s.w : (iy1 - iy0) * s.w;
   detail::Operand oa{nullptr, nullptr, w.packed().panels(), w.packed().k_padded()};
   detail::Operand ob{pack_im2col, &ctx, nullptr, 0};
   detail::DriverShape ds;
@@ -298,7 +304,7 @@ void conv_rows(const Conv2dShape& s, const float* xf, const uint32_t* xp, int64_
   p.bias_m = w.bias();
   p.relu = act == ConvAct::kRelu;
   if (residual) {
-    p.residual = residual + oy0 * ow;
+    p.residual = residual;
     p.ldr = res_plane;
   }
   detail::run_gemm(kern, ds, oa, ob, p, pool);
@@ -314,7 +320,8 @@ void convert_pairs(const Conv2dShape& s, const float* xb, int64_t iy0, int64_t i
   const bool split = s.stride == 2;
   const auto pair_words = ops_kernels().pair_words;
   auto convert = [&](size_t p0, size_t p1, int) {
-    std::vector<uint32_t> row_words(split ? size_t(W) : 0);
+    thread_local std::vector<uint32_t> row_words;  // one split row's words, grown once
+    if (split && row_words.size() < size_t(W)) row_words.resize(size_t(W));
     for (size_t cp = p0; cp < p1; ++cp) {
       const int64_t c0 = 2 * int64_t(cp), c1 = c0 + 1;
       const float* x0 = xb + c0 * HW + iy0 * W;
@@ -327,10 +334,10 @@ void convert_pairs(const Conv2dShape& s, const float* xb, int64_t iy0, int64_t i
       const int64_t even = (W + 1) / 2;
       for (int64_t r = 0; r < iy1 - iy0; ++r) {
         uint32_t* d = dst + r * W;
-        const uint32_t* w = row_words.data();
+        const uint32_t* words = row_words.data();
         pair_words(row_words.data(), x0 + r * W, x1 ? x1 + r * W : nullptr, W);
-        for (int64_t j = 0; j < even; ++j) d[j] = w[2 * j];
-        for (int64_t j = 0; j < W / 2; ++j) d[even + j] = w[2 * j + 1];
+        for (int64_t j = 0; j < even; ++j) d[j] = words[2 * j];
+        for (int64_t j = 0; j < W / 2; ++j) d[even + j] = words[2 * j + 1];
       }
     }
   };
@@ -357,43 +364,49 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
   const int64_t cin2 = (s.c_in + 1) / 2 * 2;
   const int64_t HW = s.h * s.w, plane = s.out_plane();
   // A residual that is y itself keeps the bits of a separate residual: where the GEMM would fold
-  // it into C (several K blocks, terms after the last), it is read from a copy instead.
+  // it into C (several K blocks, terms after the last), each band's rows are read from a copy.
   const int64_t K = bf16 ? cin2 * s.kh * s.kw : s.c_in * s.kh * s.kw;
-  std::vector<float> res_copy;
   const bool copy_res =
       residual == y && detail::gemm_folds_aliased_residual(w.packed().kernel(), K);
+  // Bands of output rows: bf16 converts the input once per band into pair planes (then the halo
+  // rows are converted twice), within g_pair_band_words; a copied residual stays within the same
+  // budget of floats.
+  int64_t band = s.out_h();
+  if (bf16 && size_t(cin2 / 2 * HW) > g_pair_band_words) {
+    const int64_t in_rows = std::max<int64_t>(s.kh, int64_t(g_pair_band_words) / (cin2 / 2 * s.w));
+    band = std::max<int64_t>(1, (in_rows - s.kh) / s.stride + 1);
+  }
+  if (copy_res)
+    band = std::min(band, std::max<int64_t>(1, int64_t(g_pair_band_words) / (s.c_out * ow)));
   for (int64_t b = 0; b < s.n; ++b) {
     const float* xb = x + b * s.c_in * HW;
     const float* rb = residual ? residual + b * s.c_out * plane : nullptr;
     float* yb = y + b * s.c_out * plane;
-    if (copy_res) {
-      res_copy.resize(size_t(s.c_out * oh * ow));
-      for (int64_t c = 0; c < s.c_out; ++c)
-        std::memcpy(res_copy.data() + c * oh * ow, rb + c * plane, size_t(oh * ow) * 4);
-      rb = res_copy.data();
-    }
-    const int64_t res_plane = copy_res ? oh * ow : plane;
-    if (!bf16) {
-      conv_rows(s, xb, nullptr, 0, s.h, 0, oh, w, rb, res_plane, yb, act, pool);
-      continue;
-    }
-    // bf16: the input converted once into pair planes, by bands of output rows when the whole
-    // image's planes would exceed the band budget (then the halo rows are converted twice).
-    const int64_t row_words = cin2 / 2 * s.w;
-    int64_t band = oh;
-    if (size_t(cin2 / 2 * HW) > g_pair_band_words) {
-      const int64_t in_rows = std::max<int64_t>(s.kh, int64_t(g_pair_band_words) / row_words);
-      band = std::max<int64_t>(1, (in_rows - s.kh) / s.stride + 1);
-    }
     for (int64_t oy0 = 0; oy0 < oh; oy0 += band) {
       const int64_t oy1 = std::min(oh, oy0 + band);
+      const float* res_rows = rb ? rb + oy0 * ow : nullptr;
+      int64_t res_plane = plane;
+      if (copy_res) {
+        const int64_t n = (oy1 - oy0) * ow;
+        std::vector<float>& rc = t_residual_rows;
+        if (rc.size() < size_t(s.c_out * n)) rc.resize(size_t(s.c_out * n));
+        for (int64_t c = 0; c < s.c_out; ++c)
+          std::memcpy(rc.data() + c * n, res_rows + c * plane, size_t(n) * sizeof(float));
+        res_rows = rc.data();
+        res_plane = n;
+      }
       int64_t iy0, iy1;
       input_rows(s, oy0, oy1, &iy0, &iy1);
+      if (!bf16) {
+        conv_rows(s, xb + iy0 * s.w, nullptr, iy0, iy1, oy0, oy1, w, res_rows, res_plane, yb, act,
+                  pool);
+        continue;
+      }
       std::vector<uint32_t>& xp = t_pair_planes;
       const size_t words = size_t(cin2 / 2 * (iy1 - iy0) * s.w);
       if (xp.size() < words) xp.resize(words);
       convert_pairs(s, xb, iy0, iy1, xp.data(), pool);
-      conv_rows(s, nullptr, xp.data(), iy0, iy1, oy0, oy1, w, rb, res_plane, yb, act, pool);
+      conv_rows(s, nullptr, xp.data(), iy0, iy1, oy0, oy1, w, res_rows, res_plane, yb, act, pool);
     }
   }
 }

@@ -73,8 +73,9 @@ constexpr int kMr = 32, kNr = 32;
 // straight into C; a ragged or ReLU one stages the term in a padded block first, so every tile of
 // a GEMM sums in the same order and a result never depends on where the tile edges fall (row bands,
 // column bands). The driver hands the terms to the first K block (GemmKernel::terms_first), so the
-// later blocks of a long K seed from C. No term, or several, take the general epilogue from the
-// tiles' fp32 sums (store_tile_from), the same for whole and ragged tiles.
+// later blocks of a long K seed from C. A whole tile with no term (alpha 1, no ReLU) also stores
+// straight into C. Several terms take the general epilogue from the tiles' fp32 sums
+// (store_tile_from), the same for whole and ragged tiles.
 void micro_amx(const MicroTile& t) {
   detail::amx_tiles_ready();
   const uint16_t* a = static_cast<const uint16_t*>(t.a);
@@ -82,7 +83,9 @@ void micro_amx(const MicroTile& t) {
   const int terms =
       int(t.load_c) + int(t.res != nullptr) + int(t.bias_n != nullptr) + int(t.bias_m != nullptr);
   const bool seeded = terms == 1 && t.alpha == 1.0f && (!t.load_c || t.beta == 1.0f);
-  const bool direct = seeded && t.m == kMr && t.n == kNr && !t.relu;
+  // Whole, without ReLU, and nothing to add after the products: stored straight into C.
+  const bool direct =
+      t.m == kMr && t.n == kNr && !t.relu && (seeded || (terms == 0 && t.alpha == 1.0f));
   alignas(64) float acc[kMr * kNr];
   if (!seeded) {
     detail::amx_zero_c_2x2();
