@@ -78,20 +78,20 @@ void fill_row(const Im2colCtx& c, const Segment* segs, int nseg, int count, int 
     }
     const T* row = plane + iy * W;
     const int64_t ix0 = sg.ox * stride + dx - s.pad_left;
+    // out[lo, hi) = src[0, hi - lo), zeros (padding) before and after.
+    auto run = [&](int64_t lo, int64_t hi, const T* src) {
+      for (int64_t i = 0; i < lo; ++i) out[i] = T(0);
+      if (hi > lo) std::memcpy(out + lo, src, sizeof(T) * size_t(hi - lo));
+      for (int64_t i = hi; i < sg.len; ++i) out[i] = T(0);
+    };
     if (stride == 1) {
       const int64_t lo = std::clamp<int64_t>(-ix0, 0, sg.len);
-      const int64_t hi = std::clamp<int64_t>(W - ix0, lo, sg.len);
-      for (int64_t i = 0; i < lo; ++i) out[i] = T(0);
-      std::memcpy(out + lo, row + ix0 + lo, sizeof(T) * size_t(hi - lo));
-      for (int64_t i = hi; i < sg.len; ++i) out[i] = T(0);
+      run(lo, std::clamp<int64_t>(W - ix0, lo, sg.len), row + ix0 + lo);
     } else if (c.split_cols) {
       // Columns ix0, ix0 + 2, ... lie side by side in the split row: one copy between the pads.
       const int64_t lo = std::clamp<int64_t>((-ix0 + 1) / 2, 0, sg.len);      // first ix >= 0
       const int64_t hi = std::clamp<int64_t>((W - ix0 + 1) / 2, lo, sg.len);  // first ix >= W
-      for (int64_t i = 0; i < lo; ++i) out[i] = T(0);
-      if (hi > lo)
-        std::memcpy(out + lo, row + split_col(ix0 + 2 * lo, W), sizeof(T) * size_t(hi - lo));
-      for (int64_t i = hi; i < sg.len; ++i) out[i] = T(0);
+      run(lo, hi, hi > lo ? row + split_col(ix0 + 2 * lo, W) : row);
     } else {
       for (int i = 0; i < sg.len; ++i) {
         const int64_t ix = ix0 + int64_t(i) * stride;
@@ -250,6 +250,11 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
 
 namespace {
 
+// The implicit GEMM's K: Cin * KH * KW taps, with Cin padded to even for the bf16 pairs.
+inline int64_t conv_k(const Conv2dShape& s, bool bf16) {
+  return (bf16 ? (s.c_in + 1) / 2 * 2 : s.c_in) * s.kh * s.kw;
+}
+
 // Output rows [oy0, oy1) of one image read input rows [iy0, iy1) (clipped to the image).
 void input_rows(const Conv2dShape& s, int64_t oy0, int64_t oy1, int64_t* iy0, int64_t* iy1) {
   *iy0 = std::clamp<int64_t>(oy0 * s.stride - s.pad_top, 0, s.h);
@@ -283,7 +288,7 @@ void conv_rows(const Conv2dShape& s, const float* xf, const uint32_t* xp, int64_
   detail::DriverShape ds;
   ds.M = s.c_out;
   ds.N = (oy1 - oy0) * ow;
-  ds.K = bf16 ? cin2 * s.kh * s.kw : s.c_in * s.kh * s.kw;
+  ds.K = conv_k(s, bf16);
   ds.C = y + oy0 * ow;
   ds.ldc = s.out_plane();
   // All output channels in one task (the im2col panels are then gathered once), up to 512. When
@@ -365,9 +370,8 @@ void conv2d(const Conv2dShape& s, const float* x, const ConvWeights& w, const fl
   const int64_t HW = s.h * s.w, plane = s.out_plane();
   // A residual that is y itself keeps the bits of a separate residual: where the GEMM would fold
   // it into C (several K blocks, terms after the last), each band's rows are read from a copy.
-  const int64_t K = bf16 ? cin2 * s.kh * s.kw : s.c_in * s.kh * s.kw;
   const bool copy_res =
-      residual == y && detail::gemm_folds_aliased_residual(w.packed().kernel(), K);
+      residual == y && detail::gemm_folds_aliased_residual(w.packed().kernel(), conv_k(s, bf16));
   // Bands of output rows: bf16 converts the input once per band into pair planes (then the halo
   // rows are converted twice), within g_pair_band_words; a copied residual stays within the same
   // budget of floats.

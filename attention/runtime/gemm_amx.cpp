@@ -102,10 +102,8 @@ void micro_amx(const MicroTile& t) {
     if (direct) {
       detail::amx_load_c_2x2(src, ld);
     } else {
-      const __mmask16 k0 = t.n >= 16 ? __mmask16(0xffff) : __mmask16((1u << t.n) - 1);
-      const __mmask16 k1 = t.n >= 32   ? __mmask16(0xffff)
-                           : t.n <= 16 ? __mmask16(0)
-                                       : __mmask16((1u << (t.n - 16)) - 1);
+      __mmask16 k0, k1;
+      half_masks(t.n, &k0, &k1);
       for (int r = 0; r < kMr; ++r) {
         const bool in = r < t.m;
         _mm512_store_ps(acc + r * kNr,
@@ -126,17 +124,14 @@ void micro_amx(const MicroTile& t) {
     return;
   }
   detail::amx_store_c_2x2(acc, kNr);
+  MicroTile rest = t;
   if (seeded) {  // the sums already hold the term: only ReLU and the ragged store remain
-    MicroTile plain = t;
-    plain.load_c = false;
-    plain.res = nullptr;
-    plain.bias_n = nullptr;
-    plain.bias_m = nullptr;
-    store_tile_from<kMr>(
-        plain, [&](int r, int half) { return _mm512_load_ps(acc + r * kNr + 16 * half); });
-    return;
+    rest.load_c = false;
+    rest.res = nullptr;
+    rest.bias_n = nullptr;
+    rest.bias_m = nullptr;
   }
-  store_tile_from<kMr>(t,
+  store_tile_from<kMr>(rest,
                        [&](int r, int half) { return _mm512_load_ps(acc + r * kNr + 16 * half); });
 }
 

@@ -29,14 +29,18 @@ inline void for_rows(const MicroTile& t, F&& f) {
   (std::make_integer_sequence<int, MR - 1>{});
 }
 
+// Lane masks of the two 16-column halves of a 32-column tile row with n valid columns.
+inline void half_masks(int n, __mmask16* k0, __mmask16* k1) {
+  *k0 = n >= 16 ? __mmask16(0xffff) : __mmask16((1u << n) - 1);
+  *k1 = n >= 32 ? __mmask16(0xffff) : n <= 16 ? __mmask16(0) : __mmask16((1u << (n - 16)) - 1);
+}
+
 // C = alpha*acc + beta*C (if load_c) + bias_n + bias_m + res, masked to t.n columns, t.m rows;
 // acc(r, 0) and acc(r, 1) give the two 16-column halves of row r's sums.
 template <int MR, typename Acc>
 inline void store_tile_from(const MicroTile& t, Acc&& acc) {
-  const __mmask16 k0 = t.n >= 16 ? __mmask16(0xffff) : __mmask16((1u << t.n) - 1);
-  const __mmask16 k1 = t.n >= 32   ? __mmask16(0xffff)
-                       : t.n <= 16 ? __mmask16(0)
-                                   : __mmask16((1u << (t.n - 16)) - 1);
+  __mmask16 k0, k1;
+  half_masks(t.n, &k0, &k1);
   const __m512 alpha = _mm512_set1_ps(t.alpha), beta = _mm512_set1_ps(t.beta);
   const bool scale = t.alpha != 1.0f;
   __m512 bn0 = _mm512_setzero_ps(), bn1 = _mm512_setzero_ps();
