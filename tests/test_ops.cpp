@@ -287,7 +287,8 @@ TEST_CASE("ops: every vector path matches the scalar reference", "[runtime][ops]
   });
 }
 
-TEST_CASE("ops: bf16 pair words on every path are the scalar rounding's bits", "[runtime][ops]") {
+TEST_CASE("ops: bf16 pair words and in-place rounding on every path are the scalar rounding's bits",
+          "[runtime][ops]") {
   // Random values, exact ties (odd and even bf16 mantissa), the largest finite values (which round
   // to infinity), infinities, quiet and signalling NaNs of both signs, denormals and zeros; n odd
   // so the vector paths run a tail; with and without the high half.
@@ -322,6 +323,17 @@ TEST_CASE("ops: bf16 pair words on every path are the scalar rounding's bits", "
     ops_kernels_for(isa).pair_words(got.data(), lo.data(), nullptr, n);
     REQUIRE(std::equal(want_lo.begin(), want_lo.end(), got.begin()));
     REQUIRE(got[size_t(n)] == 0xdeadbeefu);
+    // The in-place rounding keeps the same bits in the high half of each float.
+    std::vector<float> x(lo.begin(), lo.begin() + n + 1);
+    const float sentinel = x[size_t(n)];
+    ops_kernels_for(isa).round_bf16(x.data(), n);
+    for (int64_t i = 0; i < n; ++i) {
+      uint32_t b;
+      std::memcpy(&b, &x[size_t(i)], 4);
+      INFO("element " << i);
+      REQUIRE(b == want_lo[size_t(i)] << 16);
+    }
+    REQUIRE(std::memcmp(&x[size_t(n)], &sentinel, 4) == 0);  // nothing past n written
   }
 }
 

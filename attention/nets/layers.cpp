@@ -80,11 +80,12 @@ constexpr int64_t kChunk = 1 << 14;  // elements per task of the elementwise hel
 void round_if_bf16(const Run& r, float* x, int64_t n) {
   if (r.planning() || !r.bf16()) return;
   op_profile::OpScope prof("round to bf16");
+  const auto round = ops_kernels().round_bf16;
   const size_t chunks = size_t((n + kChunk - 1) / kChunk);
   parallel(r, chunks, [&](size_t b, size_t e) {
     for (size_t c = b; c < e; ++c) {
       const int64_t lo = int64_t(c) * kChunk, hi = std::min(n, lo + kChunk);
-      round_to_bf16(x + lo, hi - lo);
+      round(x + lo, hi - lo);
     }
   });
 }

@@ -91,6 +91,10 @@ void pair_words_ref(uint32_t* dst, const float* lo, const float* hi, int64_t n) 
     dst[i] = uint32_t(f32_to_bf16(lo[i])) | (hi ? uint32_t(f32_to_bf16(hi[i])) << 16 : 0u);
 }
 
+void round_bf16_ref(float* x, int64_t n) {
+  for (int64_t i = 0; i < n; ++i) x[i] = bf16_to_f32(f32_to_bf16(x[i]));
+}
+
 OpsKernels make_table(Isa isa) {
   OpsKernels t;
   t.name = "scalar";
@@ -103,6 +107,7 @@ OpsKernels make_table(Isa isa) {
   t.geglu = geglu_ref;
   t.axpby = axpby_ref;
   t.pair_words = pair_words_ref;
+  t.round_bf16 = round_bf16_ref;
   // Each path overrides what it vectorises; AMX adds nothing for these ops.
   if (isa >= Isa::kAvx2) detail::fill_ops_avx2(t);
   if (isa >= Isa::kAvx512) detail::fill_ops_avx512(t);

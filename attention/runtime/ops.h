@@ -115,6 +115,9 @@ struct OpsKernels {
   // bf16 channel-pair words: dst[i] = bf16(lo[i]) | bf16(hi[i]) << 16 (hi null: a zero high
   // half), rounded as f32_to_bf16 (nearest even, NaN kept quiet, fp32 denormals kept).
   void (*pair_words)(uint32_t* dst, const float* lo, const float* hi, int64_t n) = nullptr;
+  // x[i] = bf16_to_f32(f32_to_bf16(x[i])) in place: the same rounding, kept as fp32 (a network's
+  // bf16 activations between ops).
+  void (*round_bf16)(float* x, int64_t n) = nullptr;
 };
 
 // The table for the active path; for a given supported path.

@@ -237,6 +237,23 @@ void axpby256(float* dst, float a, const float* x, float b, const float* y, int6
   });
 }
 
+// x rounded to bf16 and back, as f32_to_bf16: nearest even by integer rounding (denormals kept),
+// a NaN quieted.
+void round_bf16_256(float* x, int64_t n) {
+  const __m256i one = _mm256_set1_epi32(1), half = _mm256_set1_epi32(0x7fff);
+  const __m256i abs_mask = _mm256_set1_epi32(0x7fffffff), inf = _mm256_set1_epi32(0x7f800000);
+  const __m256i high = _mm256_set1_epi32(int(0xffff0000u)), quiet = _mm256_set1_epi32(0x400000);
+  for_each8(x, x, nullptr, n, [&](__m256 v, __m256) {
+    const __m256i u = _mm256_castps_si256(v);
+    const __m256i lsb = _mm256_and_si256(_mm256_srli_epi32(u, 16), one);
+    const __m256i r = _mm256_and_si256(_mm256_add_epi32(u, _mm256_add_epi32(lsb, half)), high);
+    // NaN: |u| > inf as signed integers (the sign bit is cleared, so the compare is exact).
+    const __m256i nan = _mm256_cmpgt_epi32(_mm256_and_si256(u, abs_mask), inf);
+    const __m256i q = _mm256_or_si256(_mm256_and_si256(u, high), quiet);
+    return _mm256_castsi256_ps(_mm256_blendv_epi8(r, q, nan));
+  });
+}
+
 }  // namespace
 
 void fill_ops_avx2(OpsKernels& t) {
@@ -249,6 +266,7 @@ void fill_ops_avx2(OpsKernels& t) {
   t.softmax = softmax256;
   t.geglu = geglu256;
   t.axpby = axpby256;
+  t.round_bf16 = round_bf16_256;
 }
 
 }  // namespace macro::detail

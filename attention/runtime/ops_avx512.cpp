@@ -297,6 +297,14 @@ void pair_words512(uint32_t* dst, const float* lo, const float* hi, int64_t n) {
   }
 }
 
+void round_bf16_512(float* x, int64_t n) {
+  for (int64_t i = 0; i < n; i += 16) {
+    const __mmask16 m = tail_mask(n - i);
+    const __m512i w = _mm512_slli_epi32(bf16_lanes(_mm512_maskz_loadu_ps(m, x + i)), 16);
+    _mm512_mask_storeu_ps(x + i, m, _mm512_castsi512_ps(w));
+  }
+}
+
 }  // namespace
 
 void fill_ops_avx512(OpsKernels& t) {
@@ -310,6 +318,7 @@ void fill_ops_avx512(OpsKernels& t) {
   t.geglu = geglu512;
   t.axpby = axpby512;
   t.pair_words = pair_words512;
+  t.round_bf16 = round_bf16_512;
 }
 
 }  // namespace macro::detail
