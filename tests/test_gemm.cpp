@@ -413,3 +413,80 @@ TEST_CASE("kernel table: one table per supported path, AMX only when present", "
 }
 
 }  // namespace macro
+
+namespace macro {
+namespace {
+
+TEST_CASE("gemm kernels: a strip of micro-tiles gives the bits of one micro call per tile",
+          "[kernels][gemm]") {
+  // Every path whose kernel has a strip entry (AMX): random panels, each epilogue the driver hands
+  // down, full and ragged rows, a column count with and without a ragged last tile.
+  int strips = 0;
+  for (Isa isa : supported_isas()) {
+    for (const GemmKernel* gk : {&kernels_for(isa).f32, &kernels_for(isa).bf16}) {
+      if (!gk->strip) continue;
+      ++strips;
+      INFO(isa_name(isa) << " " << gk->name);
+      const int64_t kc = 2 * gk->k_align * 3, kcp = detail::round_up(kc, gk->k_align);
+      const int64_t n_max = 3 * gk->nr + 5, ldc = n_max + 7;
+      const int esz = detail::packed_elem_bytes(gk->layout);
+      const auto a_src = random_vec(size_t(gk->mr * kc), 31);
+      const auto b_src = random_vec(size_t(n_max * kc), 32);
+      const int64_t b_panels = (n_max + gk->nr - 1) / gk->nr;
+      std::vector<unsigned char> a(size_t(gk->mr * kcp * esz) + 64),
+          b(size_t(b_panels * gk->nr * kcp * esz) + 64);
+      auto line = [](std::vector<unsigned char>& v) {
+        return reinterpret_cast<void*>((reinterpret_cast<uintptr_t>(v.data()) + 63) &
+                                       ~uintptr_t(63));
+      };
+      void* ap = line(a);
+      void* bp = line(b);
+      detail::pack_panels_f32(a_src.data(), kc, false, gk->mr, kc, gk->layout, gk->mr, 0, gk->mr, 0,
+                              kc, kcp, ap);
+      detail::pack_panels_f32(b_src.data(), kc, false, n_max, kc, gk->layout, gk->nr, 0, n_max, 0,
+                              kc, kcp, bp);
+      const int64_t b_stride = kcp * gk->nr * esz;
+      const auto bias_n = random_vec(size_t(n_max), 33), bias_m = random_vec(size_t(gk->mr), 34);
+      const auto res = random_vec(size_t(gk->mr * ldc), 35),
+                 c0 = random_vec(size_t(gk->mr * ldc), 36);
+      for (int64_t ncols : {int64_t(3 * gk->nr), n_max}) {
+        for (int m : {gk->mr, gk->mr - 3}) {
+          for (int variant = 0; variant < 8; ++variant) {
+            INFO("ncols " << ncols << " m " << m << " variant " << variant);
+            MicroTile t;
+            t.kc = kcp;
+            t.a = ap;
+            t.ldc = ldc;
+            t.ldr = ldc;
+            t.m = m;
+            if (variant == 1) t.bias_n = bias_n.data();
+            if (variant == 2) t.res = res.data();
+            if (variant == 3) t.load_c = true, t.beta = 1.0f;
+            if (variant == 4) t.bias_n = bias_n.data(), t.res = res.data();
+            if (variant == 5) t.relu = true, t.bias_n = bias_n.data();
+            if (variant == 6) t.bias_m = bias_m.data();
+            if (variant == 7) t.load_c = true, t.beta = 0.5f, t.alpha = 2.0f;
+            std::vector<float> want(c0.begin(), c0.end()), got(c0.begin(), c0.end());
+            for (int64_t j = 0; j < ncols; j += gk->nr) {
+              MicroTile one = t;
+              one.b = static_cast<const unsigned char*>(bp) + (j / gk->nr) * b_stride;
+              one.n = int(std::min<int64_t>(gk->nr, ncols - j));
+              one.c = want.data() + j;
+              if (t.bias_n) one.bias_n = t.bias_n + j;
+              if (t.res) one.res = t.res + j;
+              gk->micro(one);
+            }
+            t.b = bp;
+            t.c = got.data();
+            gk->strip(t, ncols, b_stride);
+            REQUIRE(std::memcmp(want.data(), got.data(), want.size() * sizeof(float)) == 0);
+          }
+        }
+      }
+    }
+  }
+  if (strips == 0) WARN("no kernel path of this machine has a strip entry (AMX absent)");
+}
+
+}  // namespace
+}  // namespace macro

@@ -411,6 +411,15 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
           mt.a = abase + (ir / mr) * a_stride;
           mt.m = int(std::min<int64_t>(mr, i1 - i));
           mt.bias_m = terms && p.bias_m ? p.bias_m + i : nullptr;
+          mt.relu = last && p.relu;
+          if (kern.strip) {
+            mt.b = bbase;
+            mt.c = s.C + i * s.ldc + jc;
+            mt.bias_n = terms && p.bias_n ? p.bias_n + jc : nullptr;
+            mt.res = terms && p.residual ? p.residual + i * p.ldr + jc : nullptr;
+            kern.strip(mt, ncols, b_stride);
+            continue;
+          }
           for (int64_t jr = 0; jr < ncols; jr += nr) {
             const int64_t j = jc + jr;
             mt.b = bbase + (jr / nr) * b_stride;
@@ -418,7 +427,6 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
             mt.c = s.C + i * s.ldc + j;
             mt.bias_n = terms && p.bias_n ? p.bias_n + j : nullptr;
             mt.res = terms && p.residual ? p.residual + i * p.ldr + j : nullptr;
-            mt.relu = last && p.relu;
             kern.micro(mt);
           }
         }

@@ -76,8 +76,7 @@ constexpr int kMr = 32, kNr = 32;
 // later blocks of a long K seed from C. A whole tile with no term (alpha 1, no ReLU) also stores
 // straight into C. Several terms take the general epilogue from the tiles' fp32 sums
 // (store_tile_from), the same for whole and ragged tiles.
-void micro_amx(const MicroTile& t) {
-  detail::amx_tiles_ready();
+inline __attribute__((always_inline)) void tile_amx(const MicroTile& t) {
   const uint16_t* a = static_cast<const uint16_t*>(t.a);
   const uint16_t* b = static_cast<const uint16_t*>(t.b);
   const int terms =
@@ -133,6 +132,26 @@ void micro_amx(const MicroTile& t) {
   }
   store_tile_from<kMr>(rest,
                        [&](int r, int half) { return _mm512_load_ps(acc + r * kNr + 16 * half); });
+}
+
+void micro_amx(const MicroTile& t) {
+  detail::amx_tiles_ready();
+  tile_amx(t);
+}
+
+// The tiles of a strip in one call: between tiles nothing goes through the stack.
+void strip_amx(const MicroTile& t0, int64_t ncols, int64_t b_stride) {
+  detail::amx_tiles_ready();
+  MicroTile t = t0;
+  const unsigned char* b = static_cast<const unsigned char*>(t0.b);
+  for (int64_t j = 0; j < ncols; j += kNr, b += b_stride) {
+    t.b = b;
+    t.n = int(ncols - j < kNr ? ncols - j : kNr);
+    t.c = t0.c + j;
+    t.bias_n = t0.bias_n ? t0.bias_n + j : nullptr;
+    t.res = t0.res ? t0.res + j : nullptr;
+    tile_amx(t);
+  }
 }
 
 // A panel [kcp/32][w][32] bf16 (row-major 16 x 32 tiles) from row-major fp32 rows: each row is read
@@ -229,7 +248,8 @@ void fill_amx_kernels(KernelTable& t) {
                       "amx bf16 32x32",
                       pack_a_amx,
                       pack_a_amx_t,
-                      /*terms_first=*/true};
+                      /*terms_first=*/true,
+                      strip_amx};
   t.probe_bf16 = probe_amx;
 }
 }  // namespace detail

@@ -44,6 +44,12 @@ struct MicroTile {
   bool relu = false;  // max(0, .) applied last, after the residual
 };
 using MicroKernel = void (*)(const MicroTile& t);
+// Optional: a strip of micro-tiles on one A micro-panel, exactly as calling the micro-kernel for
+// each. t describes the first tile (t.n is ignored); tile q covers columns [q nr, min(ncols,
+// (q + 1) nr)) with B at t.b + q * b_stride bytes, C at t.c + q nr and bias_n, res (when set)
+// advanced by q nr. A kernel gives one where a call per tile costs it throughput (AMX: the
+// per-call stack traffic queues behind the tile stores of the previous tile).
+using MicroStripKernel = void (*)(const MicroTile& t, int64_t ncols, int64_t b_stride);
 
 // Optional fast packer for one A micro-panel from a row-major fp32 source: rows r < valid_rows of
 // src[r * ld + k], k < valid_k, into the kernel's A layout [kcp][w] (zeros beyond; kcp a multiple
@@ -90,6 +96,7 @@ struct GemmKernel {
   // seeds its C tiles with them, so its later blocks only add products onto C). ReLU always goes
   // with the last block.
   bool terms_first = false;
+  MicroStripKernel strip = nullptr;  // null: the driver calls micro per tile
 };
 
 struct KernelTable {
