@@ -50,7 +50,7 @@ Timing fma_peak_gflops(const AttentionKernels& k, ThreadPool& pool) {
 
 double score_tile_gflops(const AttentionKernels& k, int d) {
   // One 64 x 64 x D tile in cache: S^T = K Q^T, K rows read in place, Q^T packed.
-  std::vector<float> kr(size_t(kAttnBlockK) * d, 0.5f), qt(size_t(d) * kAttnBlockQ, 0.25f),
+  LineVec kr(size_t(kAttnBlockK) * d, 0.5f), qt(size_t(d) * kAttnBlockQ, 0.25f),
       s(size_t(kAttnBlockQ) * kAttnBlockK);
   std::vector<const float*> rows(kAttnBlockK);
   for (int c = 0; c < kAttnBlockK; ++c) rows[size_t(c)] = kr.data() + size_t(c) * d;
@@ -120,7 +120,7 @@ std::vector<MaskCase> macro_like_masks(int gh, int gw) {
 }
 
 struct Buffers {
-  std::vector<float> q, k, v, out;
+  LineVec q, k, v, out;
 };
 Buffers make_buffers(int n, int c) {
   Buffers b;

@@ -117,8 +117,8 @@ int run(int argc, char** argv) {
     std::printf("\nmicro-kernels, panels in L1/L2, 1 thread:\n");
     for (const GemmKernel* gk : {&kt.f32, &kt.bf16}) {
       const int64_t kc = 256;
-      std::vector<float> a(size_t(gk->mr * kc), 0.5f), b(size_t(gk->nr * kc), 0.25f);
-      std::vector<float> c(size_t(gk->mr * gk->nr));
+      LineVec a(size_t(gk->mr * kc), 0.5f), b(size_t(gk->nr * kc), 0.25f);
+      LineVec c(size_t(gk->mr * gk->nr));
       if (gk->layout != PackLayout::kF32) {
         std::fill(a.begin(), a.end(), 0.0f);
         std::fill(b.begin(), b.end(), 0.0f);
@@ -165,7 +165,7 @@ int run(int argc, char** argv) {
       auto x = random_vec(size_t(g.m * g.k), 1);
       auto w = random_vec(size_t(g.n * g.k), 2);
       auto b = random_vec(size_t(g.n), 3);
-      std::vector<float> y(size_t(g.m * g.n));
+      LineVec y(size_t(g.m * g.n));
       GemmParams p;
       p.bias_n = b.data();
       const double flop = 2.0 * double(g.m) * g.n * g.k;
@@ -184,7 +184,7 @@ int run(int argc, char** argv) {
       const int64_t m = 1024, k = 640, n = 640;
       auto a = random_vec(size_t(m * k), 4);
       auto bm = random_vec(size_t(n * k), 5);
-      std::vector<float> c(size_t(m * n));
+      LineVec c(size_t(m * n));
       GemmParams p;
       p.trans_b = true;
       const double flop = 2.0 * double(m) * n * k;
@@ -252,7 +252,7 @@ int run(int argc, char** argv) {
       auto x = random_vec(size_t(s.c_in * s.h * s.w), 6);
       auto w = random_vec(size_t(s.c_out * s.c_in * s.kh * s.kw), 7);
       auto b = random_vec(size_t(s.c_out), 8);
-      std::vector<float> y(size_t(s.c_out * s.out_h() * s.out_w()));
+      LineVec y(size_t(s.c_out * s.out_h() * s.out_w()));
       ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, s.kh, s.kw);
       ConvWeights cw16 =
           ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, s.kh, s.kw, WeightType::kBf16);

@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <functional>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -53,7 +54,38 @@ inline std::string golden_root() {
   return exe_dir() + "/../../shared/golden";
 }
 
-using test::random_vec;  // benchmark inputs (tests/test_random.h)
+// Benchmark buffers start on a cache line, as the networks' tensors do (Arena, kTensorAlign):
+// std::vector's 16-byte alignment splits every 64-byte row an AMX tile loads or stores over two
+// lines, which halved the AMX GEMM's measured rate.
+template <typename T>
+struct LineAllocator {
+  using value_type = T;
+  LineAllocator() = default;
+  template <typename U>
+  LineAllocator(const LineAllocator<U>&) {}
+  T* allocate(size_t n) {
+    const size_t bytes = (n * sizeof(T) + 63) / 64 * 64;
+    void* p = std::aligned_alloc(64, bytes ? bytes : 64);
+    if (!p) throw std::bad_alloc();
+    return static_cast<T*>(p);
+  }
+  void deallocate(T* p, size_t) { std::free(p); }
+  template <typename U>
+  bool operator==(const LineAllocator<U>&) const {
+    return true;
+  }
+  template <typename U>
+  bool operator!=(const LineAllocator<U>&) const {
+    return false;
+  }
+};
+using LineVec = std::vector<float, LineAllocator<float>>;
+
+// Uniform in [-1, 1), the values of test::random_vec, on a cache line.
+inline LineVec random_vec(size_t n, uint32_t seed) {
+  const std::vector<float> v = test::random_vec(n, seed);
+  return LineVec(v.begin(), v.end());
+}
 
 inline double now_seconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();

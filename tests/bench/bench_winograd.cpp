@@ -82,7 +82,7 @@ int run(int argc, char** argv) {
     auto x = random_vec(size_t(s.c_in * s.h * s.w), 6);
     auto w = random_vec(size_t(s.c_out * s.c_in * 9), 7);
     auto b = random_vec(size_t(s.c_out), 8);
-    std::vector<float> y(size_t(s.c_out * s.out_h() * s.out_w()));
+    LineVec y(size_t(s.c_out * s.out_h() * s.out_w()));
     const ConvWinograd old = conv2d_set_winograd(ConvWinograd::kAlways);  // packs for any shape
     const ConvWeights cw = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3,
                                              f32 ? WeightType::kF32 : WeightType::kBf16);
