@@ -10,6 +10,7 @@
 //   threads   bit-identical results with 1 and 2 threads (the split never cuts K).
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -18,6 +19,8 @@
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/gemm.h"
 #include "attention/runtime/half.h"
+#include "attention/runtime/ops.h"
+#include "attention/runtime/thread_pool.h"
 #include "test_support.h"
 
 namespace macro {
@@ -486,6 +489,68 @@ TEST_CASE("gemm kernels: a strip of micro-tiles gives the bits of one micro call
     }
   }
   if (strips == 0) WARN("no kernel path of this machine has a strip entry (AMX absent)");
+}
+
+}  // namespace
+}  // namespace macro
+
+namespace macro {
+namespace {
+
+TEST_CASE("gemm_packed: the GEGLU epilogue gives the bits of the GEMM followed by geglu()",
+          "[kernels][gemm]") {
+  // A GEGLU projection W [N, K] (value rows, then gate rows) packed with its rows permuted by
+  // geglu_source_row, against the plain GEMM into [M, N] and geglu(): one and several K blocks,
+  // ragged row blocks, with and without a bias, fp32 and bf16 weights, 1 and 2 threads.
+  struct G {
+    int64_t m, k, n;
+    int g;
+  };
+  const G shapes[] = {{1, 33, 32, 16},  {37, 70, 64, 16},    {200, 700, 160, 16},
+                      {601, 45, 96, 8}, {130, 320, 640, 16}, {70, 96, 256, 64}};
+  IsaGuard guard;
+  ThreadPool pool(2);
+  for (Isa isa : supported_isas()) {
+    REQUIRE(set_isa(isa));
+    for (const G& s : shapes) {
+      const auto x = random_vec(size_t(s.m * s.k), 41);
+      const auto w = random_vec(size_t(s.n * s.k), 42);
+      const auto b = random_vec(size_t(s.n), 43);
+      std::vector<float> wp(w.size()), bp(b.size());
+      for (int64_t r = 0; r < s.n; ++r) {
+        const int64_t src = geglu_source_row(r, s.n, s.g);
+        std::copy_n(w.begin() + src * s.k, s.k, wp.begin() + r * s.k);
+        bp[size_t(r)] = b[size_t(src)];
+      }
+      for (WeightType t : {WeightType::kF32, WeightType::kBf16}) {
+        for (bool bias : {true, false}) {
+          for (ThreadPool* tp : {static_cast<ThreadPool*>(nullptr), &pool}) {
+            INFO(isa_name(isa) << " M=" << s.m << " K=" << s.k << " N=" << s.n << " g=" << s.g
+                               << (t == WeightType::kBf16 ? " bf16" : " f32") << " bias " << bias
+                               << " threads " << (tp ? 2 : 1));
+            const PackedWeights plain = PackedWeights::pack(w.data(), s.n, s.k, s.k, t);
+            const PackedWeights perm = PackedWeights::pack(wp.data(), s.n, s.k, s.k, t);
+            std::vector<float> full(size_t(s.m * s.n)), want(size_t(s.m * s.n / 2));
+            GemmParams p;
+            p.bias_n = bias ? b.data() : nullptr;
+            gemm_packed(s.m, x.data(), s.k, plain, full.data(), s.n, p, tp);
+            geglu(want.data(), full.data(), s.m, s.n / 2, tp);
+            const int64_t ldc = s.n / 2 + 3;  // a row stride wider than the output
+            std::vector<float> got(size_t(s.m * ldc), -7.0f);
+            GemmParams pg;
+            pg.bias_n = bias ? bp.data() : nullptr;
+            pg.geglu_group = s.g;
+            gemm_packed(s.m, x.data(), s.k, perm, got.data(), ldc, pg, tp);
+            for (int64_t i = 0; i < s.m; ++i) {
+              REQUIRE(std::memcmp(got.data() + i * ldc, want.data() + i * (s.n / 2),
+                                  size_t(s.n / 2) * sizeof(float)) == 0);
+              for (int64_t j = s.n / 2; j < ldc; ++j) REQUIRE(got[size_t(i * ldc + j)] == -7.0f);
+            }
+          }
+        }
+      }
+    }
+  }
 }
 
 }  // namespace

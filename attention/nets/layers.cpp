@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <type_traits>
 
 #include "attention/runtime/file_io.h"
 #include "attention/runtime/op_profile.h"
@@ -216,23 +217,44 @@ WeightType weight_type(Precision p) {
 void Linear::pack(Precision p) {
   MACRO_CHECK(weight.loaded());
   // bf16 files pack straight from the mapping; anything else goes through one transient fp32 copy.
+  const int g = geglu_group;
+  MACRO_CHECK(g == 0 || out % (2 * g) == 0);
+  // Rows in GEGLU order (a permuted copy of the same values), or as stored.
+  auto permuted = [&](const auto* w) {
+    using T = std::remove_cv_t<std::remove_pointer_t<decltype(w)>>;
+    std::vector<T> v(size_t(out * in));
+    for (int64_t r = 0; r < out; ++r)
+      std::memcpy(v.data() + r * in, w + geglu_source_row(r, out, g) * in, size_t(in) * sizeof(T));
+    return v;
+  };
   if (const uint16_t* wb = p == Precision::kBf16 ? param_bf16(weight) : nullptr) {
-    packed = PackedWeights::pack(wb, out, in, in);
+    packed = g ? PackedWeights::pack(permuted(wb).data(), out, in, in)
+               : PackedWeights::pack(wb, out, in, in);
   } else {
     ParamF32 w(weight);
-    packed = PackedWeights::pack(w.data(), out, in, in, weight_type(p));
+    packed = g ? PackedWeights::pack(permuted(w.data()).data(), out, in, in, weight_type(p))
+               : PackedWeights::pack(w.data(), out, in, in, weight_type(p));
   }
   release_param(weight);
   weight = Param();
-  if (has_bias) take_vector(bias, b);
+  if (has_bias) {
+    take_vector(bias, b);
+    if (g) {
+      const std::vector<float> src = b;
+      for (int64_t r = 0; r < out; ++r) b[size_t(r)] = src[size_t(geglu_source_row(r, out, g))];
+    }
+  }
 }
 
 void Linear::forward(const Run& r, int64_t m, const float* x, int64_t ldx, float* y, int64_t ldy,
                      const float* residual, bool trans_x) const {
   if (r.planning() || m == 0) return;
-  op_profile::OpScope prof("linear", 2.0 * double(m) * double(in) * double(out));
+  op_profile::OpScope prof(geglu_group ? "linear + GEGLU" : "linear",
+                           2.0 * double(m) * double(in) * double(out));
   GemmParams p;
   p.trans_a = trans_x;
+  p.geglu_group = geglu_group;
+  MACRO_CHECK(!geglu_group || !residual);
   p.bias_n = b.empty() ? nullptr : b.data();
   if (residual) {
     p.residual = residual;

@@ -97,13 +97,17 @@ struct Linear {
   Param weight, bias;
   PackedWeights packed;
   std::vector<float> b;
+  // A GEGLU projection (out = value rows | gate rows): set before pack(); the rows are packed in
+  // the order of GemmParams::geglu_group, and forward() writes value * GELU(gate), [M, out / 2].
+  int geglu_group = 0;
 
   void init(int64_t in_features, int64_t out_features, bool with_bias);
   void visit(const std::string& prefix, ParamVisitor& v);
   void pack(Precision p);
   size_t bytes() const { return packed.bytes() + b.size() * sizeof(float); }
   // y [M, out] (row stride ldy) = x [M, in] (row stride ldx) W^T + b (+ residual [M, ldy], may
-  // alias y). trans_x: x given as [in, M] (an NCHW plane: ldx = HW).
+  // alias y). trans_x: x given as [in, M] (an NCHW plane: ldx = HW). With geglu_group: y
+  // [M, out / 2] = GEGLU of the projection, no residual.
   void forward(const Run& r, int64_t m, const float* x, int64_t ldx, float* y, int64_t ldy,
                const float* residual = nullptr, bool trans_x = false) const;
 };

@@ -66,6 +66,11 @@ void BasicTransformerBlock::init(int64_t channels, int64_t context_dim, int num_
   attn1.init(c, c, num_heads, true);
   attn2.init(c, context_dim, num_heads, false);
   ff_proj.init(c, 8 * c, true);
+  // value * GELU(gate) in the projection's epilogue, in groups of up to 64 columns (4C is a
+  // multiple of 4; the SD-Turbo widths take 64).
+  int group = 64;
+  while ((4 * c) % group != 0) group /= 2;
+  ff_proj.geglu_group = group;
   ff_out.init(4 * c, c, true);
 }
 
@@ -90,9 +95,10 @@ void BasicTransformerBlock::pack(Precision p) {
 }
 
 namespace {
-// Token rows per feed-forward chunk: the GEGLU projection [rows, 8C] and its output [rows, 4C] are
-// only ever this tall (instead of the whole M = V*HW), which keeps the 10-view case's scratch
-// small; 4096 rows still give the GEMM full-size tiles.
+// Token rows per feed-forward chunk: the GEGLU output [rows, 4C] is only ever this tall (instead
+// of the whole M = V*HW), which keeps the 10-view case's scratch small; 4096 rows still give the
+// GEMM full-size tiles. (The [rows, 8C] projection never reaches memory: the GEMM's GEGLU
+// epilogue.)
 constexpr int64_t kFeedForwardRows = 4096;
 }  // namespace
 
@@ -109,7 +115,6 @@ void BasicTransformerBlock::forward(const Run& r, float* x, int64_t views, int64
   const int64_t ff_rows = std::min(m, kFeedForwardRows);
   float* n = r.alloc(all * c);                  // LayerNorm output, then attention output [M, C]
   float* big = r.alloc(all * 3 * c);            // q|k|v [M, 3C], then q2 [M, C]
-  float* proj = r.alloc(ff_rows * 8 * c);       // GEGLU projection of a row chunk [rows, 8C]
   float* g = r.alloc(ff_rows * 4 * c);          // GEGLU output of the chunk [rows, 4C]
   float* kv = r.alloc(ctx_views * lc * 2 * c);  // cross k|v [Vc*Lc, 2C]
 
@@ -154,15 +159,12 @@ void BasicTransformerBlock::forward(const Run& r, float* x, int64_t views, int64
   }
   attn2.to_out.forward(r, m, n, c, x, c, x);  // x [M, C] += to_out(n)
 
-  // Feed-forward: GEGLU (value = first half, gate = second half, exact-erf GELU), by row chunks.
+  // Feed-forward: GEGLU (value = first half, gate = second half, exact-erf GELU), by row chunks;
+  // the projection's GEMM applies it as it goes (Linear::geglu_group).
   norm3.forward(r, n, x, m);  // [M, C]
   for (int64_t r0 = 0; r0 < m; r0 += ff_rows) {
     const int64_t rows = std::min(ff_rows, m - r0);
-    ff_proj.forward(r, rows, n + r0 * c, c, proj, 8 * c);  // [rows, 8C] = value | gate
-    if (!r.planning()) {
-      op_profile::OpScope prof("GEGLU");
-      geglu(g, proj, rows, 4 * c, r.pool);  // [rows, 4C]
-    }
+    ff_proj.forward(r, rows, n + r0 * c, c, g, 4 * c);  // [rows, 4C] = value * GELU(gate)
     // x rows [rows, C] += ff_out(g)
     ff_out.forward(r, rows, g, 4 * c, x + r0 * c, c, x + r0 * c);
   }

@@ -20,8 +20,10 @@
 #include <cstdlib>
 #include <cstring>
 #include <memory>
+#include <numeric>
 
 #include "attention/runtime/half.h"
+#include "attention/runtime/ops.h"
 #include "attention/runtime/status.h"
 
 namespace macro {
@@ -102,7 +104,7 @@ struct Scratch {
     return reinterpret_cast<void*>((reinterpret_cast<uintptr_t>(mem.get()) + 63) & ~uintptr_t(63));
   }
 };
-thread_local Scratch t_scratch_a, t_scratch_b;
+thread_local Scratch t_scratch_a, t_scratch_b, t_scratch_c;
 
 // ---- packing -----------------------------------------------------------------------------------
 
@@ -298,10 +300,136 @@ bool gemm_folds_aliased_residual(const GemmKernel& kern, int64_t K) {
   return !kern.terms_first && gemm_k_block(kern, K) < K;
 }
 
+namespace {
+
+// GemmParams::geglu_group: every task packs its A rows for all K blocks, then takes one strip of
+// MR rows x NC columns at a time through all K blocks into a per-thread buffer (each tile sums as
+// in run_gemm: the same blocks, terms and kernel calls, so the same bits) and writes value *
+// GELU(gate) of the strip's column pairs into C. The [M, N] product stays in cache.
+void run_gemm_geglu(const GemmKernel& kern, const DriverShape& s, const Operand& a,
+                    const Operand& b, const GemmParams& p, ThreadPool* pool) {
+  const int64_t M = s.M, N = s.N, K = s.K;
+  const int g = p.geglu_group;
+  MACRO_CHECK(g > 0 && N % (2 * g) == 0 && b.prepacked && K > 0);
+  MACRO_CHECK(p.alpha == 1.0f && p.beta == 0.0f && !p.bias_m && !p.residual && !p.relu);
+  const int mr = kern.mr, nr = kern.nr;
+  const int64_t esz = packed_elem_bytes(kern.layout);
+  const Tuning& tun = tuning();
+  const int64_t KC = gemm_k_block(kern, K);
+  const int64_t threads = pool ? pool->size() : 1;
+  // Column blocks hold whole tiles and whole groups; B of a block over all of K about 448 KB.
+  const int64_t unit = std::lcm(int64_t(nr), int64_t(2 * g));
+  const int64_t nc_target =
+      tun.nc > 0 ? tun.nc : std::max<int64_t>(unit, (448 * 1024) / std::max<int64_t>(1, K * esz));
+  const int64_t nc = unit * std::max<int64_t>(1, nc_target / unit);
+  const int64_t mc_target = tun.mc > 0 ? tun.mc : 192;
+  int64_t m_tasks = (M + mc_target - 1) / mc_target;
+  if (threads > 1)
+    m_tasks = std::min(round_up(m_tasks, threads), std::max<int64_t>(1, M / (4 * mr)));
+  const int64_t mc = round_up((M + m_tasks - 1) / m_tasks, mr);
+  m_tasks = (M + mc - 1) / mc;
+  int64_t n_tasks = 1;
+  if (threads > 1 && m_tasks < threads)
+    n_tasks = std::clamp<int64_t>((4 * threads + m_tasks - 1) / m_tasks, 1, (N + unit - 1) / unit);
+  const int64_t n_per_task = round_up((N + n_tasks - 1) / n_tasks, unit);
+  n_tasks = (N + n_per_task - 1) / n_per_task;
+  const int64_t k_blocks = (K + KC - 1) / KC;
+  const OpsKernels& ops = ops_kernels();
+
+  auto task = [&](int64_t t) {
+    const int64_t ti = t / n_tasks, tj = t % n_tasks;
+    const int64_t i0 = ti * mc, i1 = std::min(M, i0 + mc);
+    const int64_t j0 = tj * n_per_task, j1 = std::min(N, j0 + n_per_task);
+    if (j0 >= j1) return;
+    const int64_t mrows = i1 - i0, mrows_p = round_up(mrows, mr);
+    // A for every K block: block pc at a_off[pc / KC], micro-panels a_stride[] bytes apart.
+    std::vector<const unsigned char*> a_base(static_cast<size_t>(k_blocks));
+    std::vector<int64_t> a_stride(static_cast<size_t>(k_blocks));
+    if (a.prepacked) {
+      for (int64_t bi = 0; bi < k_blocks; ++bi) {
+        a_base[size_t(bi)] = static_cast<const unsigned char*>(a.prepacked) +
+                             ((i0 / mr) * a.kp * mr + bi * KC * mr) * esz;
+        a_stride[size_t(bi)] = a.kp * mr * esz;
+      }
+    } else {
+      int64_t total = 0;
+      for (int64_t pc = 0; pc < K; pc += KC)
+        total += mrows_p * round_up(std::min(KC, K - pc), kern.k_align) * esz;
+      auto* buf = static_cast<unsigned char*>(t_scratch_a.get(size_t(total)));
+      int64_t off = 0;
+      for (int64_t pc = 0, bi = 0; pc < K; pc += KC, ++bi) {
+        const int64_t kc = std::min(KC, K - pc), kcp = round_up(kc, kern.k_align);
+        a.pack(a.ctx, kern, true, i0, mrows, pc, kc, buf + off);
+        a_base[size_t(bi)] = buf + off;
+        a_stride[size_t(bi)] = kcp * mr * esz;
+        off += mrows_p * kcp * esz;
+      }
+    }
+    float* strip = static_cast<float*>(t_scratch_c.get(size_t(mr * nc) * sizeof(float)));
+    const int64_t b_stride = b.kp * nr * esz;
+    for (int64_t jc = j0; jc < j1; jc += nc) {
+      const int64_t ncols = std::min(nc, j1 - jc);
+      for (int64_t ir = 0; ir < mrows; ir += mr) {
+        const int64_t i = i0 + ir;
+        MicroTile mt;
+        mt.ldc = nc;
+        mt.m = int(std::min<int64_t>(mr, i1 - i));
+        for (int64_t pc = 0, bi = 0; pc < K; pc += KC, ++bi) {
+          const int64_t kc = std::min(KC, K - pc);
+          const bool first = pc == 0, last = pc + kc >= K;
+          const bool terms = kern.terms_first ? first : last;
+          mt.kc = round_up(kc, kern.k_align);
+          mt.a = a_base[size_t(bi)] + (ir / mr) * a_stride[size_t(bi)];
+          mt.beta = first ? 0.0f : 1.0f;
+          mt.load_c = !first;
+          const unsigned char* bbase = static_cast<const unsigned char*>(b.prepacked) +
+                                       ((jc / nr) * b.kp * nr + pc * nr) * esz;
+          if (kern.strip) {
+            mt.b = bbase;
+            mt.c = strip;
+            mt.bias_n = terms && p.bias_n ? p.bias_n + jc : nullptr;
+            kern.strip(mt, ncols, b_stride);
+            continue;
+          }
+          for (int64_t jr = 0; jr < ncols; jr += nr) {
+            mt.b = bbase + (jr / nr) * b_stride;
+            mt.n = int(std::min<int64_t>(nr, ncols - jr));
+            mt.c = strip + jr;
+            mt.bias_n = terms && p.bias_n ? p.bias_n + jc + jr : nullptr;
+            kern.micro(mt);
+          }
+        }
+        for (int r = 0; r < mt.m; ++r) {
+          const float* sr = strip + r * nc;
+          float* cr = s.C + (i + r) * s.ldc + jc / 2;
+          for (int64_t q = 0; q < ncols; q += 2 * g) ops.geglu(cr + q / 2, sr + q, sr + q + g, g);
+        }
+      }
+    }
+  };
+  const int64_t total = m_tasks * n_tasks;
+  if (!pool || pool->size() == 1 || total == 1) {
+    for (int64_t t = 0; t < total; ++t) task(t);
+  } else {
+    pool->parallel_for(
+        size_t(total),
+        [&](size_t b0, size_t b1, int) {
+          for (size_t t = b0; t < b1; ++t) task(int64_t(t));
+        },
+        1);
+  }
+}
+
+}  // namespace
+
 void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, const Operand& b,
               const GemmParams& p_in, ThreadPool* pool) {
   const int64_t M = s.M, N = s.N, K = s.K;
   if (M <= 0 || N <= 0) return;
+  if (p_in.geglu_group > 0) {
+    run_gemm_geglu(kern, s, a, b, p_in, pool);
+    return;
+  }
   GemmParams p = p_in;
   // A residual that is C itself, added after the last of several K blocks: fold it into beta so
   // that block does not read a C the earlier blocks overwrote. Added with the first block (or in

@@ -40,7 +40,22 @@ struct GemmParams {
   const float* residual = nullptr;  // [M, ldr], added after everything else (may alias C only if
   int64_t ldr = 0;                  //  beta == 0 and ldr == ldc)
   bool relu = false;                // C = max(0, C) after everything else (fused activation)
+  // GEGLU epilogue (a GEGLU projection, the U-Net's ff.net.0). With g > 0, B's N columns come in
+  // groups of 2g: g value columns, then the g gate columns that go with them (the projection's
+  // weight rows permuted by geglu_source_row when packed). C is then [M, N / 2] with
+  // C[i, q g + e] = value * GELU(gate) of the pair (q, e), by the ops table's geglu (ops.h), so
+  // the bits equal those of the GEMM into [M, N] followed by geglu() on the unpermuted columns;
+  // the [M, N] product never reaches memory. Needs prepacked B, N % 2g == 0, alpha 1, beta 0, and
+  // no bias_m, residual or ReLU (bias_n is in the permuted order).
+  int geglu_group = 0;
 };
+
+// The source row of packed row p of a GEGLU projection W [n, k] (value rows [0, n/2), gate rows
+// [n/2, n)) permuted for GemmParams::geglu_group = g.
+inline int64_t geglu_source_row(int64_t p, int64_t n, int g) {
+  const int64_t q = p / (2 * g), e = p % (2 * g);
+  return e < g ? q * g + e : n / 2 + q * g + (e - g);
+}
 
 // fp32 GEMM with both operands given unpacked.
 void gemm_f32(int64_t M, int64_t N, int64_t K, const float* A, int64_t lda, const float* B,

@@ -7,6 +7,7 @@
 #include <time.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -18,6 +19,7 @@
 #include "attention/runtime/cpu.h"
 #include "attention/runtime/gemm.h"
 #include "attention/runtime/kernels.h"
+#include "attention/runtime/ops.h"
 #include "bench_registry.h"
 
 namespace macro::bench {
@@ -164,6 +166,9 @@ int run(int argc, char** argv) {
     for (const G& g : shapes) {
       auto x = random_vec(size_t(g.m * g.k), 1);
       auto w = random_vec(size_t(g.n * g.k), 2);
+      // The scale of trained weights (std 1/sqrt(K)): the outputs are then of order 1, as the
+      // GEGLU rows need (gates of +-10 and beyond drive GELU's tail into denormals).
+      for (float& v : w) v *= float(std::sqrt(3.0 / double(g.k)));
       auto b = random_vec(size_t(g.n), 3);
       LineVec y(size_t(g.m * g.n));
       GemmParams p;
@@ -178,6 +183,31 @@ int run(int argc, char** argv) {
       PackedWeights w16 = PackedWeights::pack(w.data(), g.n, g.k, g.k, WeightType::kBf16);
       row((std::string("bf16 ") + g.what).c_str(), shape, flop, reps,
           [&] { gemm_packed(g.m, x.data(), g.k, w16, y.data(), g.n, p, pool); }, bf16_probe, pool);
+      if (std::string(g.what).find("ff.net.0") != std::string::npos) {
+        // The same projection then geglu() over memory (the baseline), and with the GEMM's GEGLU
+        // epilogue (rows permuted at pack time; the [M, N] product stays in cache).
+        LineVec h(size_t(g.m * g.n / 2));
+        row((std::string("bf16 ") + g.what + " + geglu()").c_str(), shape, flop, reps,
+            [&] {
+              gemm_packed(g.m, x.data(), g.k, w16, y.data(), g.n, p, pool);
+              geglu(h.data(), y.data(), g.m, g.n / 2, pool);
+            },
+            bf16_probe, pool);
+        const int group = 64;
+        std::vector<float> wp(w.size()), bp(b.size());
+        for (int64_t r = 0; r < g.n; ++r) {
+          const int64_t src = geglu_source_row(r, g.n, group);
+          std::copy_n(w.begin() + src * g.k, g.k, wp.begin() + r * g.k);
+          bp[size_t(r)] = b[size_t(src)];
+        }
+        PackedWeights wg = PackedWeights::pack(wp.data(), g.n, g.k, g.k, WeightType::kBf16);
+        GemmParams pg;
+        pg.bias_n = bp.data();
+        pg.geglu_group = group;
+        row((std::string("bf16 ") + g.what + " GEGLU epilogue").c_str(), shape, flop, reps,
+            [&] { gemm_packed(g.m, x.data(), g.k, wg, h.data(), g.n / 2, pg, pool); }, bf16_probe,
+            pool);
+      }
     }
     {
       // Unpacked B (both operands packed per call), and the scalar twin for the ratio.
