@@ -302,6 +302,21 @@ bool gemm_folds_aliased_residual(const GemmKernel& kern, int64_t K) {
 
 namespace {
 
+// task(t) for every t < total: one task per pool job, or inline.
+template <typename Task>
+void run_tasks(ThreadPool* pool, int64_t total, const Task& task) {
+  if (!pool || pool->size() == 1 || total == 1) {
+    for (int64_t t = 0; t < total; ++t) task(t);
+    return;
+  }
+  pool->parallel_for(
+      size_t(total),
+      [&](size_t b0, size_t b1, int) {
+        for (size_t t = b0; t < b1; ++t) task(int64_t(t));
+      },
+      1);
+}
+
 // GemmParams::geglu_group: every task packs its A rows for all K blocks, then takes one strip of
 // MR rows x NC columns at a time through all K blocks into a per-thread buffer (each tile sums as
 // in run_gemm: the same blocks, terms and kernel calls, so the same bits) and writes value *
@@ -407,17 +422,7 @@ void run_gemm_geglu(const GemmKernel& kern, const DriverShape& s, const Operand&
       }
     }
   };
-  const int64_t total = m_tasks * n_tasks;
-  if (!pool || pool->size() == 1 || total == 1) {
-    for (int64_t t = 0; t < total; ++t) task(t);
-  } else {
-    pool->parallel_for(
-        size_t(total),
-        [&](size_t b0, size_t b1, int) {
-          for (size_t t = b0; t < b1; ++t) task(int64_t(t));
-        },
-        1);
-  }
+  run_tasks(pool, m_tasks * n_tasks, task);
 }
 
 }  // namespace
@@ -561,17 +566,7 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
       }
     }
   };
-  const int64_t total = m_tasks * n_tasks;
-  if (!pool || pool->size() == 1 || total == 1) {
-    for (int64_t t = 0; t < total; ++t) task(t);
-  } else {
-    pool->parallel_for(
-        size_t(total),
-        [&](size_t b0, size_t b1, int) {
-          for (size_t t = b0; t < b1; ++t) task(int64_t(t));
-        },
-        1);
-  }
+  run_tasks(pool, m_tasks * n_tasks, task);
 }
 
 }  // namespace detail
