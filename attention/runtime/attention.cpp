@@ -287,27 +287,29 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, bool bf16_ok, 
   const ScratchLayout layout(d, bf16);
   const uint16_t* k16 = nullptr;
   const uint16_t* v16 = nullptr;
-  const bool tiles = bf16 && kern.bf16_tiles;
+  const Bf16Layout layout16 = bf16 ? kern.bf16_layout : Bf16Layout::kRows;
+  const bool tiles = layout16 == Bf16Layout::kTiles, pairs = layout16 == Bf16Layout::kPairs;
   // Tile layouts: whole key blocks of mask columns (zero past nk).
   const size_t ncol = tiles ? size_t(nkb) * kBK : size_t(a.nk);
   if (bf16 && a.nk > 0) {
     std::vector<uint16_t>& buf = kv16_buffer();
-    const size_t need = 2 * ncol * c;
+    // Pairs: V padded to whole key blocks (the missing partner of an odd last column is zero).
+    const size_t need = ncol * c + (pairs ? size_t(nkb) * kBK : ncol) * c;
     if (buf.size() < need) buf.resize(need);
     uint16_t* kb16 = buf.data();
     uint16_t* vb16 = kb16 + ncol * c;
-    if (!tiles) {
+    const int32_t* key_index = mask && !mask->key_index.empty() ? mask->key_index.data() : nullptr;
+    auto token = [&](size_t j) { return key_index ? size_t(key_index[j]) : j; };
+    if (layout16 == Bf16Layout::kRows) {
       pool.parallel_for(size_t(a.nk), [&](size_t begin, size_t end, int) {
         for (size_t j = begin; j < end; ++j) {
           kern.to_bf16(a.k + j * a.k_stride, kb16 + j * c, c);
           kern.to_bf16(a.v + j * a.v_stride, vb16 + j * c, c);
         }
       });
-    } else {
+    } else if (tiles) {
       // K row of mask column j, and V transposed per key block:
       // vb16[(kb * c + i) * BK + jj] = V[token of column kb * BK + jj][i].
-      const int32_t* key_index =
-          mask && !mask->key_index.empty() ? mask->key_index.data() : nullptr;
       pool.parallel_for(size_t(nkb), [&](size_t begin, size_t end, int) {
         std::vector<uint16_t> row(c);
         for (size_t kb = begin; kb < end; ++kb) {
@@ -319,10 +321,44 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, bool bf16_ok, 
               for (size_t i = 0; i < c; ++i) vt[i * kBK + jj] = 0;
               continue;
             }
-            const size_t t = key_index ? size_t(key_index[j]) : j;
-            kern.to_bf16(a.k + t * a.k_stride, kb16 + j * c, c);
-            kern.to_bf16(a.v + t * a.v_stride, row.data(), c);
+            kern.to_bf16(a.k + token(j) * a.k_stride, kb16 + j * c, c);
+            kern.to_bf16(a.v + token(j) * a.v_stride, row.data(), c);
             for (size_t i = 0; i < c; ++i) vt[i * kBK + jj] = row[i];
+          }
+        }
+      });
+    } else {
+      // Per head h: K row of mask column j at kb16 + (h nk + j) D; V pair words of columns
+      // (2p, 2p + 1) of the whole padded sequence at vb16 + 2 ((h nkb BK / 2 + p) D + i).
+      const size_t dd = size_t(d), npairs = size_t(nkb) * kBK / 2;
+      pool.parallel_for(npairs, [&](size_t begin, size_t end, int) {
+        std::vector<uint16_t> lo(c), hi(c);
+        for (size_t p = begin; p < end; ++p) {
+          const size_t j0 = 2 * p, j1 = j0 + 1;
+          if (j0 < size_t(a.nk)) {
+            kern.to_bf16(a.v + token(j0) * a.v_stride, lo.data(), c);
+            for (int h = 0; h < a.heads; ++h)
+              kern.to_bf16(a.k + token(j0) * a.k_stride + size_t(h) * dd,
+                           kb16 + (size_t(h) * a.nk + j0) * dd, dd);
+          } else {
+            std::fill(lo.begin(), lo.end(), uint16_t(0));
+          }
+          if (j1 < size_t(a.nk)) {
+            kern.to_bf16(a.v + token(j1) * a.v_stride, hi.data(), c);
+            for (int h = 0; h < a.heads; ++h)
+              kern.to_bf16(a.k + token(j1) * a.k_stride + size_t(h) * dd,
+                           kb16 + (size_t(h) * a.nk + j1) * dd, dd);
+          } else {
+            std::fill(hi.begin(), hi.end(), uint16_t(0));
+          }
+          for (int h = 0; h < a.heads; ++h) {
+            uint16_t* w = vb16 + 2 * ((size_t(h) * npairs + p) * dd);
+            const uint16_t* l = lo.data() + size_t(h) * dd;
+            const uint16_t* u = hi.data() + size_t(h) * dd;
+            for (size_t i = 0; i < dd; ++i) {
+              w[2 * i] = l[i];
+              w[2 * i + 1] = u[i];
+            }
           }
         }
       });
@@ -415,9 +451,15 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, bool bf16_ok, 
     job.v_stride = a.v_stride;
     job.key_index = mask && !mask->key_index.empty() ? mask->key_index.data() : nullptr;
     job.nk = a.nk;
-    job.k16 = k16 ? k16 + size_t(h) * d : nullptr;
-    job.v16 = v16 ? v16 + (tiles ? size_t(h) * d * kBK : size_t(h) * d) : nullptr;
-    job.kv16_stride = c;
+    if (pairs) {
+      job.k16 = k16 + size_t(h) * size_t(a.nk) * d;
+      job.v16 = v16 + size_t(h) * size_t(nkb) * kBK * d;
+      job.kv16_stride = size_t(d);
+    } else {
+      job.k16 = k16 ? k16 + size_t(h) * d : nullptr;
+      job.v16 = v16 ? v16 + (tiles ? size_t(h) * d * kBK : size_t(h) * d) : nullptr;
+      job.kv16_stride = c;
+    }
   };
 
   const size_t items = size_t(groups) * size_t(a.heads);

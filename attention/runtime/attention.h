@@ -33,7 +33,7 @@
 // bf16 (nearest even): K and V once per call, scale * log2(e) * Q when a query block is packed,
 // and the probabilities P of each tile. Paths: avx512bf16 (D % 32 == 0) and the scalar twin (same
 // roundings, reference for the tests), amx (D % 32 == 0: both products on tiles with TDPBF16PS,
-// K in mask column order and V transposed, see AttentionKernels::bf16_tiles); on avx2 / avx512
+// K in mask column order and V transposed, see Bf16Layout); on avx2 / avx512
 // without bf16 dot products, or a head dim the kernel cannot take, the request is ignored and
 // attention runs in fp32.
 #pragma once
@@ -76,6 +76,15 @@ namespace attention_detail {
 
 inline constexpr int kMaxHeadDim = 512;
 
+// Where a bf16 kernel finds K and V (rounded once per call):
+//   kRows   token rows of all heads, as the fp32 inputs (the scalar twin);
+//   kTiles  K rows in mask column order and V transposed per key block, zero-padded to whole key
+//           blocks, so a key block of either is read by strided AMX tile loads (the amx kernel);
+//   kPairs  per head, K rows in mask column order and V as pair words per key block (the value
+//           pairs vdpbf16ps multiplies: keys 2c and 2c+1 of the block), so a key block of each is
+//           one contiguous stretch and the kernel packs nothing per block (avx512bf16).
+enum class Bf16Layout { kRows, kTiles, kPairs };
+
 // One (head, query block) work item, already resolved to row pointers in token order.
 struct BlockJob {
   int rows = 0;                           // valid query rows, 1..kAttnBlockQ
@@ -91,11 +100,16 @@ struct BlockJob {
   size_t k_stride = 0, v_stride = 0;
   const int32_t* key_index = nullptr;  // mask column -> key token, or null = identity
   int nk = 0;
-  // bf16 kernels: K and V rounded to bf16, head slice of row 0 (token j at k16 + j * kv16_stride).
-  // With AttentionKernels::bf16_tiles: k16 holds mask column j (not token j) at k16 + j *
-  // kv16_stride, and v16 is V transposed per key block, [key block][C][BK]: channel i of this
-  // head and column kb * BK + c at v16 + (kb * kv16_stride + i) * BK + c (rows of a tile 128 bytes
-  // apart, not a whole sequence); both are zero past nk up to a whole key block.
+  // bf16 kernels: K and V rounded to bf16 in the kernel table's Bf16Layout:
+  //   kRows: head slice of row 0, token j at k16 + j * kv16_stride (v16 likewise);
+  //   kTiles: k16 holds mask column j (not token j) at k16 + j * kv16_stride, and v16 is V
+  //     transposed per key block, [key block][C][BK]: channel i of this head and column
+  //     kb * BK + c at v16 + (kb * kv16_stride + i) * BK + c (rows of a tile 128 bytes apart, not
+  //     a whole sequence); both are zero past nk up to a whole key block;
+  //   kPairs: this head's rows only: mask column j at k16 + j * D (kv16_stride = D), and v16 holds
+  //     [key block][BK / 2][D] pair words, word (kb, c, i) = (V[column kb BK + 2c][i] low,
+  //     V[column kb BK + 2c + 1][i] high) at v16 + 2 ((kb BK / 2 + c) D + i), the high half zero
+  //     for a missing last column.
   const uint16_t* k16 = nullptr;
   const uint16_t* v16 = nullptr;
   size_t kv16_stride = 0;
@@ -153,10 +167,8 @@ struct AttentionKernels {
   BlockFn block_bf16 = nullptr;  // null: this path computes bf16 requests in fp32
   int bf16_d_multiple = 1;
   ToBf16Fn to_bf16 = nullptr;
-  // The bf16 K / V layouts of BlockJob: false = token rows; true = K rows in mask column order
-  // and V transposed per key block, zero-padded to whole key blocks (so a key block of either is
-  // read by strided AMX tile loads: the amx kernel).
-  bool bf16_tiles = false;
+  // The bf16 K / V layout of BlockJob the bf16 kernel reads (see Bf16Layout).
+  Bf16Layout bf16_layout = Bf16Layout::kRows;
 };
 
 // The table for a path (the scalar table for paths without their own kernels).

@@ -93,10 +93,6 @@ void pv_amx(const BlockJob& job, int kb, int cols, uint32_t* pp, float* o, bool 
 struct AmxBlocks {
   using Row = uint16_t;
   static constexpr bool kWholeBlocks = true;
-  static const uint16_t* k(const BlockJob& j) { return j.k16; }
-  static const uint16_t* v(const BlockJob& j) { return j.v16; }
-  static size_t k_stride(const BlockJob& j) { return j.kv16_stride; }
-  static size_t v_stride(const BlockJob& j) { return j.kv16_stride; }
 
   // O^T is not cleared: the first step (m still -inf) starts its tiles from zero instead of O^T.
   static void init(const BlockJob& j, const BlockScratch& sc) {
@@ -113,7 +109,7 @@ struct AmxBlocks {
   static void prefetch(const BlockJob&, int) {}
 
   static void step(const BlockJob& j, const BlockScratch& sc, int kb, const uint16_t* const*,
-                   const uint16_t* const*, int cols, const uint8_t* tile, const void**) {
+                   const uint16_t* const*, int cols, const uint8_t* tile, bool) {
     const bool first = sc.m[0] == -std::numeric_limits<float>::infinity();
     scores_amx(j, kb, reinterpret_cast<const uint32_t*>(sc.qt), sc.s);
     mask_scores<Avx512>(sc.s, cols, tile);
@@ -157,7 +153,7 @@ const AttentionKernels& amx_kernels() {
     t.isa = Isa::kAmx;
     t.block_bf16 = blocks_amx;
     t.bf16_d_multiple = 32;
-    t.bf16_tiles = true;
+    t.bf16_layout = Bf16Layout::kTiles;
     return t;
   }();
   return k;

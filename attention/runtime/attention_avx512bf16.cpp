@@ -5,7 +5,8 @@
 //   qp [D/2][BQ]  Q pairs (channels 2e, 2e+1) per query lane, pre-scaled by scale * log2(e)
 //   K rows        bf16 [D] per key; pair e is read as one word and broadcast
 //   pp [BK/2][BQ] P pairs (keys 2c, 2c+1) per query lane, built from S^T after the softmax
-//   vp [BK/2][D]  V pairs (keys 2c, 2c+1) per channel, built per key block
+//   vp [BK/2][D]  V pairs (keys 2c, 2c+1) per channel: the pairs layout's own words for a whole
+//                 key block (Bf16Layout::kPairs), packed per tile for a partial one
 // Score tile: 6 keys x 4 zmm (64 queries) = 24 accumulators; P V: 6 query rows x 4 zmm (64
 // channels), as in the fp32 kernel, with half the instructions per product.
 #include "attention/runtime/attention_avx512_traits.h"
@@ -27,13 +28,6 @@ inline uint32_t load_word(const uint16_t* p) {
 
 inline __m512 dot(__m512 acc, __m512i a, __m512i b) {
   return _mm512_dpbf16_ps(acc, reinterpret_cast<__m512bh>(a), reinterpret_cast<__m512bh>(b));
-}
-
-// 16 words from two bf16 rows: low halves a[i], high halves b[i].
-inline __m512i pair_words(const uint16_t* a, const uint16_t* b) {
-  const __m512i l = _mm512_cvtepu16_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(a)));
-  const __m512i h = _mm512_cvtepu16_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(b)));
-  return _mm512_or_si512(l, _mm512_slli_epi32(h, 16));
 }
 
 // S^T[c][0..64) for R keys: sum over pairs e of K[c] pair e . qp[e][r].
@@ -82,14 +76,28 @@ void score_tile_bf16(const uint16_t* const* k_rows, int keys, const uint32_t* qp
   if (c < keys) score_tail_bf16<R - 1>(keys - c, k_rows + c, qp, d2, s + size_t(c) * kTileQ);
 }
 
-// vp[c][i] = (V[2c][i], V[2c+1][i]); a missing odd key pairs with 0.
-void pack_v_pairs(const uint16_t* const* v_rows, int cols, int d, uint32_t* vp) {
-  alignas(64) static const uint16_t zeros[kMaxHeadDim] = {};
+// 16 bf16 values of one V row in the pairs layout (Bf16Layout::kPairs), elements i .. i + 15, in
+// the low halves of 16 words: the row's elements are every other bf16 of its pair row, the low
+// halves for an even column, the high halves for an odd one (the layout is 4-byte aligned, so
+// bit 1 of the address says which).
+inline __m512i v_halves(const uint16_t* row, int i) {
+  const bool high = reinterpret_cast<uintptr_t>(row) & 2;
+  const __m512i w = _mm512_loadu_si512(row - int(high) + 2 * i);
+  return high ? _mm512_srli_epi32(w, 16) : _mm512_and_si512(w, _mm512_set1_epi32(0xffff));
+}
+
+// vp[c][i] = (V[2c][i], V[2c+1][i]) for the live columns of a partial tile (rows in the pairs
+// layout, see v_halves); a missing odd key pairs with 0. Whole key blocks use the layout's own
+// pair words, which hold the same pairs of the block's columns.
+void pack_live_v_pairs(const uint16_t* const* v_rows, int cols, int d, uint32_t* vp) {
   for (int c = 0; 2 * c < cols; ++c) {
     const uint16_t* a = v_rows[2 * c];
-    const uint16_t* b = 2 * c + 1 < cols ? v_rows[2 * c + 1] : zeros;
-    for (int i = 0; i < d; i += 16)
-      _mm512_storeu_si512(vp + size_t(c) * d + i, pair_words(a + i, b + i));
+    const uint16_t* b = 2 * c + 1 < cols ? v_rows[2 * c + 1] : nullptr;
+    for (int i = 0; i < d; i += 16) {
+      const __m512i lo = v_halves(a, i);
+      const __m512i hi = b ? _mm512_slli_epi32(v_halves(b, i), 16) : _mm512_setzero_si512();
+      _mm512_storeu_si512(vp + size_t(c) * d + i, _mm512_or_si512(lo, hi));
+    }
   }
 }
 
@@ -152,31 +160,51 @@ void pv_tile_bf16(int rows, const uint32_t* pp, int cols, const uint32_t* vp, fl
   for (; d0 < d; d0 += 16) pv_chunk_bf16<1>(rows, pp, c2, vp, d0, o, d, alpha);
 }
 
+// K and V in the pairs layout (Bf16Layout::kPairs): a key block's K rows and its V pair words
+// are two contiguous stretches of this head, so nothing is packed per block but the
+// probabilities (and the V pairs of a partial tile whose dead keys were dropped).
 struct Bf16Blocks {
   using Row = uint16_t;
   static constexpr bool kWholeBlocks = false;
-  static const uint16_t* k(const BlockJob& j) { return j.k16; }
-  static const uint16_t* v(const BlockJob& j) { return j.v16; }
-  static size_t k_stride(const BlockJob& j) { return j.kv16_stride; }
-  static size_t v_stride(const BlockJob& j) { return j.kv16_stride; }
+  static const uint16_t* k_block(const BlockJob& j, int kb) {
+    return j.k16 + size_t(kb) * kTileK * j.kv16_stride;
+  }
+  static const uint16_t* v_block(const BlockJob& j, int kb) {
+    return j.v16 + size_t(kb) * kTileK * j.d;
+  }
+  // V row of column c: every other bf16 of its pair row, from the low (even c) or high half.
+  static void rows(const BlockJob& j, int kb, int cols, const uint16_t** k_rows,
+                   const uint16_t** v_rows) {
+    const uint16_t* k = k_block(j, kb);
+    const uint16_t* v = v_block(j, kb);
+    for (int c = 0; c < cols; ++c) {
+      k_rows[c] = k + size_t(c) * j.kv16_stride;
+      v_rows[c] = v + size_t(c / 2) * 2 * j.d + (c & 1);
+    }
+  }
+  static void prefetch(const BlockJob& j, int kb) {
+    const int cols = std::min(kTileK, j.nk - kb * kTileK);
+    const char* k = reinterpret_cast<const char*>(k_block(j, kb));
+    const char* v = reinterpret_cast<const char*>(v_block(j, kb));
+    const size_t k_bytes = size_t(cols) * j.kv16_stride * 2,
+                 v_bytes = size_t(cols + 1) / 2 * j.d * 4;
+    for (size_t i = 0; i < k_bytes; i += 64) _mm_prefetch(k + i, _MM_HINT_T1);
+    for (size_t i = 0; i < v_bytes; i += 64) _mm_prefetch(v + i, _MM_HINT_T1);
+  }
   static void init(const BlockJob& j, const BlockScratch& sc) {
     block_reset<Avx512>(j, sc);
     pack_q_pairs(j, reinterpret_cast<uint32_t*>(sc.qt));
   }
-  // The V pairs of a whole key block are packed once and shared by the group's jobs (`shared`);
-  // a partial tile with dropped keys packs its own.
-  static void step(const BlockJob& j, const BlockScratch& sc, int, const uint16_t* const* k_rows,
-                   const uint16_t* const* v_rows, int cols, const uint8_t* tile,
-                   const void** shared) {
+  static void step(const BlockJob& j, const BlockScratch& sc, int kb, const uint16_t* const* k_rows,
+                   const uint16_t* const* v_rows, int cols, const uint8_t* tile, bool whole) {
     score_tile_bf16(k_rows, cols, reinterpret_cast<const uint32_t*>(sc.qt), j.d, sc.s);
     mask_scores<Avx512>(sc.s, cols, tile);
     softmax_pack_bf16(sc.s, cols, sc.m, sc.l, sc.alpha, sc.pp);
-    const uint32_t* vp = shared && *shared ? static_cast<const uint32_t*>(*shared) : nullptr;
-    if (!vp) {
-      pack_v_pairs(v_rows, cols, j.d, sc.vp);
-      vp = sc.vp;
-      if (shared) *shared = vp;
-    }
+    const uint32_t* vp = sc.vp;
+    if (whole)
+      vp = reinterpret_cast<const uint32_t*>(v_block(j, kb));
+    else
+      pack_live_v_pairs(v_rows, cols, j.d, sc.vp);
     pv_tile_bf16(j.rows, sc.pp, cols, vp, sc.o, j.d, sc.alpha);
   }
   static void finish(const BlockJob& j, const BlockScratch& sc) { block_finish<Avx512>(j, sc); }
@@ -203,6 +231,7 @@ const AttentionKernels& avx512bf16_kernels() {
     t.block_bf16 = blocks_bf16;
     t.bf16_d_multiple = 32;
     t.to_bf16 = to_bf16_avx512;
+    t.bf16_layout = Bf16Layout::kPairs;
     return t;
   }();
   return k;

@@ -254,16 +254,17 @@ void block_finish(const BlockJob& job, const BlockScratch& sc) {
 // K/V block is visited once and applied to every job that lists it, so a job sees exactly its
 // own blocks in its own order (results do not depend on the grouping).
 // Kern supplies the element type of the K / V rows and the per-block operations:
-//   using Row; k(job), v(job), k_stride(job), v_stride(job): head slice of token 0 and row strides;
-//   init(job, sc); step(job, sc, kb, k_rows, v_rows, cols, tile, shared); finish(job, sc);
+//   using Row; rows(job, kb, cols, k_rows, v_rows): the row pointers of key block kb (not called
+//   when kWholeBlocks); prefetch(job, kb): ask for key block kb, the next one the walk visits;
+//   init(job, sc); step(job, sc, kb, k_rows, v_rows, cols, tile, whole); finish(job, sc);
 //   kWholeBlocks: false for kernels that read K / V through the row pointers (a partial tile's
 //   dead keys are then dropped before the step); true for a kernel that reads whole key blocks
 //   from its own layouts by their index kb (the AMX kernel: no row pointers are built, partial
 //   tiles keep their dead keys, whose probabilities the mask zeroes, and Kern::prefetch(job, kb)
 //   asks for the next block).
-// `shared` is null for a partial tile whose dead keys were dropped; for a whole key block it
-// points to one slot per key block, reset to null before the block's first job, where a kernel
-// may leave what it derived from the block (the bf16 kernel's V pairs) for the group's other jobs.
+// `whole` is true when the rows are key block kb's own, all of its columns in order, and false
+// for the live columns of a partial tile whose dead keys were dropped (a kernel with its own
+// per-block layouts, the bf16 V pairs, can use them only in the first case).
 template <typename Kern>
 void blocks_walk(const BlockJob* jobs, int count, const BlockScratch* scratch) {
   using Row = typename Kern::Row;
@@ -281,28 +282,18 @@ void blocks_walk(const BlockJob* jobs, int count, const BlockScratch* scratch) {
     return kb;
   };
   const BlockJob& j0 = jobs[0];
-  const Row* kbase = Kern::k(j0);
-  const Row* vbase = Kern::v(j0);
-  const size_t ks = Kern::k_stride(j0), vs = Kern::v_stride(j0);
   for (int kb = next_block(pos); kb != INT32_MAX;) {
     const int cols = std::min(kTileK, j0.nk - kb * kTileK);
-    if constexpr (!Kern::kWholeBlocks)
-      key_block_rows(j0, kb, cols, kbase, vbase, ks, vs, k_rows, v_rows);
+    if constexpr (!Kern::kWholeBlocks) Kern::rows(j0, kb, cols, k_rows, v_rows);
     for (int g = 0; g < count; ++g)
       if (pos[g] < jobs[g].entries && jobs[g].key_blocks[pos[g]] == kb) ++pos[g];
     const int next = next_block(pos);
-    if (next != INT32_MAX) {
-      if constexpr (Kern::kWholeBlocks)
-        Kern::prefetch(j0, next);
-      else
-        prefetch_key_block(j0, kbase, vbase, ks, vs, next);
-    }
-    const void* shared = nullptr;
+    if (next != INT32_MAX) Kern::prefetch(j0, next);
     for (int g = 0; g < count; ++g) {
       if (pos[g] == 0 || jobs[g].key_blocks[pos[g] - 1] != kb) continue;
       const uint8_t* tile = jobs[g].tiles[pos[g] - 1];
       if (!tile) {
-        Kern::step(jobs[g], scratch[g], kb, k_rows, v_rows, cols, nullptr, &shared);
+        Kern::step(jobs[g], scratch[g], kb, k_rows, v_rows, cols, nullptr, true);
         continue;
       }
       // Partial tile: drop the keys no query of this block may see (they would only add exact
@@ -327,11 +318,11 @@ void blocks_walk(const BlockJob* jobs, int count, const BlockScratch* scratch) {
         ++live;
       }
       if (Kern::kWholeBlocks) {
-        if (live > 0) Kern::step(jobs[g], scratch[g], kb, k_rows, v_rows, cols, tile, nullptr);
+        if (live > 0) Kern::step(jobs[g], scratch[g], kb, k_rows, v_rows, cols, tile, true);
       } else if (live == cols) {
-        Kern::step(jobs[g], scratch[g], kb, k_rows, v_rows, cols, tile, &shared);
+        Kern::step(jobs[g], scratch[g], kb, k_rows, v_rows, cols, tile, true);
       } else if (live > 0) {
-        Kern::step(jobs[g], scratch[g], kb, live_k, live_v, live, live_tile, nullptr);
+        Kern::step(jobs[g], scratch[g], kb, live_k, live_v, live, live_tile, false);
       }
     }
     kb = next;
@@ -344,13 +335,16 @@ template <typename T>
 struct F32Blocks {
   using Row = float;
   static constexpr bool kWholeBlocks = false;
-  static const float* k(const BlockJob& j) { return j.k; }
-  static const float* v(const BlockJob& j) { return j.v; }
-  static size_t k_stride(const BlockJob& j) { return j.k_stride; }
-  static size_t v_stride(const BlockJob& j) { return j.v_stride; }
+  static void rows(const BlockJob& j, int kb, int cols, const float** k_rows,
+                   const float** v_rows) {
+    key_block_rows(j, kb, cols, j.k, j.v, j.k_stride, j.v_stride, k_rows, v_rows);
+  }
+  static void prefetch(const BlockJob& j, int kb) {
+    prefetch_key_block(j, j.k, j.v, j.k_stride, j.v_stride, kb);
+  }
   static void init(const BlockJob& j, const BlockScratch& sc) { block_init<T>(j, sc); }
   static void step(const BlockJob& j, const BlockScratch& sc, int, const float* const* k_rows,
-                   const float* const* v_rows, int cols, const uint8_t* tile, const void**) {
+                   const float* const* v_rows, int cols, const uint8_t* tile, bool) {
     block_step<T>(j, sc, k_rows, v_rows, cols, tile);
   }
   static void finish(const BlockJob& j, const BlockScratch& sc) { block_finish<T>(j, sc); }
