@@ -62,33 +62,43 @@ inline __m512 exp2_bf16(__m512 x) {
 // with the packing of the probabilities: per query vector,
 // m' = max(m, max_c S), alpha = 2^(m - m'), P = 2^(S - m') summed into l in key order and written
 // straight into pair words pp[c][r] = (bf16(P[2c][r]), bf16(P[2c+1][r])), a missing odd key as 0.
-// The fp32 P never goes back to memory.
+// The fp32 P never goes back to memory. The four 16-query vectors of the tile go through each key
+// together: four independent max and sum chains (each lane's own order is unchanged), and one
+// contiguous 256-byte score row per key.
 inline void softmax_pack_bf16(const float* s, int cols, float* m, float* l, float* alpha,
                               uint32_t* pp) {
+  constexpr int kV = kTileQ / 16;
   const __m512 zero = _mm512_setzero_ps();
-  for (int r0 = 0; r0 < kTileQ; r0 += 16) {
-    __m512 mx = _mm512_set1_ps(-std::numeric_limits<float>::infinity());
-    for (int c = 0; c < cols; ++c)
-      mx = _mm512_max_ps(mx, _mm512_loadu_ps(s + size_t(c) * kTileQ + r0));
-    const __m512 m_old = _mm512_loadu_ps(m + r0);
-    const __m512 m_new = _mm512_max_ps(_mm512_max_ps(m_old, mx),
-                                       _mm512_set1_ps(std::numeric_limits<float>::lowest()));
-    const __m512 a = exp2_bf16(_mm512_sub_ps(m_old, m_new));
-    __m512 sum = zero;
-    for (int c = 0; 2 * c < cols; ++c) {
-      const float* sc = s + size_t(2 * c) * kTileQ + r0;
-      const __m512 lo = exp2_bf16(_mm512_sub_ps(_mm512_loadu_ps(sc), m_new));
-      sum = _mm512_add_ps(sum, lo);
+  __m512 mx[kV], m_new[kV], sum[kV];
+  for (int v = 0; v < kV; ++v) mx[v] = _mm512_set1_ps(-std::numeric_limits<float>::infinity());
+  for (int c = 0; c < cols; ++c)
+    for (int v = 0; v < kV; ++v)
+      mx[v] = _mm512_max_ps(mx[v], _mm512_loadu_ps(s + size_t(c) * kTileQ + 16 * v));
+  for (int v = 0; v < kV; ++v) {
+    const __m512 m_old = _mm512_loadu_ps(m + 16 * v);
+    m_new[v] = _mm512_max_ps(_mm512_max_ps(m_old, mx[v]),
+                             _mm512_set1_ps(std::numeric_limits<float>::lowest()));
+    _mm512_storeu_ps(alpha + 16 * v, exp2_bf16(_mm512_sub_ps(m_old, m_new[v])));
+    sum[v] = zero;
+  }
+  for (int c = 0; 2 * c < cols; ++c) {
+    const float* sc = s + size_t(2 * c) * kTileQ;
+    const bool odd = 2 * c + 1 < cols;
+    for (int v = 0; v < kV; ++v) {
+      const __m512 lo = exp2_bf16(_mm512_sub_ps(_mm512_loadu_ps(sc + 16 * v), m_new[v]));
+      sum[v] = _mm512_add_ps(sum[v], lo);
       __m512 hi = zero;
-      if (2 * c + 1 < cols) {
-        hi = exp2_bf16(_mm512_sub_ps(_mm512_loadu_ps(sc + kTileQ), m_new));
-        sum = _mm512_add_ps(sum, hi);
+      if (odd) {
+        hi = exp2_bf16(_mm512_sub_ps(_mm512_loadu_ps(sc + kTileQ + 16 * v), m_new[v]));
+        sum[v] = _mm512_add_ps(sum[v], hi);
       }
-      _mm512_storeu_si512(pp + size_t(c) * kTileQ + r0, bf16_pair_words(lo, hi));
+      _mm512_storeu_si512(pp + size_t(c) * kTileQ + 16 * v, bf16_pair_words(lo, hi));
     }
-    _mm512_storeu_ps(l + r0, _mm512_fmadd_ps(_mm512_loadu_ps(l + r0), a, sum));
-    _mm512_storeu_ps(m + r0, m_new);
-    _mm512_storeu_ps(alpha + r0, a);
+  }
+  for (int v = 0; v < kV; ++v) {
+    _mm512_storeu_ps(l + 16 * v, _mm512_fmadd_ps(_mm512_loadu_ps(l + 16 * v),
+                                                 _mm512_loadu_ps(alpha + 16 * v), sum[v]));
+    _mm512_storeu_ps(m + 16 * v, m_new[v]);
   }
 }
 
