@@ -331,26 +331,22 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, bool bf16_ok, 
       // Per head h: K row of mask column j at kb16 + (h nk + j) D; V pair words of columns
       // (2p, 2p + 1) of the whole padded sequence at vb16 + 2 ((h nkb BK / 2 + p) D + i).
       const size_t dd = size_t(d), npairs = size_t(nkb) * kBK / 2;
+      // Column j: its K rows into place, its V row (zero past nk) into `row`.
+      auto column = [&](size_t j, std::vector<uint16_t>& row) {
+        if (j >= size_t(a.nk)) {
+          std::fill(row.begin(), row.end(), uint16_t(0));
+          return;
+        }
+        kern.to_bf16(a.v + token(j) * a.v_stride, row.data(), c);
+        for (int h = 0; h < a.heads; ++h)
+          kern.to_bf16(a.k + token(j) * a.k_stride + size_t(h) * dd,
+                       kb16 + (size_t(h) * a.nk + j) * dd, dd);
+      };
       pool.parallel_for(npairs, [&](size_t begin, size_t end, int) {
         std::vector<uint16_t> lo(c), hi(c);
         for (size_t p = begin; p < end; ++p) {
-          const size_t j0 = 2 * p, j1 = j0 + 1;
-          if (j0 < size_t(a.nk)) {
-            kern.to_bf16(a.v + token(j0) * a.v_stride, lo.data(), c);
-            for (int h = 0; h < a.heads; ++h)
-              kern.to_bf16(a.k + token(j0) * a.k_stride + size_t(h) * dd,
-                           kb16 + (size_t(h) * a.nk + j0) * dd, dd);
-          } else {
-            std::fill(lo.begin(), lo.end(), uint16_t(0));
-          }
-          if (j1 < size_t(a.nk)) {
-            kern.to_bf16(a.v + token(j1) * a.v_stride, hi.data(), c);
-            for (int h = 0; h < a.heads; ++h)
-              kern.to_bf16(a.k + token(j1) * a.k_stride + size_t(h) * dd,
-                           kb16 + (size_t(h) * a.nk + j1) * dd, dd);
-          } else {
-            std::fill(hi.begin(), hi.end(), uint16_t(0));
-          }
+          column(2 * p, lo);
+          column(2 * p + 1, hi);
           for (int h = 0; h < a.heads; ++h) {
             uint16_t* w = vb16 + 2 * ((size_t(h) * npairs + p) * dd);
             const uint16_t* l = lo.data() + size_t(h) * dd;
