@@ -331,7 +331,8 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, bool bf16_ok, 
       // Per head h: K row of mask column j at kb16 + (h nk + j) D; V pair words of columns
       // (2p, 2p + 1) of the whole padded sequence at vb16 + 2 ((h nkb BK / 2 + p) D + i).
       const size_t dd = size_t(d), npairs = size_t(nkb) * kBK / 2;
-      // Column j: its K rows into place, its V row (zero past nk) into `row`.
+      // Column j: its K rows into place, its V row (zero past nk) into `row`; V is rounded by the
+      // table's to_bf16 like K, then interleaved into pair words (once per call, off the hot loop).
       auto column = [&](size_t j, std::vector<uint16_t>& row) {
         if (j >= size_t(a.nk)) {
           std::fill(row.begin(), row.end(), uint16_t(0));
