@@ -4,9 +4,12 @@
 // wall and process CPU time.
 //
 //   bench winograd [--threads N] [--reps R] [--quick] [--only SUBSTR] [--chunk TILES] [--f32]
+//                  [--wino-only]
+// --wino-only runs the Winograd conv alone (no direct baseline; for profiling it with perf).
 // Shapes: the Difix VAE's 3x3 convs at 960x536 and the SD-Turbo U-Net's at its 120x67 latent.
 // --quick crops the spatial sizes by 4 per side. GFLOP/s are the direct conv's FLOP per second
-// (2 Cin Cout 9 per pixel) for both, so the columns compare directly.
+// (2 Cin Cout 9 per pixel) for both, so the columns compare directly; "best w" is the fastest
+// Winograd run (ms: on a busy VM the least disturbed one).
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -33,7 +36,7 @@ int run(int argc, char** argv) {
   bool quick = false;
   std::string only;
   size_t chunk = 0;
-  bool f32 = false;
+  bool f32 = false, wino_only = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--threads") && i + 1 < argc)
       threads = std::atoi(argv[++i]);
@@ -47,10 +50,12 @@ int run(int argc, char** argv) {
       chunk = size_t(std::atoll(argv[++i]));
     else if (!std::strcmp(argv[i], "--f32"))
       f32 = true;
+    else if (!std::strcmp(argv[i], "--wino-only"))
+      wino_only = true;
     else {
       std::fprintf(stderr,
                    "usage: bench winograd [--threads N] [--reps R] [--quick] [--only SUBSTR] "
-                   "[--chunk TILES] [--f32]\n");
+                   "[--chunk TILES] [--f32] [--wino-only]\n");
       return 2;
     }
   }
@@ -68,9 +73,9 @@ int run(int argc, char** argv) {
   std::printf("%s conv 3x3 s1 p1, Winograd F(2x2,3x3) vs direct; isa %s, threads %d, reps %d%s\n",
               f32 ? "fp32" : "bf16", isa_name(active_isa()), threads, reps,
               quick ? " [--quick: spatial sizes / 4 per side]" : "");
-  std::printf("  %-14s %-16s %10s %10s %8s | %9s %9s %8s | %7s %7s\n", "layer", "shape",
+  std::printf("  %-14s %-16s %10s %10s %8s | %9s %9s %8s | %7s %7s | %7s\n", "layer", "shape",
               "direct ms", "wino ms", "ratio", "direct cpu", "wino cpu", "ratio", "GF/s d",
-              "GF/s w");
+              "GF/s w", "best w");
   const size_t old_chunk = conv2d_set_winograd_chunk(chunk);
   for (C cv : convs) {
     if (!only.empty() && std::string(cv.what).find(only) == std::string::npos) continue;
@@ -92,11 +97,12 @@ int run(int argc, char** argv) {
       conv2d(s, x.data(), cw, nullptr, y.data(), pool);
       return Timing{now_seconds() - w0, cpu_seconds() - c0};
     };
-    once(ConvWinograd::kOff);  // warm-up both
+    if (!wino_only) once(ConvWinograd::kOff);  // warm-up both
     once(ConvWinograd::kAlways);
     std::vector<double> dw, dc, ww, wc;
     for (int r = 0; r < reps; ++r) {
-      const Timing d = once(ConvWinograd::kOff), v = once(ConvWinograd::kAlways);
+      const Timing d = wino_only ? Timing{} : once(ConvWinograd::kOff);
+      const Timing v = once(ConvWinograd::kAlways);
       dw.push_back(d.wall), dc.push_back(d.cpu), ww.push_back(v.wall), wc.push_back(v.cpu);
     }
     conv2d_set_winograd(old);
@@ -104,9 +110,10 @@ int run(int argc, char** argv) {
     char shape[64];
     std::snprintf(shape, sizeof shape, "C%ld %ldx%ld", long(cv.c), long(cv.w), long(cv.h));
     const double mdw = median(dw), mww = median(ww), mdc = median(dc), mwc = median(wc);
-    std::printf("  %-14s %-16s %10.2f %10.2f %7.2fx | %9.2f %9.2f %7.2fx | %7.1f %7.1f\n", cv.what,
+    std::printf("  %-14s %-16s %10.2f %10.2f %7.2fx | %9.2f %9.2f %7.2fx | %7.1f %7.1f | %7.2f\n",
+                cv.what,
                 shape, mdw * 1e3, mww * 1e3, mdw / mww, mdc * 1e3, mwc * 1e3, mdc / mwc,
-                flop / mdw * 1e-9, flop / mww * 1e-9);
+                flop / mdw * 1e-9, flop / mww * 1e-9, *std::min_element(ww.begin(), ww.end()) * 1e3);
     std::fflush(stdout);
   }
   conv2d_set_winograd_chunk(old_chunk);
