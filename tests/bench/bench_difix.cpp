@@ -95,8 +95,7 @@ void reset_peak_rss() {
 // fp32 FMA peak of `threads` threads at once: GFLOP per wall-second, and per CPU-second.
 Timing fma_peak(int threads, bool bf16 = false) {
   const Rate r = probe_rate(bf16 ? kernels().probe_bf16 : kernels().probe_fma,
-                            threads > 1 ? &ThreadPool::global() : nullptr, 2000000, 3,
-                            /*warmup=*/false);
+                            threads > 1 ? &ThreadPool::global() : nullptr, 2000000, 5);
   return {r.wall, r.cpu};
 }
 

@@ -135,31 +135,38 @@ inline Timing median_timing(int reps, const std::function<void()>& fn, bool warm
 
 // Peak arithmetic rate of a probe kernel (probe(n) runs n iterations of its loop and returns the
 // FLOP of one iteration): one copy per thread of `pool` at once (nullptr: one copy on the calling
-// thread), `iters` iterations each, medians of `reps` (after one warm-up call unless `warmup` is
-// false). wall: GFLOP per wall-second of all threads; cpu: GFLOP per CPU-second.
+// thread), `iters` iterations each, after one warm-up call (the pool's threads may be asleep and
+// the vector units cold: a first call on a machine that was loading weights read half the fp32
+// rate), then the fastest of `reps` calls, as ../shared/anchors/peak.cpp takes it: a busy
+// neighbour can only slow a register-only loop down. wall: GFLOP per wall-second of all threads;
+// cpu: GFLOP per CPU-second (of the fastest call by wall time).
 struct Rate {
   double wall = 0, cpu = 0;
 };
-inline Rate probe_rate(double (*probe)(int64_t), ThreadPool* pool, int64_t iters, int reps,
-                       bool warmup = true) {
+inline Rate probe_rate(double (*probe)(int64_t), ThreadPool* pool, int64_t iters, int reps) {
   const int threads = pool ? pool->size() : 1;
-  const Timing t = median_timing(
-      reps,
-      [&] {
-        if (!pool) {
-          probe(iters);
-          return;
-        }
-        pool->parallel_for(
-            size_t(threads),
-            [&](size_t b, size_t e, int) {
-              for (size_t i = b; i < e; ++i) probe(iters);
-            },
-            1);
-      },
-      warmup);
+  auto once = [&] {
+    if (!pool) {
+      probe(iters);
+      return;
+    }
+    pool->parallel_for(
+        size_t(threads),
+        [&](size_t b, size_t e, int) {
+          for (size_t i = b; i < e; ++i) probe(iters);
+        },
+        1);
+  };
+  once();
+  Timing best{1e300, 1e300};
+  for (int r = 0; r < std::max(1, reps); ++r) {
+    const double w0 = now_seconds(), c0 = cpu_seconds();
+    once();
+    const Timing t{now_seconds() - w0, cpu_seconds() - c0};
+    if (t.wall < best.wall) best = t;
+  }
   const double flop = probe(1) * double(iters) * threads;
-  return {flop / t.wall * 1e-9, flop / t.cpu * 1e-9};
+  return {flop / best.wall * 1e-9, flop / std::max(best.cpu, 1e-9) * 1e-9};
 }
 
 // The per-op profile (attention/runtime/op_profile.h) of work that took `wall` seconds: per op,
