@@ -110,10 +110,14 @@ int run(int argc, char** argv) {
     char shape[64];
     std::snprintf(shape, sizeof shape, "C%ld %ldx%ld", long(cv.c), long(cv.w), long(cv.h));
     const double mdw = median(dw), mww = median(ww), mdc = median(dc), mwc = median(wc);
-    std::printf("  %-14s %-16s %10.2f %10.2f %7.2fx | %9.2f %9.2f %7.2fx | %7.1f %7.1f | %7.2f\n",
-                cv.what,
-                shape, mdw * 1e3, mww * 1e3, mdw / mww, mdc * 1e3, mwc * 1e3, mdc / mwc,
-                flop / mdw * 1e-9, flop / mww * 1e-9, *std::min_element(ww.begin(), ww.end()) * 1e3);
+    const double best = *std::min_element(ww.begin(), ww.end()) * 1e3;
+    if (wino_only)  // no direct runs: dashes, not ratios against zero
+      std::printf("  %-14s %-16s %10s %10.2f %8s | %9s %9.2f %8s | %7s %7.1f | %7.2f\n", cv.what,
+                  shape, "-", mww * 1e3, "-", "-", mwc * 1e3, "-", "-", flop / mww * 1e-9, best);
+    else
+      std::printf("  %-14s %-16s %10.2f %10.2f %7.2fx | %9.2f %9.2f %7.2fx | %7.1f %7.1f | %7.2f\n",
+                  cv.what, shape, mdw * 1e3, mww * 1e3, mdw / mww, mdc * 1e3, mwc * 1e3, mdc / mwc,
+                  flop / mdw * 1e-9, flop / mww * 1e-9, best);
     std::fflush(stdout);
   }
   conv2d_set_winograd_chunk(old_chunk);
