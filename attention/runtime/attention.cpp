@@ -476,8 +476,10 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, bool bf16_ok, 
           }
         }
         for (size_t item = begin; item < end; ++item) {
-          const int h = int(item % size_t(a.heads));
-          const int qb0 = int(item / size_t(a.heads)) * group;
+          // Head-major: the workers walk one head's query groups together, so that head's K/V
+          // stays in the shared cache instead of cycling through every head's per group.
+          const int h = int(item / size_t(groups));
+          const int qb0 = int(item % size_t(groups)) * group;
           const int count = std::min(group, nqb - qb0);
           for (int g = 0; g < count; ++g)
             prepare(h, qb0 + g, slot[size_t(worker) * size_t(group) + size_t(g)], jobs[g]);
