@@ -71,6 +71,7 @@ void check_conv(const Conv2dShape& s, bool bias, bool residual, ThreadPool* pool
 
 TEST_CASE("conv2d: 3x3 stride 1 pad 1, every path", "[kernels][conv]") {
   IsaGuard guard;
+  test::KcCap cap(384);
   for (Isa isa : supported_isas()) {
     REQUIRE(set_isa(isa));
     check_conv(shape(2, 3, 7, 9, 5, 3, 1, 1, 1, 1, 1), true, false, nullptr);
@@ -106,6 +107,7 @@ TEST_CASE("conv2d: 1x1 (shortcut, quant_conv), with residual, every path", "[ker
 
 TEST_CASE("conv2d: bf16 weights and activations, every path", "[kernels][conv]") {
   IsaGuard guard;
+  test::KcCap cap(384);
   auto round = [](std::vector<float> v) {
     for (float& x : v) x = bf16_to_f32(f32_to_bf16(x));
     return v;

@@ -404,6 +404,7 @@ TEST_CASE("winograd: bit-identical for 1 and 2 threads, any chunk size and row b
 
 TEST_CASE("conv2d: direct rows in place over several K blocks keep a separate residual's bits",
           "[winograd][conv]") {
+  test::KcCap cap(384);
   // K = 9 x 96 = 864 spans several K blocks on every path, where the GEMM would fold a residual
   // that aliases C into C (another summation order); conv2d reads it from a copy instead.
   ModeGuard guard(ConvWinograd::kOff);

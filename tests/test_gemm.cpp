@@ -161,6 +161,7 @@ TEST_CASE("gemm_f32: alpha, beta, biases and residual on every path", "[kernels]
 TEST_CASE("gemm: fused ReLU after bias and residual, K split in blocks, every path",
           "[kernels][gemm]") {
   IsaGuard guard;
+  test::KcCap cap(384);
   // K = 1000 runs as several K blocks: the activation must apply once, after the last.
   const int64_t M = 29, N = 45, K = 1000, ldc = 50;
   auto A = random_vec(size_t(M * K), 21);
@@ -195,6 +196,7 @@ TEST_CASE("gemm: fused ReLU after bias and residual, K split in blocks, every pa
 
 TEST_CASE("gemm_bf16: each added term alone and together, one and several K blocks, every path",
           "[kernels][gemm]") {
+  test::KcCap cap(384);
   // The AMX kernel seeds its C tiles with the one added term of a tile (C itself,
   // the residual, the bias row or the bias column) and hands the terms to the first K block; the
   // other paths add them after the products of the last block. Whole tiles (M, N multiples of
@@ -265,6 +267,7 @@ TEST_CASE("gemm_bf16: each added term alone and together, one and several K bloc
 
 TEST_CASE("gemm_f32: residual aliasing C is C += A.B", "[kernels][gemm]") {
   IsaGuard guard;
+  test::KcCap cap(384);
   const int64_t M = 20, N = 45, K = 600;  // K spans several K blocks
   auto A = random_vec(size_t(M * K), 9);
   auto B = random_vec(size_t(K * N), 10);
@@ -392,6 +395,35 @@ TEST_CASE("gemm: two threads give bit-identical results to one", "[kernels][gemm
   }
 }
 
+TEST_CASE("gemm: the K block follows the L1 size", "[kernels][gemm]") {
+  // The A micro-panel (MR x KC) fills the L1: multiples of 64 within [256, 2048].
+  CHECK(detail::kc_for_l1(14, 2, 384, 48 << 10) == 1728);  // bf16 14-row tile, 48 KB
+  CHECK(detail::kc_for_l1(12, 4, 384, 48 << 10) == 1024);  // fp32 12-row tile
+  CHECK(detail::kc_for_l1(12, 4, 384, 32 << 10) == 640);
+  CHECK(detail::kc_for_l1(14, 2, 384, 32 << 10) == 1152);
+  CHECK(detail::kc_for_l1(12, 4, 384, 4 << 10) == 256);
+  CHECK(detail::kc_for_l1(14, 2, 384, 1 << 20) == 2048);
+  CHECK(detail::kc_for_l1(12, 4, 384, 0) == 384);  // size unknown: the fallback
+  // The AVX-512 kernels take it from this CPU's L1.
+  if (isa_supported(Isa::kAvx512)) {
+    const GemmKernel& f = kernels_for(Isa::kAvx512).f32;
+    CHECK(f.kc == detail::kc_for_l1(f.mr, 4, 384));
+    CHECK(f.kc % f.k_align == 0);
+  }
+  if (isa_supported(Isa::kAvx512Bf16)) {
+    const GemmKernel& b = kernels_for(Isa::kAvx512Bf16).bf16;
+    CHECK(b.kc == detail::kc_for_l1(b.mr, 2, 384));
+    CHECK(b.kc % b.k_align == 0);
+  }
+  // The test cap lowers it, and lifting the cap restores it.
+  const GemmKernel& s = kernels_for(Isa::kScalar).f32;
+  {
+    test::KcCap cap(64);
+    CHECK(detail::gemm_k_block(s, 1000) <= 64);
+  }
+  CHECK(detail::gemm_k_block(s, 1000) > 64);
+}
+
 TEST_CASE("gemm: K = 0 gives beta * C + bias", "[kernels][gemm]") {
   std::vector<float> C = {1, 2, 3, 4};
   const float bn[2] = {10, 20};
@@ -499,6 +531,7 @@ namespace {
 
 TEST_CASE("gemm_packed: the GEGLU epilogue gives the bits of the GEMM followed by geglu()",
           "[kernels][gemm]") {
+  test::KcCap cap(384);
   // A GEGLU projection W [N, K] (value rows, then gate rows) packed with its rows permuted by
   // geglu_source_row, against the plain GEMM into [M, N] and geglu(): one and several K blocks,
   // ragged row blocks, with and without a bias, fp32 and bf16 weights, 1 and 2 threads.

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "attention/runtime/cpu.h"
+#include "attention/runtime/gemm.h"
 #include "tests/test_random.h"
 
 namespace macro::test {
@@ -97,6 +98,14 @@ inline std::vector<Isa> supported_isas() {
 struct IsaGuard {
   Isa saved = active_isa();
   ~IsaGuard() { (void)set_isa(saved); }
+};
+
+// Caps the GEMM's K block for a scope (gemm.h), so that a case meant to run as several K blocks
+// does on any CPU (the kernels' own K block follows the L1 size and reaches 2048).
+struct KcCap {
+  int64_t saved;
+  explicit KcCap(int64_t kc) : saved(detail::gemm_set_kc_cap(kc)) {}
+  ~KcCap() { detail::gemm_set_kc_cap(saved); }
 };
 
 }  // namespace macro::test

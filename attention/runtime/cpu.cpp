@@ -4,6 +4,7 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstdio>
 #include <cstdlib>
@@ -65,6 +66,8 @@ CpuFeatures detect() {
   }
   f.brand = brand;
   while (!f.brand.empty() && f.brand.back() == ' ') f.brand.pop_back();
+  f.l1d = std::max(0L, sysconf(_SC_LEVEL1_DCACHE_SIZE));
+  f.l2 = std::max(0L, sysconf(_SC_LEVEL2_CACHE_SIZE));
   return f;
 }
 

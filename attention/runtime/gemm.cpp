@@ -6,17 +6,18 @@
 //       jc: the task's columns in blocks of NC   (B block KC x NC packed, or prepacked weights)
 //         ir: MR rows  (A micro-panel MR x KC stays in L1)
 //           jr: NR columns (B micro-panels stream from L2) -> micro-kernel MR x NR
-// KC <= kern.kc (384 for AVX-512 fp32) with K cut into equal blocks; NC sized so the B block is
-// about 448 KB; MC about 192 rows, the row tasks a multiple of the thread count (equal shares for
-// 1 and 2 threads), columns split only when there are fewer row blocks than threads. Results never
-// depend on the split (K blocking depends on K alone), so they are thread-count invariant.
-// (Tried: columns outermost with K inside, to keep C in L2 for the conv's prepacked A: 3-5 points
-// slower on the 128-channel VAE convs, 2026-11-22.)
-// The scalar path runs the same driver with a small plain-C++ micro-kernel, so packing and
-// blocking are exercised by every path; the tests also compare against a naive loop.
+// KC <= kern.kc (from the L1 size for AVX-512, kc_for_l1) with K cut into equal blocks; NC sized so
+// the B block is about 448 KB; MC about 192 rows, the row tasks a multiple of the thread count
+// (equal shares for 1 and 2 threads), columns split only when there are fewer row blocks than
+// threads. Results never depend on the split (K blocking depends on K alone), so they are
+// thread-count invariant. (Tried: columns outermost with K inside, to keep C in L2 for the conv's
+// prepacked A: 3-5 points slower on the 128-channel VAE convs, 2026-11-22.) The scalar path runs
+// the same driver with a small plain-C++ micro-kernel, so packing and blocking are exercised by
+// every path; the tests also compare against a naive loop.
 #include "attention/runtime/gemm.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cstdlib>
 #include <cstring>
 #include <memory>
@@ -289,9 +290,26 @@ void pack_panels_bf16(const uint16_t* src, int64_t ld, bool transposed, int64_t 
   }
 }
 
+namespace {
+std::atomic<int64_t> g_kc_cap{0};
+}  // namespace
+
+int64_t kc_for_l1(int mr, int elem_bytes, int64_t fallback, long l1d_bytes) {
+  const long l1 = l1d_bytes < 0 ? cpu_features().l1d : l1d_bytes;
+  if (l1 <= 0 || mr <= 0 || elem_bytes <= 0) return fallback;
+  const int64_t kc = int64_t(l1) / (int64_t(mr) * elem_bytes) / 64 * 64;
+  return std::clamp<int64_t>(kc, 256, 2048);
+}
+
+int64_t gemm_set_kc_cap(int64_t kc) {
+  return g_kc_cap.exchange(std::max<int64_t>(0, kc));
+}
+
 int64_t gemm_k_block(const GemmKernel& kern, int64_t K) {
   const Tuning& tun = tuning();
-  const int64_t kc_max = tun.kc > 0 ? round_up(tun.kc, kern.k_align) : kern.kc;
+  int64_t kc_max = tun.kc > 0 ? round_up(tun.kc, kern.k_align) : kern.kc;
+  if (const int64_t cap = g_kc_cap.load(); cap > 0)
+    kc_max = std::min(kc_max, round_up(cap, kern.k_align));
   const int64_t k_blocks = std::max<int64_t>(1, (K + kc_max - 1) / kc_max);
   return round_up((K + k_blocks - 1) / k_blocks, kern.k_align);
 }

@@ -151,6 +151,10 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
 // The K block run_gemm uses for a reduction of length K (equal blocks of at most the kernel's
 // KC; it depends on K only).
 int64_t gemm_k_block(const GemmKernel& kern, int64_t K);
+// Caps every kernel's KC at `kc` (> 0; the tests run their several-K-block cases on any CPU), 0
+// for the kernels' own. Returns the previous cap. Results depend on KC, so change it only between
+// computations.
+int64_t gemm_set_kc_cap(int64_t kc);
 // Whether run_gemm reads a residual that aliases C as C itself (beta 1) rather than as a
 // residual: when the terms go with the last of several K blocks, whose earlier blocks overwrite
 // C. Its sums then add in another order than with a separate residual of the same values.

@@ -122,6 +122,13 @@ void fill_avx512_kernels(KernelTable& t);
 void fill_avx512bf16_kernels(KernelTable& t);
 void fill_amx_kernels(KernelTable& t);
 ConvGatherRows32 avx512_conv_rows32();  // conv_avx512.cpp
+// The KC of a register tile of `mr` rows of `elem_bytes`-byte elements on this CPU: the largest
+// multiple of 64 whose A micro-panel (mr x KC) fills the L1 data cache, within [256, 2048];
+// `fallback` where the L1 size is unknown. (On a Zen 5 with a 48 KB L1, KC 1024 to 1728 ran the
+// U-Net's GEMMs with K >= 640 5-13 points of the peak faster than the 384 chosen on an earlier
+// machine; docs/PERFORMANCE.md, 2026-12-06.) The AVX-512 fp32 and AVX512-BF16 kernels use it.
+// l1d_bytes: the L1 size to size for (the default reads this CPU's).
+int64_t kc_for_l1(int mr, int elem_bytes, int64_t fallback, long l1d_bytes = -1);
 }  // namespace detail
 
 }  // namespace macro
