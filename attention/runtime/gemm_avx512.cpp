@@ -138,14 +138,9 @@ double probe_fma(int64_t iters) {
 
 namespace detail {
 void fill_avx512_kernels(KernelTable& t) {
-  t.f32 = GemmKernel{kMrF32,
-                     kNr,
-                     1,
-                     int(kc_for_l1(kMrF32, 4, 384)),
-                     PackLayout::kF32,
-                     micro_f32,
-                     "avx512 f32 12x32",
-                     pack_a_f32};
+  const int kc = int(kc_for_l1(kMrF32, 4, 384));
+  t.f32 =
+      GemmKernel{kMrF32, kNr, 1, kc, PackLayout::kF32, micro_f32, "avx512 f32 12x32", pack_a_f32};
   t.bf16 = GemmKernel{kMrBf16,
                       kNr,
                       2,

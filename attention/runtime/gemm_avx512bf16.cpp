@@ -127,15 +127,10 @@ double probe_bf16(int64_t iters) {
 namespace detail {
 void fill_avx512bf16_kernels(KernelTable& t) {
   fill_avx512_kernels(t);
-  t.bf16 = GemmKernel{kMr,
-                      kNr,
-                      2,
-                      int(kc_for_l1(kMr, 2, 384)),
-                      PackLayout::kBf16Pairs,
-                      micro_bf16,
-                      "avx512bf16 14x32",
-                      pack_a_pairs,
-                      pack_a_pairs_t};
+  const int kc = int(kc_for_l1(kMr, 2, 384));
+  t.bf16 = GemmKernel{
+      kMr,          kNr,           2, kc, PackLayout::kBf16Pairs, micro_bf16, "avx512bf16 14x32",
+      pack_a_pairs, pack_a_pairs_t};
   t.probe_bf16 = probe_bf16;
 }
 }  // namespace detail
