@@ -67,7 +67,6 @@ CpuFeatures detect() {
   f.brand = brand;
   while (!f.brand.empty() && f.brand.back() == ' ') f.brand.pop_back();
   f.l1d = std::max(0L, sysconf(_SC_LEVEL1_DCACHE_SIZE));
-  f.l2 = std::max(0L, sysconf(_SC_LEVEL2_CACHE_SIZE));
   return f;
 }
 

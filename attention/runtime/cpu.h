@@ -20,9 +20,9 @@ struct CpuFeatures {
   bool avx512bf16 = false;
   bool amx = false;       // AMX-TILE + AMX-BF16, and the kernel granted XTILEDATA permission
   std::string brand;
-  // Per-core data cache sizes in bytes as the C library reports them (CPUID leaf 4 or
-  // 0x8000001D); 0 where unknown. The GEMM sizes its K blocks from l1d (kernels.h).
-  long l1d = 0, l2 = 0;
+  // Per-core L1 data cache size in bytes as the C library reports it (CPUID leaf 4 or
+  // 0x8000001D); 0 where unknown. The GEMM sizes its K blocks from it (kernels.h).
+  long l1d = 0;
 };
 
 // Detected once; AMX permission is requested from the kernel on first call (arch_prctl).

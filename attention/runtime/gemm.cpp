@@ -11,9 +11,9 @@
 // (equal shares for 1 and 2 threads), columns split only when there are fewer row blocks than
 // threads. Results never depend on the split (K blocking depends on K alone), so they are
 // thread-count invariant. (Tried: columns outermost with K inside, to keep C in L2 for the conv's
-// prepacked A: 3-5 points slower on the 128-channel VAE convs, 2026-11-22.) The scalar path runs
-// the same driver with a small plain-C++ micro-kernel, so packing and blocking are exercised by
-// every path; the tests also compare against a naive loop.
+// prepacked A: 3-5 points slower on the 128-channel VAE convs, 2026-11-22.)
+// The scalar path runs the same driver with a small plain-C++ micro-kernel, so packing and
+// blocking are exercised by every path; the tests also compare against a naive loop.
 #include "attention/runtime/gemm.h"
 
 #include <algorithm>
