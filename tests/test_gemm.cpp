@@ -454,8 +454,9 @@ namespace {
 
 TEST_CASE("gemm kernels: a strip of micro-tiles gives the bits of one micro call per tile",
           "[kernels][gemm]") {
-  // Every path whose kernel has a strip entry (AMX): random panels, each epilogue the driver hands
-  // down, full and ragged rows, a column count with and without a ragged last tile.
+  // Every path whose kernel has a strip entry (AMX, the shift-widened bf16 kernels of AVX2 and
+  // AVX-512): random panels, each epilogue the driver hands down, full and ragged rows, a column
+  // count with and without a ragged last tile, a K whose widened panel ends mid-vector.
   int strips = 0;
   for (Isa isa : supported_isas()) {
     for (const GemmKernel* gk : {&kernels_for(isa).f32, &kernels_for(isa).bf16}) {
@@ -520,7 +521,9 @@ TEST_CASE("gemm kernels: a strip of micro-tiles gives the bits of one micro call
       }
     }
   }
-  if (strips == 0) WARN("no kernel path of this machine has a strip entry (AMX absent)");
+  if (strips == 0) WARN("no kernel path of this machine has a strip entry (no AVX2)");
+  for (Isa isa : supported_isas())
+    if (isa == Isa::kAvx2 || isa == Isa::kAvx512) CHECK(kernels_for(isa).bf16.strip != nullptr);
 }
 
 }  // namespace

@@ -1,7 +1,8 @@
-// AVX2+FMA GEMM micro-kernels: fp32 6x16 (12 ymm accumulators) and bf16 4x16 widened with shifts.
+// AVX2+FMA GEMM micro-kernels: fp32 6x16 (12 ymm accumulators) and bf16 6x16 widened with shifts.
 // Packed layouts and the MicroTile contract: kernels.h.
 #include <immintrin.h>
 
+#include "attention/runtime/gemm_wide_a.h"
 #include "attention/runtime/kernels.h"
 
 namespace macro {
@@ -87,34 +88,98 @@ void micro_f32(const MicroTile& t) {
   store_tile<kMrF32>(t, c0, c1);
 }
 
-constexpr int kMrBf16 = 4;
+// bf16 pairs: lane i of a 32-bit view holds (even | odd << 16); even << 16 and odd & 0xffff0000
+// are the exact fp32 values; odd products first, as vdpbf16ps does. The A micro-panel is widened
+// once per call or strip (gemm_wide_a.h) so each row's broadcast is a load; the B pairs are
+// widened in registers, the odd halves for all rows first, then the even ones (12 accumulators +
+// 2 B vectors + 1 broadcast fit the 16 ymm). Each accumulator takes the odd product, then the even
+// one, per pair: the scalar twin's bits.
+constexpr int kMrBf16 = 6;
 
-void micro_bf16_emulated(const MicroTile& t) {
-  __m256 c0[kMrBf16], c1[kMrBf16];
-  for (int r = 0; r < kMrBf16; ++r) c0[r] = c1[r] = _mm256_setzero_ps();
+thread_local detail::WideA t_wide_a;
+
+void widen_a(const MicroTile& t) {
+  const int64_t words = t.kc / 2 * kMrBf16;
+  t_wide_a.reserve(words);
+  const __m256i hi = _mm256_set1_epi32(int(0xffff0000u));
   const uint32_t* a = static_cast<const uint32_t*>(t.a);
+  uint32_t* odd = reinterpret_cast<uint32_t*>(t_wide_a.odd);
+  uint32_t* even = reinterpret_cast<uint32_t*>(t_wide_a.even);
+  int64_t i = 0;
+  for (; i + 8 <= words; i += 8) {
+    const __m256i w = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a + i));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(odd + i), _mm256_and_si256(w, hi));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(even + i), _mm256_slli_epi32(w, 16));
+  }
+  for (; i < words; ++i) {
+    odd[i] = a[i] & 0xffff0000u;
+    even[i] = a[i] << 16;
+  }
+}
+
+template <int R>
+void micro_bf16_wide_rows(const MicroTile& t) {
+  __m256 c0[kMrBf16], c1[kMrBf16];
+#pragma GCC unroll 8
+  for (int r = 0; r < kMrBf16; ++r) c0[r] = c1[r] = _mm256_setzero_ps();
+  const float* ao = t_wide_a.odd;
+  const float* ae = t_wide_a.even;
   const __m256i* b = static_cast<const __m256i*>(t.b);
   const __m256i hi = _mm256_set1_epi32(int(0xffff0000u));
   for (int64_t kp = 0; kp < t.kc / 2; ++kp) {
     const __m256i w0 = _mm256_loadu_si256(b), w1 = _mm256_loadu_si256(b + 1);
     const __m256 b0o = _mm256_castsi256_ps(_mm256_and_si256(w0, hi));
-    const __m256 b0e = _mm256_castsi256_ps(_mm256_slli_epi32(w0, 16));
     const __m256 b1o = _mm256_castsi256_ps(_mm256_and_si256(w1, hi));
+#pragma GCC unroll 8
+    for (int r = 0; r < R; ++r) {
+      const __m256 o = _mm256_broadcast_ss(ao + r);
+      c0[r] = _mm256_fmadd_ps(o, b0o, c0[r]);
+      c1[r] = _mm256_fmadd_ps(o, b1o, c1[r]);
+    }
+    const __m256 b0e = _mm256_castsi256_ps(_mm256_slli_epi32(w0, 16));
     const __m256 b1e = _mm256_castsi256_ps(_mm256_slli_epi32(w1, 16));
 #pragma GCC unroll 8
-    for (int r = 0; r < kMrBf16; ++r) {
-      const uint32_t pair = a[r];
-      const __m256 ao = _mm256_castsi256_ps(_mm256_set1_epi32(int(pair & 0xffff0000u)));
-      const __m256 ae = _mm256_castsi256_ps(_mm256_set1_epi32(int(pair << 16)));
-      c0[r] = _mm256_fmadd_ps(ao, b0o, c0[r]);
-      c1[r] = _mm256_fmadd_ps(ao, b1o, c1[r]);
-      c0[r] = _mm256_fmadd_ps(ae, b0e, c0[r]);
-      c1[r] = _mm256_fmadd_ps(ae, b1e, c1[r]);
+    for (int r = 0; r < R; ++r) {
+      const __m256 e = _mm256_broadcast_ss(ae + r);
+      c0[r] = _mm256_fmadd_ps(e, b0e, c0[r]);
+      c1[r] = _mm256_fmadd_ps(e, b1e, c1[r]);
     }
-    a += kMrBf16;
+    ao += kMrBf16;
+    ae += kMrBf16;
     b += 2;
   }
   store_tile<kMrBf16>(t, c0, c1);
+}
+
+// The rows of the tile: the full panel, or the last panel's m < 6 (fewer accumulators).
+void micro_bf16_wide(const MicroTile& t) {
+  switch (t.m) {
+    case 1: micro_bf16_wide_rows<1>(t); break;
+    case 2: micro_bf16_wide_rows<2>(t); break;
+    case 3: micro_bf16_wide_rows<3>(t); break;
+    case 4: micro_bf16_wide_rows<4>(t); break;
+    case 5: micro_bf16_wide_rows<5>(t); break;
+    default: micro_bf16_wide_rows<kMrBf16>(t); break;
+  }
+}
+
+void micro_bf16_emulated(const MicroTile& t) {
+  widen_a(t);
+  micro_bf16_wide(t);
+}
+
+void strip_bf16_emulated(const MicroTile& t0, int64_t ncols, int64_t b_stride) {
+  widen_a(t0);
+  MicroTile t = t0;
+  const unsigned char* b = static_cast<const unsigned char*>(t0.b);
+  for (int64_t j = 0; j < ncols; j += kNr, b += b_stride) {
+    t.b = b;
+    t.n = int(ncols - j < kNr ? ncols - j : kNr);
+    t.c = t0.c + j;
+    t.bias_n = t0.bias_n ? t0.bias_n + j : nullptr;
+    t.res = t0.res ? t0.res + j : nullptr;
+    micro_bf16_wide(t);
+  }
 }
 
 double probe_fma(int64_t iters) {
@@ -145,7 +210,8 @@ void fill_avx2_kernels(KernelTable& t) {
                       256,
                       PackLayout::kBf16Pairs,
                       micro_bf16_emulated,
-                      "avx2 bf16 4x16 (shift-widened)"};
+                      "avx2 bf16 6x16 (shift-widened)"};
+  t.bf16.strip = strip_bf16_emulated;
   t.probe_fma = probe_fma;
   t.probe_bf16 = probe_fma;
 }

@@ -6,7 +6,10 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include <immintrin.h>
 
+#include <cstdint>
+
 #include "attention/runtime/gemm_store_avx512.h"
+#include "attention/runtime/gemm_wide_a.h"
 #include "attention/runtime/kernels.h"
 
 namespace macro {
@@ -82,40 +85,89 @@ void pack_a_f32(const float* src, int64_t ld, int valid_rows, int64_t valid_k, i
 
 // bf16 pairs without vdpbf16ps: lane i of a 32-bit view holds (even | odd << 16); even << 16 and
 // odd & 0xffff0000 are the exact fp32 values. Odd products first, as vdpbf16ps does.
+//
+// The B pairs are widened in registers (4 ops per k pair for 48 FMAs). The A pairs are broadcast
+// per row, so widening them in the loop would cost a GPR op and a vpbroadcastd (a port-5 uop
+// beside the FMAs) per row and k pair; instead each A micro-panel is widened once (gemm_wide_a.h)
+// and the loop broadcasts from memory as the fp32 kernel does. The strip kernel widens once for
+// all the tiles of a strip; the single-tile kernel widens per call. Each accumulator still takes
+// the odd product, then the even one, per pair: the same bits.
 constexpr int kMrBf16 = 12;
 
+thread_local detail::WideA t_wide_a;
+
+// The kc/2 x 12 words of an A micro-panel into t_wide_a.
+void widen_a(const MicroTile& t) {
+  const int64_t words = t.kc / 2 * kMrBf16;
+  t_wide_a.reserve(words);
+  const __m512i hi = _mm512_set1_epi32(int(0xffff0000u));
+  const __m512i* a = static_cast<const __m512i*>(t.a);
+  __m512i* odd = reinterpret_cast<__m512i*>(t_wide_a.odd);
+  __m512i* even = reinterpret_cast<__m512i*>(t_wide_a.even);
+  const int64_t full = words / 16;
+  for (int64_t i = 0; i < full; ++i) {
+    const __m512i w = _mm512_loadu_si512(a + i);
+    _mm512_store_si512(odd + i, _mm512_and_si512(w, hi));
+    _mm512_store_si512(even + i, _mm512_slli_epi32(w, 16));
+  }
+  if (const int64_t left = words - full * 16; left > 0) {
+    const __mmask16 m = __mmask16((1u << left) - 1);
+    const __m512i w = _mm512_maskz_loadu_epi32(m, a + full);
+    _mm512_mask_storeu_epi32(odd + full, m, _mm512_and_si512(w, hi));
+    _mm512_mask_storeu_epi32(even + full, m, _mm512_slli_epi32(w, 16));
+  }
+}
+
 template <int R>
-void micro_bf16_emulated_rows(const MicroTile& t) {
+void micro_bf16_wide_rows(const MicroTile& t) {
+  prefetch_c(t, R);
   __m512 c0[R], c1[R];
 #pragma GCC unroll 16
   for (int r = 0; r < R; ++r) c0[r] = c1[r] = _mm512_setzero_ps();
-  const uint32_t* a = static_cast<const uint32_t*>(t.a);
+  const float* ao = t_wide_a.odd;
+  const float* ae = t_wide_a.even;
   const __m512i* b = static_cast<const __m512i*>(t.b);
   const __m512i hi = _mm512_set1_epi32(int(0xffff0000u));
   for (int64_t kp = 0; kp < t.kc / 2; ++kp) {
     const __m512i w0 = _mm512_loadu_si512(b), w1 = _mm512_loadu_si512(b + 1);
+    _mm_prefetch(reinterpret_cast<const char*>(b + 8), _MM_HINT_T0);
     const __m512 b0o = _mm512_castsi512_ps(_mm512_and_si512(w0, hi));
     const __m512 b0e = _mm512_castsi512_ps(_mm512_slli_epi32(w0, 16));
     const __m512 b1o = _mm512_castsi512_ps(_mm512_and_si512(w1, hi));
     const __m512 b1e = _mm512_castsi512_ps(_mm512_slli_epi32(w1, 16));
 #pragma GCC unroll 16
     for (int r = 0; r < R; ++r) {
-      const uint32_t pair = a[r];
-      const __m512 ao = _mm512_castsi512_ps(_mm512_set1_epi32(int(pair & 0xffff0000u)));
-      const __m512 ae = _mm512_castsi512_ps(_mm512_set1_epi32(int(pair << 16)));
-      c0[r] = _mm512_fmadd_ps(ao, b0o, c0[r]);
-      c1[r] = _mm512_fmadd_ps(ao, b1o, c1[r]);
-      c0[r] = _mm512_fmadd_ps(ae, b0e, c0[r]);
-      c1[r] = _mm512_fmadd_ps(ae, b1e, c1[r]);
+      const __m512 o = _mm512_set1_ps(ao[r]);
+      c0[r] = _mm512_fmadd_ps(o, b0o, c0[r]);
+      c1[r] = _mm512_fmadd_ps(o, b1o, c1[r]);
+      const __m512 e = _mm512_set1_ps(ae[r]);
+      c0[r] = _mm512_fmadd_ps(e, b0e, c0[r]);
+      c1[r] = _mm512_fmadd_ps(e, b1e, c1[r]);
     }
-    a += kMrBf16;
+    ao += kMrBf16;
+    ae += kMrBf16;
     b += 2;
   }
   store_tile<R>(t, c0, c1);
 }
 
 void micro_bf16_emulated(const MicroTile& t) {
-  for_rows<kMrBf16>(t, [&]<int R>() { micro_bf16_emulated_rows<R>(t); });
+  widen_a(t);
+  for_rows<kMrBf16>(t, [&]<int R>() { micro_bf16_wide_rows<R>(t); });
+}
+
+void strip_bf16_emulated(const MicroTile& t0, int64_t ncols, int64_t b_stride) {
+  widen_a(t0);
+  MicroTile t = t0;
+  const unsigned char* b = static_cast<const unsigned char*>(t0.b);
+  for (int64_t j = 0; j < ncols; j += kNr, b += b_stride) {
+    t.b = b;
+    t.n = int(ncols - j < kNr ? ncols - j : kNr);
+    t.c = t0.c + j;
+    t.bias_n = t0.bias_n ? t0.bias_n + j : nullptr;
+    t.res = t0.res ? t0.res + j : nullptr;
+    for_rows<kMrBf16>(t, [&]<int R>() { micro_bf16_wide_rows<R>(t); });
+  }
 }
 
 // 24 independent FMA chains (enough to cover latency x throughput on current cores).
@@ -141,13 +193,15 @@ void fill_avx512_kernels(KernelTable& t) {
   const int kc = int(kc_for_l1(kMrF32, 4, 384));
   t.f32 =
       GemmKernel{kMrF32, kNr, 1, kc, PackLayout::kF32, micro_f32, "avx512 f32 12x32", pack_a_f32};
+  // The widened A panel is fp32, as in the fp32 kernel: the same K block.
   t.bf16 = GemmKernel{kMrBf16,
                       kNr,
                       2,
-                      384,
+                      kc,
                       PackLayout::kBf16Pairs,
                       micro_bf16_emulated,
                       "avx512 bf16 12x32 (shift-widened)"};
+  t.bf16.strip = strip_bf16_emulated;
   t.probe_fma = probe_fma;
   t.probe_bf16 = probe_fma;
   t.conv_rows32 = avx512_conv_rows32();

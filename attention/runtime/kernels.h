@@ -48,7 +48,8 @@ using MicroKernel = void (*)(const MicroTile& t);
 // each. t describes the first tile (t.n is ignored); tile q covers columns [q nr, min(ncols,
 // (q + 1) nr)) with B at t.b + q * b_stride bytes, C at t.c + q nr and bias_n, res (when set)
 // advanced by q nr. A kernel gives one where a call per tile costs it throughput (AMX: the
-// per-call stack traffic queues behind the tile stores of the previous tile).
+// per-call stack traffic queues behind the tile stores of the previous tile; the shift-widened
+// bf16 kernels: they widen the A micro-panel to fp32 once per strip instead of once per tile).
 using MicroStripKernel = void (*)(const MicroTile& t, int64_t ncols, int64_t b_stride);
 
 // Optional fast packer for one A micro-panel from a row-major fp32 source: rows r < valid_rows of
@@ -102,7 +103,7 @@ struct GemmKernel {
 struct KernelTable {
   Isa isa = Isa::kScalar;
   GemmKernel f32;   // fp32 x fp32 -> fp32
-  GemmKernel bf16;  // bf16 x bf16 -> fp32 accumulate (emulated with shifts where the ISA lacks it)
+  GemmKernel bf16;  // bf16 x bf16 -> fp32 accumulate (widened with shifts where the ISA lacks it)
   // Peak probes for the benchmarks: run `iters` iterations of a dependency-free loop of FMAs (or
   // bf16 dot products) and return the number of floating-point operations done (1 FMA = 2).
   double (*probe_fma)(int64_t iters) = nullptr;
