@@ -18,6 +18,7 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include "attention/runtime/conv.h"
@@ -223,8 +224,10 @@ TEST_CASE("winograd: the scalar twin and every path against the double loop nest
 
 TEST_CASE("winograd: the vector transforms equal the scalar twins bit for bit", "[winograd]") {
   const detail::WinogradTransforms& sc = detail::winograd_scalar_transforms();
-  for (bool f32 : {false, true}) {
-    const Isa isa = f32 ? Isa::kAvx512 : Isa::kAvx512Bf16;
+  // bf16 on AVX512-BF16 (vcvtne2ps2bf16) and on plain AVX-512 (rounding in integer ops), fp32.
+  const std::pair<bool, Isa> cases[] = {
+      {false, Isa::kAvx512Bf16}, {false, Isa::kAvx512}, {true, Isa::kAvx512}};
+  for (const auto& [f32, isa] : cases) {
     if (!isa_supported(isa)) {
       WARN("no " << isa_name(isa) << " on this machine: only the scalar " << (f32 ? "fp32" : "bf16")
                  << " transforms exist here");
@@ -232,7 +235,7 @@ TEST_CASE("winograd: the vector transforms equal the scalar twins bit for bit", 
     }
     const detail::WinogradTransforms& vx = detail::winograd_transforms(isa, f32);
     REQUIRE(vx.input != sc.input);
-    INFO((f32 ? "fp32" : "bf16"));
+    INFO((f32 ? "fp32 " : "bf16 ") << vx.name);
     // A chunk of 45 tiles from tile 5 of a 17 x 13 output (TW = 7: runs cut by rows and
     // 16-groups).
     for (int pad : {0, 1})
@@ -472,12 +475,12 @@ TEST_CASE("winograd: modes, pack rule, and the direct path when forced", "[winog
     const bool f32_fast = isa == Isa::kAvx512 || isa == Isa::kAvx512Bf16 || isa == Isa::kAmx;
     ConvWeights f32 = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3);
     CHECK(f32.winograd().size() == (f32_fast ? 16u : 0u));
-    // Auto: bf16 only on the bf16 hardware paths, fp32 on AVX-512 and up, and only with enough
-    // tiles (60 here: too few).
+    // Auto: bf16 and fp32 on AVX-512 and up (the paths with vector transforms), and only with
+    // enough tiles (60 here: too few).
     CHECK_FALSE(detail::winograd_applies(s, auto_w));
     Conv2dShape big = s;
     big.h = 16, big.w = 16;  // 64 tiles
-    CHECK(detail::winograd_applies(big, auto_w) == (isa == Isa::kAvx512Bf16 || isa == Isa::kAmx));
+    CHECK(detail::winograd_applies(big, auto_w) == f32_fast);
     if (f32_fast) {
       CHECK_FALSE(detail::winograd_applies(s, f32));
       CHECK(detail::winograd_applies(big, f32));

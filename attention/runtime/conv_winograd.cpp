@@ -237,14 +237,15 @@ const WinogradTransforms& winograd_scalar_transforms() {
 }
 
 bool winograd_vector_path(Isa isa, WeightType type) {
-  return isa == Isa::kAvx512Bf16 || isa == Isa::kAmx ||
-         (type == WeightType::kF32 && isa == Isa::kAvx512);
+  (void)type;
+  return isa == Isa::kAvx512Bf16 || isa == Isa::kAmx || isa == Isa::kAvx512;
 }
 
 const WinogradTransforms& winograd_transforms(Isa isa, bool f32) {
   if (winograd_vector_path(isa, f32 ? WeightType::kF32 : WeightType::kBf16)) {
-    const WinogradTransforms* t =
-        f32 ? winograd_avx512_transforms() : winograd_avx512bf16_transforms();
+    const WinogradTransforms* t = f32                   ? winograd_avx512_transforms()
+                                  : isa == Isa::kAvx512 ? winograd_avx512_bf16_transforms()
+                                                        : winograd_avx512bf16_transforms();
     if (t) return *t;
   }
   return winograd_scalar_transforms();

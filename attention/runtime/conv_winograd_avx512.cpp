@@ -1,8 +1,9 @@
-// AVX-512 Winograd F(2x2, 3x3) fp32 input transform (the WinoInput contract in conv_winograd.h,
-// WinoInput::f32) and the shared output transform (conv_winograd_avx512.h): 16 tiles of a run per
-// vector, one lane per tile, bit-identical to the scalar twins in conv_winograd.cpp. Input: V of
-// one channel in 16 registers, one masked store per xi into the fp32 kernel's B panels; the next
-// channel's rows are prefetched first.
+// AVX-512 Winograd F(2x2, 3x3) input transforms (the WinoInput contract in conv_winograd.h) and the
+// shared output transform (conv_winograd_avx512.h): 16 tiles of a run per vector, one lane per
+// tile, bit-identical to the scalar twins in conv_winograd.cpp. fp32 input: V of one channel in 16
+// registers, one masked store per xi into the fp32 kernel's B panels; the next channel's rows are
+// prefetched first. bf16 input (for CPUs without AVX512-BF16): V of two channels rounded to bf16
+// in integer ops and joined into pair words.
 // GCC 12's AVX-512 headers trip -W(maybe-)uninitialized on their own _mm512_undefined_*() idiom.
 #pragma GCC diagnostic ignored "-Wuninitialized"
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
@@ -35,11 +36,67 @@ void input_f32_avx512(const detail::WinoInput& a) {
   }
 }
 
+// bf16 bits of 16 floats in 32-bit lanes, as the scalar bf16_bits_daz (and vcvtne2ps2bf16) round:
+// nearest even, NaN quiet, fp32 denormals to signed zero.
+inline __m512i bf16_bits_daz16(__m512 v) {
+  const __m512i u = _mm512_castps_si512(v);
+  const __m512i one = _mm512_set1_epi32(1);
+  const __m512i r = _mm512_srli_epi32(
+      _mm512_add_epi32(_mm512_add_epi32(u, _mm512_set1_epi32(0x7fff)),
+                       _mm512_and_si512(_mm512_srli_epi32(u, 16), one)),
+      16);
+  const __m512i top = _mm512_srli_epi32(u, 16);
+  const __mmask16 nan = _mm512_cmpgt_epu32_mask(
+      _mm512_and_si512(u, _mm512_set1_epi32(0x7fffffff)), _mm512_set1_epi32(0x7f800000));
+  const __mmask16 tiny =
+      _mm512_testn_epi32_mask(u, _mm512_set1_epi32(0x7f800000));  // exponent field zero
+  __m512i out = _mm512_mask_or_epi32(r, nan, top, _mm512_set1_epi32(0x40));
+  out = _mm512_mask_and_epi32(out, tiny, top, _mm512_set1_epi32(0x8000));
+  return out;
+}
+
+// The bf16 input transform without AVX512-BF16 (the WinoInput contract, bf16 pair words): the
+// rounding in integer ops (bf16_bits_daz16), the two channels' bits joined by a shift and an OR;
+// the same bits as the scalar twin and as the AVX512-BF16 transform.
+void input_bf16_avx512f(const detail::WinoInput& a) {
+  const int64_t hw = a.h * a.w;
+  for (int64_t q = a.q0; q < a.q1; ++q) {
+    const int64_t c0 = 2 * q, c1 = c0 + 1;
+    const float* p0 = c0 < a.c_in ? a.x + c0 * hw : nullptr;
+    const float* p1 = c1 < a.c_in ? a.x + c1 * hw : nullptr;
+    for (int r = 0; r < a.nruns; ++r) {
+      const detail::WinoRun& run = a.runs[r];
+      const int64_t iy0 = 2 * run.ty - a.row_phase - a.pad_top;
+      const int64_t ix0 = 2 * run.tx0 - a.pad_left;
+      if (q + 1 < a.q1 && 2 * q + 3 < a.c_in) {  // the next pair's planes
+        prefetch_patch_rows(p0 + 2 * hw, a.h, a.w, iy0, ix0);
+        prefetch_patch_rows(p0 + 3 * hw, a.h, a.w, iy0, ix0);
+      }
+      __m512 v0[16], v1[16];
+      input_tiles(p0, a.h, a.w, iy0, ix0, v0);
+      input_tiles(p1, a.h, a.w, iy0, ix0, v1);
+      const __mmask16 keep = __mmask16((1u << run.len) - 1u);
+      uint32_t* dst = a.v + (run.col / a.nr) * a.k_rows * a.nr + q * a.nr + run.col % a.nr;
+#pragma GCC unroll 16
+      for (int xi = 0; xi < 16; ++xi) {
+        const __m512i word = _mm512_or_si512(bf16_bits_daz16(v0[xi]),
+                                             _mm512_slli_epi32(bf16_bits_daz16(v1[xi]), 16));
+        _mm512_mask_storeu_epi32(dst + xi * a.xi_stride, keep, word);
+      }
+    }
+  }
+}
+
 }  // namespace
 
 namespace detail {
 const WinogradTransforms* winograd_avx512_transforms() {
   static const WinogradTransforms t{input_f32_avx512, output_avx512, "avx512"};
+  return &t;
+}
+const WinogradTransforms* winograd_avx512_bf16_transforms() {
+  static const WinogradTransforms t{input_bf16_avx512f, output_avx512,
+                                    "avx512 (bf16 rounded in integer ops)"};
   return &t;
 }
 }  // namespace detail
