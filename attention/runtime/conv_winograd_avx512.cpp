@@ -59,32 +59,9 @@ inline __m512i bf16_bits_daz16(__m512 v) {
 // rounding in integer ops (bf16_bits_daz16), the two channels' bits joined by a shift and an OR;
 // the same bits as the scalar twin and as the AVX512-BF16 transform.
 void input_bf16_avx512f(const detail::WinoInput& a) {
-  const int64_t hw = a.h * a.w;
-  for (int64_t q = a.q0; q < a.q1; ++q) {
-    const int64_t c0 = 2 * q, c1 = c0 + 1;
-    const float* p0 = c0 < a.c_in ? a.x + c0 * hw : nullptr;
-    const float* p1 = c1 < a.c_in ? a.x + c1 * hw : nullptr;
-    for (int r = 0; r < a.nruns; ++r) {
-      const detail::WinoRun& run = a.runs[r];
-      const int64_t iy0 = 2 * run.ty - a.row_phase - a.pad_top;
-      const int64_t ix0 = 2 * run.tx0 - a.pad_left;
-      if (q + 1 < a.q1 && 2 * q + 3 < a.c_in) {  // the next pair's planes
-        prefetch_patch_rows(p0 + 2 * hw, a.h, a.w, iy0, ix0);
-        prefetch_patch_rows(p0 + 3 * hw, a.h, a.w, iy0, ix0);
-      }
-      __m512 v0[16], v1[16];
-      input_tiles(p0, a.h, a.w, iy0, ix0, v0);
-      input_tiles(p1, a.h, a.w, iy0, ix0, v1);
-      const __mmask16 keep = __mmask16((1u << run.len) - 1u);
-      uint32_t* dst = a.v + (run.col / a.nr) * a.k_rows * a.nr + q * a.nr + run.col % a.nr;
-#pragma GCC unroll 16
-      for (int xi = 0; xi < 16; ++xi) {
-        const __m512i word = _mm512_or_si512(bf16_bits_daz16(v0[xi]),
-                                             _mm512_slli_epi32(bf16_bits_daz16(v1[xi]), 16));
-        _mm512_mask_storeu_epi32(dst + xi * a.xi_stride, keep, word);
-      }
-    }
-  }
+  input_bf16_pairs(a, [](__m512 v0, __m512 v1) {
+    return _mm512_or_si512(bf16_bits_daz16(v0), _mm512_slli_epi32(bf16_bits_daz16(v1), 16));
+  });
 }
 
 }  // namespace

@@ -1,8 +1,8 @@
 // The AVX-512 Winograd F(2x2, 3x3) pieces shared by the fp32 and bf16 transforms
 // (conv_winograd_avx512.cpp, conv_winograd_avx512bf16.cpp; contracts in conv_winograd.h): the
-// input tile transform of 16 tiles of one channel and the whole output transform. The same fp32
-// adds in the same order as the scalar twins in conv_winograd.cpp, so the results are
-// bit-identical to them.
+// input tile transform of 16 tiles of one channel, the bf16 pairs loop and the whole output
+// transform. The same fp32 adds in the same order as the scalar twins in conv_winograd.cpp, so the
+// results are bit-identical to them.
 //   input:  per input row, four masked loads (offsets 0, 16, 2, 18 from the run's first column)
 //           split into even/odd columns give d[i][0..3] for 16 tiles; V in 16 registers.
 //   output: 16 masked loads of M, A^T M A, then each output row's two columns interleaved back
@@ -82,6 +82,36 @@ inline void prefetch_patch_rows(const float* p, int64_t h, int64_t w, int64_t iy
     _mm_prefetch(r, _MM_HINT_T0);
     _mm_prefetch(r + 64, _MM_HINT_T0);
     _mm_prefetch(r + 128, _MM_HINT_T0);
+  }
+}
+
+// The bf16 input transform's loop (the WinoInput contract, bf16 pair words): V of two channels
+// (16 registers each) joined by words(v0[xi], v1[xi]) into 16 pair words, one masked store per xi;
+// the next pair's rows are prefetched first. words() is the path's rounding.
+template <typename Words>
+inline void input_bf16_pairs(const detail::WinoInput& a, Words&& words) {
+  const int64_t hw = a.h * a.w;
+  for (int64_t q = a.q0; q < a.q1; ++q) {
+    const int64_t c0 = 2 * q, c1 = c0 + 1;
+    const float* p0 = c0 < a.c_in ? a.x + c0 * hw : nullptr;
+    const float* p1 = c1 < a.c_in ? a.x + c1 * hw : nullptr;
+    for (int r = 0; r < a.nruns; ++r) {
+      const detail::WinoRun& run = a.runs[r];
+      const int64_t iy0 = 2 * run.ty - a.row_phase - a.pad_top;
+      const int64_t ix0 = 2 * run.tx0 - a.pad_left;
+      if (q + 1 < a.q1 && 2 * q + 3 < a.c_in) {  // the next pair's planes
+        prefetch_patch_rows(p0 + 2 * hw, a.h, a.w, iy0, ix0);
+        prefetch_patch_rows(p0 + 3 * hw, a.h, a.w, iy0, ix0);
+      }
+      __m512 v0[16], v1[16];
+      input_tiles(p0, a.h, a.w, iy0, ix0, v0);
+      input_tiles(p1, a.h, a.w, iy0, ix0, v1);
+      const __mmask16 keep = __mmask16((1u << run.len) - 1u);
+      uint32_t* dst = a.v + (run.col / a.nr) * a.k_rows * a.nr + q * a.nr + run.col % a.nr;
+#pragma GCC unroll 16
+      for (int xi = 0; xi < 16; ++xi)
+        _mm512_mask_storeu_epi32(dst + xi * a.xi_stride, keep, words(v0[xi], v1[xi]));
+    }
   }
 }
 

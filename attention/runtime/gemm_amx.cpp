@@ -21,6 +21,7 @@
 #include "attention/runtime/amx_tiles.h"
 #include "attention/runtime/bf16_pairs_avx512.h"
 #include "attention/runtime/gemm_store_avx512.h"
+#include "attention/runtime/gemm_strip.h"
 #include "attention/runtime/kernels.h"
 
 namespace macro {
@@ -142,16 +143,7 @@ void micro_amx(const MicroTile& t) {
 // The tiles of a strip in one call: between tiles nothing goes through the stack.
 void strip_amx(const MicroTile& t0, int64_t ncols, int64_t b_stride) {
   detail::amx_tiles_ready();
-  MicroTile t = t0;
-  const unsigned char* b = static_cast<const unsigned char*>(t0.b);
-  for (int64_t j = 0; j < ncols; j += kNr, b += b_stride) {
-    t.b = b;
-    t.n = int(ncols - j < kNr ? ncols - j : kNr);
-    t.c = t0.c + j;
-    t.bias_n = t0.bias_n ? t0.bias_n + j : nullptr;
-    t.res = t0.res ? t0.res + j : nullptr;
-    tile_amx(t);
-  }
+  detail::for_each_strip_tile<kNr>(t0, ncols, b_stride, [](const MicroTile& t) { tile_amx(t); });
 }
 
 // A panel [kcp/32][w][32] bf16 (row-major 16 x 32 tiles) from row-major fp32 rows: each row is read

@@ -2,6 +2,7 @@
 // Packed layouts and the MicroTile contract: kernels.h.
 #include <immintrin.h>
 
+#include "attention/runtime/gemm_strip.h"
 #include "attention/runtime/gemm_wide_a.h"
 #include "attention/runtime/kernels.h"
 
@@ -170,16 +171,8 @@ void micro_bf16_emulated(const MicroTile& t) {
 
 void strip_bf16_emulated(const MicroTile& t0, int64_t ncols, int64_t b_stride) {
   widen_a(t0);
-  MicroTile t = t0;
-  const unsigned char* b = static_cast<const unsigned char*>(t0.b);
-  for (int64_t j = 0; j < ncols; j += kNr, b += b_stride) {
-    t.b = b;
-    t.n = int(ncols - j < kNr ? ncols - j : kNr);
-    t.c = t0.c + j;
-    t.bias_n = t0.bias_n ? t0.bias_n + j : nullptr;
-    t.res = t0.res ? t0.res + j : nullptr;
-    micro_bf16_wide(t);
-  }
+  detail::for_each_strip_tile<kNr>(t0, ncols, b_stride,
+                                   [](const MicroTile& t) { micro_bf16_wide(t); });
 }
 
 double probe_fma(int64_t iters) {

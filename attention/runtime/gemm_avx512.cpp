@@ -9,6 +9,7 @@
 #include <cstdint>
 
 #include "attention/runtime/gemm_store_avx512.h"
+#include "attention/runtime/gemm_strip.h"
 #include "attention/runtime/gemm_wide_a.h"
 #include "attention/runtime/kernels.h"
 
@@ -158,16 +159,9 @@ void micro_bf16_emulated(const MicroTile& t) {
 
 void strip_bf16_emulated(const MicroTile& t0, int64_t ncols, int64_t b_stride) {
   widen_a(t0);
-  MicroTile t = t0;
-  const unsigned char* b = static_cast<const unsigned char*>(t0.b);
-  for (int64_t j = 0; j < ncols; j += kNr, b += b_stride) {
-    t.b = b;
-    t.n = int(ncols - j < kNr ? ncols - j : kNr);
-    t.c = t0.c + j;
-    t.bias_n = t0.bias_n ? t0.bias_n + j : nullptr;
-    t.res = t0.res ? t0.res + j : nullptr;
+  detail::for_each_strip_tile<kNr>(t0, ncols, b_stride, [](const MicroTile& t) {
     for_rows<kMrBf16>(t, [&]<int R>() { micro_bf16_wide_rows<R>(t); });
-  }
+  });
 }
 
 // 24 independent FMA chains (enough to cover latency x throughput on current cores).
