@@ -224,9 +224,11 @@ TEST_CASE("winograd: the scalar twin and every path against the double loop nest
 
 TEST_CASE("winograd: the vector transforms equal the scalar twins bit for bit", "[winograd]") {
   const detail::WinogradTransforms& sc = detail::winograd_scalar_transforms();
-  // bf16 on AVX512-BF16 (vcvtne2ps2bf16) and on plain AVX-512 (rounding in integer ops), fp32.
-  const std::pair<bool, Isa> cases[] = {
-      {false, Isa::kAvx512Bf16}, {false, Isa::kAvx512}, {true, Isa::kAvx512}};
+  // bf16 on AVX512-BF16 (vcvtne2ps2bf16), on plain AVX-512 and on AVX2 (rounding in integer
+  // ops), fp32 on AVX-512 and AVX2.
+  const std::pair<bool, Isa> cases[] = {{false, Isa::kAvx512Bf16}, {false, Isa::kAvx512},
+                                        {true, Isa::kAvx512},      {false, Isa::kAvx2},
+                                        {true, Isa::kAvx2}};
   for (const auto& [f32, isa] : cases) {
     if (!isa_supported(isa)) {
       WARN("no " << isa_name(isa) << " on this machine: only the scalar " << (f32 ? "fp32" : "bf16")
@@ -471,11 +473,12 @@ TEST_CASE("winograd: modes, pack rule, and the direct path when forced", "[winog
     const std::vector<float> w_wide(size_t(64 * 1280 * 9), 0.25f);
     ConvWeights wide = ConvWeights::pack(w_wide.data(), nullptr, 64, 1280, 3, 3, WeightType::kBf16);
     CHECK(wide.winograd().empty());  // Cin 1280: no packs under kAuto
-    // fp32 packs under kAuto only where the fp32 transforms are vector code (AVX-512 and up).
-    const bool f32_fast = isa == Isa::kAvx512 || isa == Isa::kAvx512Bf16 || isa == Isa::kAmx;
+    // fp32 packs under kAuto only where the fp32 transforms are vector code (AVX2 and up).
+    const bool f32_fast = isa == Isa::kAvx2 || isa == Isa::kAvx512 || isa == Isa::kAvx512Bf16 ||
+                          isa == Isa::kAmx;
     ConvWeights f32 = ConvWeights::pack(w.data(), b.data(), s.c_out, s.c_in, 3, 3);
     CHECK(f32.winograd().size() == (f32_fast ? 16u : 0u));
-    // Auto: bf16 and fp32 on AVX-512 and up (the paths with vector transforms), and only with
+    // Auto: bf16 and fp32 on AVX2 and up (the paths with vector transforms), and only with
     // enough tiles (60 here: too few).
     CHECK_FALSE(detail::winograd_applies(s, auto_w));
     Conv2dShape big = s;

@@ -186,7 +186,7 @@ ConvWeights ConvWeights::pack(const float* w, const float* bias, int64_t c_out, 
   cw.kh_ = kh;
   cw.kw_ = kw;
   const ConvWinograd mode = conv2d_winograd_mode();
-  // fp32 under kAuto: only on the paths with the vector fp32 transforms (AVX-512 and up).
+  // fp32 under kAuto: only on the paths with the vector fp32 transforms (AVX2 and up).
   const bool wino = kh == 3 && kw == 3 &&
                     (mode == ConvWinograd::kAlways ||
                      (mode == ConvWinograd::kAuto && detail::winograd_pack_qualifies(c_out, c_in) &&

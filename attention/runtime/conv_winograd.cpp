@@ -238,10 +238,11 @@ const WinogradTransforms& winograd_scalar_transforms() {
 
 bool winograd_vector_path(Isa isa, WeightType type) {
   (void)type;
-  return isa == Isa::kAvx512Bf16 || isa == Isa::kAmx || isa == Isa::kAvx512;
+  return isa == Isa::kAvx512Bf16 || isa == Isa::kAmx || isa == Isa::kAvx512 || isa == Isa::kAvx2;
 }
 
 const WinogradTransforms& winograd_transforms(Isa isa, bool f32) {
+  if (isa == Isa::kAvx2) return *winograd_avx2_transforms(f32);
   if (winograd_vector_path(isa, f32 ? WeightType::kF32 : WeightType::kBf16)) {
     const WinogradTransforms* t = f32                   ? winograd_avx512_transforms()
                                   : isa == Isa::kAvx512 ? winograd_avx512_bf16_transforms()

@@ -95,21 +95,23 @@ struct WinogradTransforms {
 };
 
 // The transforms for a kernel path and element type: AVX-512 where the path has them (kAvx512,
-// kAvx512Bf16 and kAmx, both types; bf16 on kAvx512 rounds in integer ops), scalar otherwise.
-// The scalar input transform handles both element types (WinoInput::f32), each vector one its own.
+// kAvx512Bf16 and kAmx, both types; bf16 on kAvx512 rounds in integer ops), AVX2 on kAvx2 (both
+// types, 8 tiles per vector, bf16 rounded in integer ops), scalar otherwise. The scalar input
+// transform handles both element types (WinoInput::f32), each vector one its own.
 const WinogradTransforms& winograd_transforms(Isa isa, bool f32 = false);
 const WinogradTransforms& winograd_scalar_transforms();
 const WinogradTransforms* winograd_avx512_transforms();      // fp32; conv_winograd_avx512.cpp
 const WinogradTransforms* winograd_avx512bf16_transforms();  // bf16; conv_winograd_avx512bf16.cpp
 const WinogradTransforms* winograd_avx512_bf16_transforms();  // bf16, AVX-512F; conv_winograd_avx512.cpp
+const WinogradTransforms* winograd_avx2_transforms(bool f32);  // conv_winograd_avx2.cpp
 
 // The 16 transformed weight packs U_xi (A operands of the `type` kernel of `isa`): [Cout, Cin2]
 // for bf16 (the pad channel zero), [Cout, Cin] for fp32.
 std::vector<PackedWeights> winograd_pack(const float* w, int64_t c_out, int64_t c_in, Isa isa,
                                          WeightType type);
 
-// Whether `isa` has vector transforms for `type` (avx512, avx512bf16 and amx, both types): the
-// paths kAuto takes Winograd on (and, for fp32, builds its packs on).
+// Whether `isa` has vector transforms for `type` (avx2, avx512, avx512bf16 and amx, both types):
+// the paths kAuto takes Winograd on (and, for fp32, builds its packs on).
 bool winograd_vector_path(Isa isa, WeightType type);
 
 // Whether ConvWeights::pack builds the Winograd packs for a 3x3 conv of these channels.
