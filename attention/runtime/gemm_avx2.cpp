@@ -1,4 +1,4 @@
-// AVX2+FMA GEMM micro-kernels: fp32 6x16 (12 ymm accumulators) and bf16 6x16 widened with shifts.
+// AVX2+FMA GEMM micro-kernels: fp32 6x16 (12 ymm accumulators) and bf16 5x16 widened with shifts.
 // Packed layouts and the MicroTile contract: kernels.h.
 #include <immintrin.h>
 
@@ -98,10 +98,12 @@ void micro_f32(const MicroTile& t) {
 // bf16 pairs: lane i of a 32-bit view holds (even | odd << 16); even << 16 and odd & 0xffff0000
 // are the exact fp32 values; odd products first, as vdpbf16ps does. The A micro-panel is widened
 // once per call or strip (gemm_wide_a.h) so each row's broadcast is a load; the B pairs are
-// widened in registers, the odd halves for all rows first, then the even ones (12 accumulators +
-// 2 B vectors + 1 broadcast fit the 16 ymm). Each accumulator takes the odd product, then the even
-// one, per pair: the scalar twin's bits.
-constexpr int kMrBf16 = 6;
+// widened in registers, the odd halves for all rows first, then the even ones. Five rows: 10
+// accumulators + 2 B words + their 2 widened halves + 1 broadcast + the mask fit the 16 ymm (six
+// rows spilled an accumulator to the stack in every step, whose store-to-load round trip then
+// lengthened its FMA chain). Each accumulator takes the odd product, then the even one, per pair:
+// the scalar twin's bits.
+constexpr int kMrBf16 = 5;
 
 thread_local detail::WideA t_wide_a;
 
@@ -158,14 +160,13 @@ void micro_bf16_wide_rows(const MicroTile& t) {
   store_tile<kMrBf16>(t, c0, c1);
 }
 
-// The rows of the tile: the full panel, or the last panel's m < 6 (fewer accumulators).
+// The rows of the tile: the full panel, or the last panel's m < 5 (fewer accumulators).
 void micro_bf16_wide(const MicroTile& t) {
   switch (t.m) {
     case 1: micro_bf16_wide_rows<1>(t); break;
     case 2: micro_bf16_wide_rows<2>(t); break;
     case 3: micro_bf16_wide_rows<3>(t); break;
     case 4: micro_bf16_wide_rows<4>(t); break;
-    case 5: micro_bf16_wide_rows<5>(t); break;
     default: micro_bf16_wide_rows<kMrBf16>(t); break;
   }
 }
@@ -209,7 +210,7 @@ void fill_avx2_kernels(KernelTable& t) {
                       256,
                       PackLayout::kBf16Pairs,
                       micro_bf16_emulated,
-                      "avx2 bf16 6x16 (shift-widened)"};
+                      "avx2 bf16 5x16 (shift-widened)"};
   t.bf16.strip = strip_bf16_emulated;
   t.probe_fma = probe_fma;
   t.probe_bf16 = probe_fma;
