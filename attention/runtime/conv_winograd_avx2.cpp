@@ -14,9 +14,16 @@
 #include <cstdint>
 
 #include "attention/runtime/conv_winograd.h"
+#include "attention/runtime/conv_winograd_simd.h"
 
 namespace macro {
 namespace {
+
+struct Ops256 {
+  using V = __m256;
+  static V add(V a, V b) { return _mm256_add_ps(a, b); }
+  static V sub(V a, V b) { return _mm256_sub_ps(a, b); }
+};
 
 // Lanes e in [0, 8) with 0 <= start + e < limit, as a maskload / maskstore mask (all bits set).
 inline __m256i lane_mask(int64_t start, int64_t limit) {
@@ -59,22 +66,7 @@ inline void input_tiles(const float* p, int64_t h, int64_t w, int64_t iy0, int64
     d[i * 4 + 2] = evens(a2, a10);
     d[i * 4 + 3] = odds(a2, a10);
   }
-  __m256 r[16];
-#pragma GCC unroll 4
-  for (int j = 0; j < 4; ++j) {
-    r[0 * 4 + j] = _mm256_sub_ps(d[0 * 4 + j], d[2 * 4 + j]);
-    r[1 * 4 + j] = _mm256_add_ps(d[1 * 4 + j], d[2 * 4 + j]);
-    r[2 * 4 + j] = _mm256_sub_ps(d[2 * 4 + j], d[1 * 4 + j]);
-    r[3 * 4 + j] = _mm256_sub_ps(d[1 * 4 + j], d[3 * 4 + j]);
-  }
-#pragma GCC unroll 4
-  for (int i = 0; i < 4; ++i) {
-    const __m256* ri = r + i * 4;
-    v[i * 4 + 0] = _mm256_sub_ps(ri[0], ri[2]);
-    v[i * 4 + 1] = _mm256_add_ps(ri[1], ri[2]);
-    v[i * 4 + 2] = _mm256_sub_ps(ri[2], ri[1]);
-    v[i * 4 + 3] = _mm256_sub_ps(ri[1], ri[3]);
-  }
+  winograd_btdb<Ops256>(d, v);
 }
 
 // bf16 bits of 8 floats in 32-bit lanes, as the scalar bf16_bits_daz rounds: nearest even, NaN
@@ -160,20 +152,15 @@ void output_avx2(const detail::WinoOutput& a) {
         for (int xi = 0; xi < 16; ++xi)
           m[xi] = _mm256_maskload_ps(mc + xi * a.xi_stride + run.col + h0, keep);
         __m256 t[8];
-#pragma GCC unroll 4
-        for (int j = 0; j < 4; ++j) {
-          t[0 * 4 + j] = _mm256_add_ps(_mm256_add_ps(m[0 * 4 + j], m[1 * 4 + j]), m[2 * 4 + j]);
-          t[1 * 4 + j] = _mm256_sub_ps(_mm256_sub_ps(m[1 * 4 + j], m[2 * 4 + j]), m[3 * 4 + j]);
-        }
+        winograd_atm<Ops256>(m, t);
         const int64_t ox0 = 2 * (run.tx0 + h0);
         const int64_t valid = std::min<int64_t>(2 * std::min(8, run.len - h0), a.ow - ox0);
         const __m256i klo = lane_mask(0, valid), khi = lane_mask(8, valid);
         for (int i = 0; i < 2; ++i) {
           const int64_t oy = 2 * run.ty - a.row_phase + i;
           if (oy < 0 || oy >= a.oh) continue;
-          const __m256* ti = t + i * 4;
-          __m256 y0 = _mm256_add_ps(_mm256_add_ps(ti[0], ti[1]), ti[2]);
-          __m256 y1 = _mm256_sub_ps(_mm256_sub_ps(ti[1], ti[2]), ti[3]);
+          __m256 y0, y1;
+          winograd_row<Ops256>(t + i * 4, &y0, &y1);
           if (a.bias) {
             y0 = _mm256_add_ps(y0, bias);
             y1 = _mm256_add_ps(y1, bias);

@@ -18,9 +18,16 @@
 #include <cstdint>
 
 #include "attention/runtime/conv_winograd.h"
+#include "attention/runtime/conv_winograd_simd.h"
 
 namespace macro {
 namespace {
+
+struct Ops512 {
+  using V = __m512;
+  static V add(V a, V b) { return _mm512_add_ps(a, b); }
+  static V sub(V a, V b) { return _mm512_sub_ps(a, b); }
+};
 
 // Lanes e in [0, 16) with 0 <= start + e < limit.
 inline __mmask16 range_mask(int64_t start, int64_t limit) {
@@ -54,20 +61,7 @@ inline void input_tiles(const float* p, int64_t h, int64_t w, int64_t iy0, int64
     d[i * 4 + 2] = _mm512_permutex2var_ps(a2, even, a18);
     d[i * 4 + 3] = _mm512_permutex2var_ps(a2, odd, a18);
   }
-  __m512 r[16];
-  for (int j = 0; j < 4; ++j) {
-    r[0 * 4 + j] = _mm512_sub_ps(d[0 * 4 + j], d[2 * 4 + j]);
-    r[1 * 4 + j] = _mm512_add_ps(d[1 * 4 + j], d[2 * 4 + j]);
-    r[2 * 4 + j] = _mm512_sub_ps(d[2 * 4 + j], d[1 * 4 + j]);
-    r[3 * 4 + j] = _mm512_sub_ps(d[1 * 4 + j], d[3 * 4 + j]);
-  }
-  for (int i = 0; i < 4; ++i) {
-    const __m512* ri = r + i * 4;
-    v[i * 4 + 0] = _mm512_sub_ps(ri[0], ri[2]);
-    v[i * 4 + 1] = _mm512_add_ps(ri[1], ri[2]);
-    v[i * 4 + 2] = _mm512_sub_ps(ri[2], ri[1]);
-    v[i * 4 + 3] = _mm512_sub_ps(ri[1], ri[3]);
-  }
+  winograd_btdb<Ops512>(d, v);
 }
 
 // Prefetch the 4 rows x 136 bytes a run's 16 tiles read from plane p (rows iy0 .. iy0 + 3,
@@ -133,19 +127,15 @@ inline void output_avx512(const detail::WinoOutput& a) {
       for (int xi = 0; xi < 16; ++xi)
         m[xi] = _mm512_maskz_loadu_ps(keep, mc + xi * a.xi_stride + run.col);
       __m512 t[8];
-      for (int j = 0; j < 4; ++j) {
-        t[0 * 4 + j] = _mm512_add_ps(_mm512_add_ps(m[0 * 4 + j], m[1 * 4 + j]), m[2 * 4 + j]);
-        t[1 * 4 + j] = _mm512_sub_ps(_mm512_sub_ps(m[1 * 4 + j], m[2 * 4 + j]), m[3 * 4 + j]);
-      }
+      winograd_atm<Ops512>(m, t);
       const int64_t ox0 = 2 * run.tx0;
       const int64_t valid = 2 * int64_t(run.len) < a.ow - ox0 ? 2 * int64_t(run.len) : a.ow - ox0;
       const __mmask16 klo = range_mask(0, valid), khi = range_mask(16, valid);
       for (int i = 0; i < 2; ++i) {
         const int64_t oy = 2 * run.ty - a.row_phase + i;
         if (oy < 0 || oy >= a.oh) continue;
-        const __m512* ti = t + i * 4;
-        __m512 y0 = _mm512_add_ps(_mm512_add_ps(ti[0], ti[1]), ti[2]);
-        __m512 y1 = _mm512_sub_ps(_mm512_sub_ps(ti[1], ti[2]), ti[3]);
+        __m512 y0, y1;
+        winograd_row<Ops512>(t + i * 4, &y0, &y1);
         if (a.bias) {
           y0 = _mm512_add_ps(y0, bias);
           y1 = _mm512_add_ps(y1, bias);
