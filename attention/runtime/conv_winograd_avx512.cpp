@@ -16,25 +16,9 @@
 namespace macro {
 namespace {
 
-void input_f32_avx512(const detail::WinoInput& a) {
-  const int64_t hw = a.h * a.w;
-  for (int64_t c = a.q0; c < a.q1; ++c) {
-    const float* p = a.x + c * hw;
-    for (int r = 0; r < a.nruns; ++r) {
-      const detail::WinoRun& run = a.runs[r];
-      const int64_t iy0 = 2 * run.ty - a.row_phase - a.pad_top;
-      const int64_t ix0 = 2 * run.tx0 - a.pad_left;
-      if (c + 1 < a.q1) prefetch_patch_rows(p + hw, a.h, a.w, iy0, ix0);  // the next channel
-      __m512 v[16];
-      input_tiles(p, a.h, a.w, iy0, ix0, v);
-      const __mmask16 keep = __mmask16((1u << run.len) - 1u);
-      float* dst = reinterpret_cast<float*>(a.v + (run.col / a.nr) * a.k_rows * a.nr + c * a.nr +
-                                            run.col % a.nr);
-#pragma GCC unroll 16
-      for (int xi = 0; xi < 16; ++xi) _mm512_mask_storeu_ps(dst + xi * a.xi_stride, keep, v[xi]);
-    }
-  }
-}
+void input_f32_avx512(const detail::WinoInput& a) { winograd_input_f32<WinoAvx512>(a); }
+
+void output_avx512(const detail::WinoOutput& a) { winograd_output<WinoAvx512>(a); }
 
 // bf16 bits of 16 floats in 32-bit lanes, as the scalar bf16_bits_daz (and vcvtne2ps2bf16) round:
 // nearest even, NaN quiet, fp32 denormals to signed zero.
@@ -59,7 +43,7 @@ inline __m512i bf16_bits_daz16(__m512 v) {
 // rounding in integer ops (bf16_bits_daz16), the two channels' bits joined by a shift and an OR;
 // the same bits as the scalar twin and as the AVX512-BF16 transform.
 void input_bf16_avx512f(const detail::WinoInput& a) {
-  input_bf16_pairs(a, [](__m512 v0, __m512 v1) {
+  winograd_input_bf16<WinoAvx512>(a, [](__m512 v0, __m512 v1) {
     return _mm512_or_si512(bf16_bits_daz16(v0), _mm512_slli_epi32(bf16_bits_daz16(v1), 16));
   });
 }

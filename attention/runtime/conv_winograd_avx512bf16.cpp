@@ -16,11 +16,13 @@
 namespace macro {
 namespace {
 
+void output_avx512bf16(const detail::WinoOutput& a) { winograd_output<WinoAvx512>(a); }
+
 void input_bf16_avx512(const detail::WinoInput& a) {
   const __m512i pair_idx =
       _mm512_set_epi16(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24, 8, 23, 7, 22, 6,
                        21, 5, 20, 4, 19, 3, 18, 2, 17, 1, 16, 0);
-  input_bf16_pairs(a, [&](__m512 v0, __m512 v1) {
+  winograd_input_bf16<WinoAvx512>(a, [&](__m512 v0, __m512 v1) {
     // [c0 lanes 0..15 | c1 lanes 0..15] as bf16, interleaved into pair words.
     return _mm512_permutexvar_epi16(pair_idx, (__m512i)_mm512_cvtne2ps_pbh(v1, v0));
   });
@@ -30,7 +32,7 @@ void input_bf16_avx512(const detail::WinoInput& a) {
 
 namespace detail {
 const WinogradTransforms* winograd_avx512bf16_transforms() {
-  static const WinogradTransforms t{input_bf16_avx512, output_avx512, "avx512bf16"};
+  static const WinogradTransforms t{input_bf16_avx512, output_avx512bf16, "avx512bf16"};
   return &t;
 }
 }  // namespace detail
