@@ -206,9 +206,9 @@ TEST_CASE("conv2d: threaded result equals single-threaded bit for bit", "[kernel
 TEST_CASE("conv2d: more output channels than pixels (the threads split the channels), bit for bit",
           "[kernels][conv]") {
   // Cout 470 over a 9x7 image: the weights outweigh the im2col panels, so with 2 to 8 threads the
-  // output channels are split between the tasks (Cout >= 4 MR per thread on every path) and each
-  // task gathers its own panels; the result must not depend on the thread count, and stays within
-  // the reference bound on every path.
+  // output channels are split between the tasks (Cout >= 4 MR per thread on every path), which
+  // share the panels gathered once for all of them; the result must not depend on the thread
+  // count, and stays within the reference bound on every path.
   const Conv2dShape s = shape(1, 37, 9, 7, 470, 3, 1, 1, 1, 1, 1);
   auto x = random_vec(size_t(s.c_in * s.h * s.w), 7);
   auto w = random_vec(size_t(s.c_out * s.c_in * 9), 8);

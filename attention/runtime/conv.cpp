@@ -229,11 +229,17 @@ size_t ConvWeights::bytes() const {
 thread_local std::vector<uint32_t> t_pair_planes;
 // Rows of a residual that aliases the output, copied per band (conv2d); grown once per thread.
 thread_local std::vector<float> t_residual_rows;
+// The whole im2col B of a conv whose tasks split the output channels (conv_rows): 64-byte
+// aligned, grown once per calling thread.
+thread_local std::unique_ptr<unsigned char[]> t_im2col;
+thread_local size_t t_im2col_bytes = 0;
 size_t g_pair_band_words = size_t(4) << 20;  // 16 MB of pair words per band (conv2d_set_pair_band)
 
 void conv2d_release_scratch() {
   std::vector<uint32_t>().swap(t_pair_planes);
   std::vector<float>().swap(t_residual_rows);
+  t_im2col.reset();
+  t_im2col_bytes = 0;
   detail::winograd_release_scratch();
 }
 
@@ -301,6 +307,30 @@ void conv_rows(const Conv2dShape& s, const float* xf, const uint32_t* xp, int64_
     const int64_t m_tasks = detail::round_up((s.c_out + 511) / 512, threads);
     ds.mc = detail::round_up((s.c_out + m_tasks - 1) / m_tasks, kern.mr);
     ds.m_only = true;
+    // Every task would gather all the panels for itself (m_tasks times in all, twice per thread
+    // for 1280 channels on 2 threads): gather the whole B once, the threads sharing the panels,
+    // and hand it to the driver as prepacked (the same words, so the same sums). Up to 32 MB
+    // (2560 -> 1280 channels at 2 x 16 x 16 pixels: 24 MB).
+    const int64_t kp = detail::round_up(ds.K, kern.k_align), nr = kern.nr;
+    const int64_t panels = (ds.N + nr - 1) / nr;
+    const size_t panel_bytes = size_t(kp * nr * detail::packed_elem_bytes(kern.layout));
+    const size_t bytes = size_t(panels) * panel_bytes;
+    if (bytes <= (size_t(32) << 20)) {
+      if (t_im2col_bytes < bytes) {
+        t_im2col.reset(new unsigned char[bytes + 64]);
+        t_im2col_bytes = bytes;
+      }
+      unsigned char* buf = reinterpret_cast<unsigned char*>(
+          (reinterpret_cast<uintptr_t>(t_im2col.get()) + 63) & ~uintptr_t(63));
+      pool->parallel_for(
+          size_t(panels),
+          [&](size_t p0, size_t p1, int) {
+            const int64_t c0 = int64_t(p0) * nr, c1 = std::min<int64_t>(ds.N, int64_t(p1) * nr);
+            pack_im2col(&ctx, kern, false, c0, c1 - c0, 0, ds.K, buf + p0 * panel_bytes);
+          },
+          1);
+      ob = detail::Operand{nullptr, nullptr, buf, kp};
+    }
   } else {
     ds.mc = detail::round_up(std::min<int64_t>(s.c_out, 512), kern.mr);
   }
