@@ -23,6 +23,7 @@
 #include "attention/runtime/conv_winograd.h"
 #include "attention/runtime/large_alloc.h"
 #include "attention/runtime/ops.h"
+#include "attention/runtime/scratch.h"
 #include "attention/runtime/status.h"
 
 namespace macro {
@@ -229,17 +230,15 @@ size_t ConvWeights::bytes() const {
 thread_local std::vector<uint32_t> t_pair_planes;
 // Rows of a residual that aliases the output, copied per band (conv2d); grown once per thread.
 thread_local std::vector<float> t_residual_rows;
-// The whole im2col B of a conv whose tasks split the output channels (conv_rows): 64-byte
-// aligned, grown once per calling thread.
-thread_local std::unique_ptr<unsigned char[]> t_im2col;
-thread_local size_t t_im2col_bytes = 0;
+// The whole im2col B of a conv whose tasks split the output channels (conv_rows), per calling
+// thread.
+thread_local detail::AlignedScratch t_im2col;
 size_t g_pair_band_words = size_t(4) << 20;  // 16 MB of pair words per band (conv2d_set_pair_band)
 
 void conv2d_release_scratch() {
   std::vector<uint32_t>().swap(t_pair_planes);
   std::vector<float>().swap(t_residual_rows);
-  t_im2col.reset();
-  t_im2col_bytes = 0;
+  t_im2col.release();
   detail::winograd_release_scratch();
 }
 
@@ -316,12 +315,7 @@ void conv_rows(const Conv2dShape& s, const float* xf, const uint32_t* xp, int64_
     const size_t panel_bytes = size_t(kp * nr * detail::packed_elem_bytes(kern.layout));
     const size_t bytes = size_t(panels) * panel_bytes;
     if (bytes <= (size_t(32) << 20)) {
-      if (t_im2col_bytes < bytes) {
-        t_im2col.reset(new unsigned char[bytes + 64]);
-        t_im2col_bytes = bytes;
-      }
-      unsigned char* buf = reinterpret_cast<unsigned char*>(
-          (reinterpret_cast<uintptr_t>(t_im2col.get()) + 63) & ~uintptr_t(63));
+      unsigned char* buf = static_cast<unsigned char*>(t_im2col.get(bytes));
       pool->parallel_for(
           size_t(panels),
           [&](size_t p0, size_t p1, int) {

@@ -20,6 +20,7 @@
 #include <string>
 
 #include "attention/runtime/conv.h"
+#include "attention/runtime/scratch.h"
 #include "attention/runtime/status.h"
 
 namespace macro {
@@ -190,17 +191,16 @@ int make_runs(int64_t t0, int64_t nt, int64_t tw, detail::WinoRun* runs) {
   return n;
 }
 
-// 64-byte aligned storage, grown only.
+// Typed view of a per-thread scratch buffer (scratch.h): room for `cap` elements.
 template <typename T>
 struct Buffer {
-  std::unique_ptr<unsigned char[]> mem;
+  detail::AlignedScratch mem;
   size_t cap = 0;  // elements
   T* data = nullptr;
   void reserve(size_t n) {
     if (n <= cap) return;
-    mem.reset(new unsigned char[n * sizeof(T) + 64]);
+    data = static_cast<T*>(mem.get(n * sizeof(T)));
     cap = n;
-    data = reinterpret_cast<T*>((reinterpret_cast<uintptr_t>(mem.get()) + 63) & ~uintptr_t(63));
   }
 };
 

@@ -25,6 +25,7 @@
 
 #include "attention/runtime/half.h"
 #include "attention/runtime/ops.h"
+#include "attention/runtime/scratch.h"
 #include "attention/runtime/status.h"
 
 namespace macro {
@@ -94,18 +95,7 @@ double scalar_probe(int64_t iters) {
 
 // ---- per-thread packing buffers (grown once, reused) -------------------------------------------
 
-struct Scratch {
-  std::unique_ptr<unsigned char[]> mem;
-  size_t size = 0;
-  void* get(size_t bytes) {
-    if (bytes + 64 > size) {
-      size = bytes + 64;
-      mem.reset(new unsigned char[size]);
-    }
-    return reinterpret_cast<void*>((reinterpret_cast<uintptr_t>(mem.get()) + 63) & ~uintptr_t(63));
-  }
-};
-thread_local Scratch t_scratch_a, t_scratch_b, t_scratch_c;
+thread_local detail::AlignedScratch t_scratch_a, t_scratch_b, t_scratch_c;
 
 // ---- packing -----------------------------------------------------------------------------------
 

@@ -105,26 +105,7 @@ void micro_f32(const MicroTile& t) {
 // the scalar twin's bits.
 constexpr int kMrBf16 = 5;
 
-thread_local detail::WideA t_wide_a;
-
-void widen_a(const MicroTile& t) {
-  const int64_t words = t.kc / 2 * kMrBf16;
-  t_wide_a.reserve(words);
-  const __m256i hi = _mm256_set1_epi32(int(0xffff0000u));
-  const uint32_t* a = static_cast<const uint32_t*>(t.a);
-  uint32_t* odd = reinterpret_cast<uint32_t*>(t_wide_a.odd);
-  uint32_t* even = reinterpret_cast<uint32_t*>(t_wide_a.even);
-  int64_t i = 0;
-  for (; i + 8 <= words; i += 8) {
-    const __m256i w = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a + i));
-    _mm256_store_si256(reinterpret_cast<__m256i*>(odd + i), _mm256_and_si256(w, hi));
-    _mm256_store_si256(reinterpret_cast<__m256i*>(even + i), _mm256_slli_epi32(w, 16));
-  }
-  for (; i < words; ++i) {
-    odd[i] = a[i] & 0xffff0000u;
-    even[i] = a[i] << 16;
-  }
-}
+thread_local WideA t_wide_a;
 
 template <int R>
 void micro_bf16_wide_rows(const MicroTile& t) {
@@ -172,12 +153,12 @@ void micro_bf16_wide(const MicroTile& t) {
 }
 
 void micro_bf16_emulated(const MicroTile& t) {
-  widen_a(t);
+  widen_a_panel(static_cast<const uint32_t*>(t.a), t.kc / 2 * kMrBf16, t_wide_a);
   micro_bf16_wide(t);
 }
 
 void strip_bf16_emulated(const MicroTile& t0, int64_t ncols, int64_t b_stride) {
-  widen_a(t0);
+  widen_a_panel(static_cast<const uint32_t*>(t0.a), t0.kc / 2 * kMrBf16, t_wide_a);
   detail::for_each_strip_tile<kNr>(t0, ncols, b_stride,
                                    [](const MicroTile& t) { micro_bf16_wide(t); });
 }

@@ -95,29 +95,7 @@ void pack_a_f32(const float* src, int64_t ld, int valid_rows, int64_t valid_k, i
 // the odd product, then the even one, per pair: the same bits.
 constexpr int kMrBf16 = 12;
 
-thread_local detail::WideA t_wide_a;
-
-// The kc/2 x 12 words of an A micro-panel into t_wide_a.
-void widen_a(const MicroTile& t) {
-  const int64_t words = t.kc / 2 * kMrBf16;
-  t_wide_a.reserve(words);
-  const __m512i hi = _mm512_set1_epi32(int(0xffff0000u));
-  const __m512i* a = static_cast<const __m512i*>(t.a);
-  __m512i* odd = reinterpret_cast<__m512i*>(t_wide_a.odd);
-  __m512i* even = reinterpret_cast<__m512i*>(t_wide_a.even);
-  const int64_t full = words / 16;
-  for (int64_t i = 0; i < full; ++i) {
-    const __m512i w = _mm512_loadu_si512(a + i);
-    _mm512_store_si512(odd + i, _mm512_and_si512(w, hi));
-    _mm512_store_si512(even + i, _mm512_slli_epi32(w, 16));
-  }
-  if (const int64_t left = words - full * 16; left > 0) {
-    const __mmask16 m = __mmask16((1u << left) - 1);
-    const __m512i w = _mm512_maskz_loadu_epi32(m, a + full);
-    _mm512_mask_storeu_epi32(odd + full, m, _mm512_and_si512(w, hi));
-    _mm512_mask_storeu_epi32(even + full, m, _mm512_slli_epi32(w, 16));
-  }
-}
+thread_local WideA t_wide_a;
 
 template <int R>
 void micro_bf16_wide_rows(const MicroTile& t) {
@@ -153,12 +131,12 @@ void micro_bf16_wide_rows(const MicroTile& t) {
 }
 
 void micro_bf16_emulated(const MicroTile& t) {
-  widen_a(t);
+  widen_a_panel(static_cast<const uint32_t*>(t.a), t.kc / 2 * kMrBf16, t_wide_a);
   for_rows<kMrBf16>(t, [&]<int R>() { micro_bf16_wide_rows<R>(t); });
 }
 
 void strip_bf16_emulated(const MicroTile& t0, int64_t ncols, int64_t b_stride) {
-  widen_a(t0);
+  widen_a_panel(static_cast<const uint32_t*>(t0.a), t0.kc / 2 * kMrBf16, t_wide_a);
   detail::for_each_strip_tile<kNr>(t0, ncols, b_stride, [](const MicroTile& t) {
     for_rows<kMrBf16>(t, [&]<int R>() { micro_bf16_wide_rows<R>(t); });
   });
