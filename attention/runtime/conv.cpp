@@ -191,7 +191,7 @@ ConvWeights ConvWeights::pack(const float* w, const float* bias, int64_t c_out, 
   const bool wino = kh == 3 && kw == 3 &&
                     (mode == ConvWinograd::kAlways ||
                      (mode == ConvWinograd::kAuto && detail::winograd_pack_qualifies(c_out, c_in) &&
-                      (type == WeightType::kBf16 || detail::winograd_vector_path(isa, type))));
+                      (type == WeightType::kBf16 || detail::winograd_vector_path(isa))));
   if (wino) cw.wino_ = detail::winograd_pack(w, c_out, c_in, isa, type);
   if (wino && stride1_only) {
     // The Winograd packs only: every call takes them.

@@ -236,20 +236,22 @@ const WinogradTransforms& winograd_scalar_transforms() {
   return t;
 }
 
-bool winograd_vector_path(Isa isa, WeightType type) {
-  (void)type;
-  return isa == Isa::kAvx512Bf16 || isa == Isa::kAmx || isa == Isa::kAvx512 || isa == Isa::kAvx2;
+bool winograd_vector_path(Isa isa) {
+  return isa == Isa::kAvx2 || isa == Isa::kAvx512 || isa == Isa::kAvx512Bf16 || isa == Isa::kAmx;
 }
 
 const WinogradTransforms& winograd_transforms(Isa isa, bool f32) {
-  if (isa == Isa::kAvx2) return *winograd_avx2_transforms(f32);
-  if (winograd_vector_path(isa, f32 ? WeightType::kF32 : WeightType::kBf16)) {
-    const WinogradTransforms* t = f32                   ? winograd_avx512_transforms()
-                                  : isa == Isa::kAvx512 ? winograd_avx512_bf16_transforms()
-                                                        : winograd_avx512bf16_transforms();
-    if (t) return *t;
+  switch (isa) {
+    case Isa::kAvx2:
+      return *winograd_avx2_transforms(f32);
+    case Isa::kAvx512:
+      return f32 ? *winograd_avx512_transforms() : *winograd_avx512_bf16_transforms();
+    case Isa::kAvx512Bf16:
+    case Isa::kAmx:
+      return f32 ? *winograd_avx512_transforms() : *winograd_avx512bf16_transforms();
+    default:
+      return winograd_scalar_transforms();
   }
-  return winograd_scalar_transforms();
 }
 
 thread_local std::vector<float> t_pack_buffer;
@@ -298,7 +300,7 @@ bool winograd_applies(const Conv2dShape& s, const ConvWeights& w) {
   if (mode == ConvWinograd::kOff || w.winograd().size() != 16) return false;
   if (s.kh != 3 || s.kw != 3 || s.stride != 1 || s.row_origin < 0) return false;
   if (mode == ConvWinograd::kAlways) return true;
-  if (!winograd_vector_path(w.winograd()[0].isa(), w.winograd()[0].type())) return false;
+  if (!winograd_vector_path(w.winograd()[0].isa())) return false;
   const int64_t tiles = (s.out_h() + 1) / 2 * ((s.out_w() + 1) / 2);
   return winograd_pack_qualifies(s.c_out, s.c_in) && tiles >= kAutoMinTiles;
 }

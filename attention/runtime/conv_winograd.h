@@ -110,9 +110,9 @@ const WinogradTransforms* winograd_avx2_transforms(bool f32);  // conv_winograd_
 std::vector<PackedWeights> winograd_pack(const float* w, int64_t c_out, int64_t c_in, Isa isa,
                                          WeightType type);
 
-// Whether `isa` has vector transforms for `type` (avx2, avx512, avx512bf16 and amx, both types):
+// Whether `isa` has vector transforms (avx2, avx512, avx512bf16 and amx, for both element types):
 // the paths kAuto takes Winograd on (and, for fp32, builds its packs on).
-bool winograd_vector_path(Isa isa, WeightType type);
+bool winograd_vector_path(Isa isa);
 
 // Whether ConvWeights::pack builds the Winograd packs for a 3x3 conv of these channels.
 bool winograd_pack_qualifies(int64_t c_out, int64_t c_in);
