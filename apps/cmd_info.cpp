@@ -20,6 +20,8 @@ int run_info(std::vector<std::string> argv) {
   std::printf("cpu: %s\n", f.brand.c_str());
   std::printf("avx2: %d  avx512: %d  avx512bf16: %d  amx: %d\n", f.avx2, f.avx512, f.avx512bf16,
               f.amx);
+  std::printf("L1d: %ld KB  L2: %ld KB per core (0 = unknown; the kernels' blocks follow them)\n",
+              f.l1d / 1024, f.l2 / 1024);
   std::printf("active path: %s\nthreads: %d\n", isa_name(active_isa()), ThreadPool::global().size());
   return 0;
 }

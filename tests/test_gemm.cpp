@@ -395,7 +395,7 @@ TEST_CASE("gemm: two threads give bit-identical results to one", "[kernels][gemm
   }
 }
 
-TEST_CASE("gemm: the K block follows the L1 size", "[kernels][gemm]") {
+TEST_CASE("gemm: the K block follows the L1 size, the column block the L2", "[kernels][gemm]") {
   // The A micro-panel (MR x KC) fills the L1: multiples of 64 within [256, 2048].
   CHECK(detail::kc_for_l1(14, 2, 384, 48 << 10) == 1728);  // bf16 14-row tile, 48 KB
   CHECK(detail::kc_for_l1(12, 4, 384, 48 << 10) == 1024);  // fp32 12-row tile
@@ -404,6 +404,14 @@ TEST_CASE("gemm: the K block follows the L1 size", "[kernels][gemm]") {
   CHECK(detail::kc_for_l1(12, 4, 384, 4 << 10) == 256);
   CHECK(detail::kc_for_l1(14, 2, 384, 1 << 20) == 2048);
   CHECK(detail::kc_for_l1(12, 4, 384, 0) == 384);  // size unknown: the fallback
+  // The L2-sized blocks (the GEMM's B block: 7/16 of the L2).
+  CHECK(l2_block_bytes(7, 16, 448 << 10, 1 << 20) == 448 << 10);
+  CHECK(l2_block_bytes(7, 16, 448 << 10, 2 << 20) == 896 << 10);
+  CHECK(l2_block_bytes(7, 16, 448 << 10, 1280 << 10) == 560 << 10);
+  CHECK(l2_block_bytes(7, 16, 448 << 10, 0) == 448 << 10);         // unknown: the fallback
+  CHECK(l2_block_bytes(7, 16, 448 << 10, 64 << 20) == 1792 << 10);  // capped at 4x
+  CHECK(l2_block_bytes(7, 16, 448 << 10, 128 << 10) == 224 << 10);  // floored at half
+  CHECK(l2_block_bytes(1, 4, 256 << 10, 1 << 20) == 256 << 10);
   // The AVX-512 kernels take it from this CPU's L1.
   if (isa_supported(Isa::kAvx512)) {
     const GemmKernel& f = kernels_for(Isa::kAvx512).f32;

@@ -364,8 +364,11 @@ Status run(const AttentionArgs& in, const AttentionKernels& kern, bool bf16_ok, 
     v16 = vb16;
   }
   // Query blocks per work item: the group's blocks share each K/V block while it is in cache.
-  // Keep the group's scratch near 256 KiB (L2 holds it with the K/V blocks).
-  const int group = std::clamp(int((256u << 10) / (layout.total * sizeof(float))), 1, kMaxGroup);
+  // Keep the group's scratch near a quarter of the L2 (256 KiB of 1 MB), which holds it with the
+  // K/V blocks.
+  static const long group_bytes = l2_block_bytes(1, 4, 256 << 10);
+  const int group =
+      std::clamp(int(size_t(group_bytes) / (layout.total * sizeof(float))), 1, kMaxGroup);
   const int groups = (nqb + group - 1) / group;
   // Per worker and group slot: floats (layout), entry lists, row pointers, one causal tile.
   struct Slot {

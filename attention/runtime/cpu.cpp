@@ -67,6 +67,7 @@ CpuFeatures detect() {
   f.brand = brand;
   while (!f.brand.empty() && f.brand.back() == ' ') f.brand.pop_back();
   f.l1d = std::max(0L, sysconf(_SC_LEVEL1_DCACHE_SIZE));
+  f.l2 = std::max(0L, sysconf(_SC_LEVEL2_CACHE_SIZE));
   return f;
 }
 
@@ -77,6 +78,12 @@ std::atomic<int> g_isa{-1};
 const CpuFeatures& cpu_features() {
   static const CpuFeatures f = detect();
   return f;
+}
+
+long l2_block_bytes(long num, long den, long fallback, long l2_bytes) {
+  const long l2 = l2_bytes < 0 ? cpu_features().l2 : l2_bytes;
+  if (l2 <= 0 || num <= 0 || den <= 0) return fallback;
+  return std::clamp(l2 / den * num, fallback / 2, 4 * fallback);
 }
 
 const char* isa_name(Isa isa) {

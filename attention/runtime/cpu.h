@@ -23,7 +23,16 @@ struct CpuFeatures {
   // Per-core L1 data cache size in bytes as the C library reports it (CPUID leaf 4 or
   // 0x8000001D); 0 where unknown. The GEMM sizes its K blocks from it (kernels.h).
   long l1d = 0;
+  // Per-core L2 size in bytes, the same way; 0 where unknown. The GEMM sizes its column blocks and
+  // the attention its query-block groups from it (l2_block_bytes).
+  long l2 = 0;
 };
+
+// Bytes of a block meant to stream through the L2 beside its neighbours: `share` of this CPU's L2
+// (e.g. 7/16 for the GEMM's B block: 448 KB of a 1 MB L2), `fallback` where the L2 size is
+// unknown, within [fallback / 2, 4 fallback] so that a misreported size cannot cripple a kernel.
+// l2_bytes: the L2 size to size for (the default reads this CPU's).
+long l2_block_bytes(long num, long den, long fallback, long l2_bytes = -1);
 
 // Detected once; AMX permission is requested from the kernel on first call (arch_prctl).
 const CpuFeatures& cpu_features();

@@ -7,7 +7,7 @@
 //         ir: MR rows  (A micro-panel MR x KC stays in L1)
 //           jr: NR columns (B micro-panels stream from L2) -> micro-kernel MR x NR
 // KC <= kern.kc (from the L1 size for AVX-512, kc_for_l1) with K cut into equal blocks; NC sized so
-// the B block is about 448 KB; MC about 192 rows, the row tasks a multiple of the thread count
+// the B block is about 7/16 of the L2 (448 KB of 1 MB; cpu.h l2_block_bytes); MC about 192 rows, the row tasks a multiple of the thread count
 // (equal shares for 1 and 2 threads), columns split only when there are fewer row blocks than
 // threads. Results never depend on the split (K blocking depends on K alone), so they are
 // thread-count invariant. (Tried: columns outermost with K inside, to keep C in L2 for the conv's
@@ -284,6 +284,12 @@ namespace {
 std::atomic<int64_t> g_kc_cap{0};
 }  // namespace
 
+// The B block's bytes: 7/16 of this CPU's L2 (448 KB where the L2 size is unknown).
+static int64_t b_block_bytes() {
+  static const int64_t bytes = l2_block_bytes(7, 16, 448 * 1024);
+  return bytes;
+}
+
 int64_t kc_for_l1(int mr, int elem_bytes, int64_t fallback, long l1d_bytes) {
   const long l1 = l1d_bytes < 0 ? cpu_features().l1d : l1d_bytes;
   if (l1 <= 0 || mr <= 0 || elem_bytes <= 0) return fallback;
@@ -340,10 +346,12 @@ void run_gemm_geglu(const GemmKernel& kern, const DriverShape& s, const Operand&
   const Tuning& tun = tuning();
   const int64_t KC = gemm_k_block(kern, K);
   const int64_t threads = pool ? pool->size() : 1;
-  // Column blocks hold whole tiles and whole groups; B of a block over all of K about 448 KB.
+  // Column blocks hold whole tiles and whole groups; B of a block over all of K about 7/16 of the
+  // L2 (448 KB of a 1 MB L2).
   const int64_t unit = std::lcm(int64_t(nr), int64_t(2 * g));
   const int64_t nc_target =
-      tun.nc > 0 ? tun.nc : std::max<int64_t>(unit, (448 * 1024) / std::max<int64_t>(1, K * esz));
+      tun.nc > 0 ? tun.nc
+                 : std::max<int64_t>(unit, b_block_bytes() / std::max<int64_t>(1, K * esz));
   const int64_t nc = unit * std::max<int64_t>(1, nc_target / unit);
   const int64_t mc_target = tun.mc > 0 ? tun.mc : 192;
   int64_t m_tasks = (M + mc_target - 1) / mc_target;
@@ -461,11 +469,11 @@ void run_gemm(const GemmKernel& kern, const DriverShape& s, const Operand& a, co
   // count, so every split below gives bit-identical results.
   const int64_t KC = gemm_k_block(kern, K);
   const int64_t threads = pool ? pool->size() : 1;
-  // B block KC x NC (streamed through L2 once per MR rows): about 448 KB, half of a 1 MB L2,
-  // leaving room for C and for part of the A block (MC x KC: ~300 KB at KC 384, ~660 KB at the
-  // KC of a 48 KB L1, which still ran faster, 2026-12-06).
+  // B block KC x NC (streamed through L2 once per MR rows): about 7/16 of the L2 (448 KB of a
+  // 1 MB L2), leaving room for C and for part of the A block (MC x KC: ~300 KB at KC 384, ~660 KB
+  // at the KC of a 48 KB L1, which still ran faster, 2026-12-06).
   const int64_t nc_target =
-      tun.nc > 0 ? tun.nc : std::max<int64_t>(nr, (448 * 1024) / std::max<int64_t>(1, KC * esz));
+      tun.nc > 0 ? tun.nc : std::max<int64_t>(nr, b_block_bytes() / std::max<int64_t>(1, KC * esz));
   const int64_t nc = s.nc > 0 ? s.nc : int64_t(nr) * std::max<int64_t>(1, nc_target / nr);
   // Tasks: row blocks of about MC rows, as many as a multiple of the thread count so the threads
   // get equal shares, but at least 4 micro-rows each; the columns are split only when there are
