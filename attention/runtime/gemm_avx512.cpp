@@ -12,6 +12,7 @@
 #include "attention/runtime/gemm_strip.h"
 #include "attention/runtime/gemm_wide_a.h"
 #include "attention/runtime/kernels.h"
+#include "attention/runtime/masked_avx512.h"
 
 namespace macro {
 namespace {
@@ -78,7 +79,7 @@ void pack_a_f32(const float* src, int64_t ld, int valid_rows, int64_t valid_k, i
         _mm_prefetch(reinterpret_cast<const char*>(src + (g + 4 + i) * ld + k0), _MM_HINT_T0);
       __m512 r[4];
       for (int i = 0; i < 4; ++i)
-        r[i] = i < rows ? _mm512_maskz_loadu_ps(m, src + (g + i) * ld + k0) : zero;
+        r[i] = i < rows ? load_lanes(m, src + (g + i) * ld + k0) : zero;
       transpose_store_4x16(r[0], r[1], r[2], r[3], nk, nrows, w, d + k0 * w + g);
     }
   }

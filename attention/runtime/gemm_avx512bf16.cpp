@@ -8,6 +8,7 @@
 #include "attention/runtime/bf16_pairs_avx512.h"
 #include "attention/runtime/gemm_store_avx512.h"
 #include "attention/runtime/kernels.h"
+#include "attention/runtime/masked_avx512.h"
 
 namespace macro {
 namespace {
@@ -72,8 +73,8 @@ void pack_a_pairs(const float* src, int64_t ld, int valid_rows, int64_t valid_k,
       for (int i = 0; i < 4; ++i) {
         if (i < rows) {
           const float* s = src + (g + i) * ld + k;
-          r[i] = _mm512_castsi512_ps((__m512i)_mm512_cvtne2ps_pbh(_mm512_maskz_loadu_ps(m1, s + 16),
-                                                                  _mm512_maskz_loadu_ps(m0, s)));
+          r[i] = _mm512_castsi512_ps(
+              (__m512i)_mm512_cvtne2ps_pbh(load_lanes(m1, s + 16), load_lanes(m0, s)));
         } else {
           r[i] = _mm512_setzero_ps();
         }

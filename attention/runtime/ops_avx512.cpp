@@ -13,6 +13,7 @@
 
 #include <cmath>
 
+#include "attention/runtime/masked_avx512.h"
 #include "attention/runtime/ops.h"
 
 namespace macro::detail {
@@ -20,24 +21,6 @@ namespace {
 
 inline __mmask16 tail_mask(int64_t rem) {
   return rem >= 16 ? __mmask16(0xffff) : __mmask16((1u << rem) - 1u);
-}
-
-// Loads and stores of up to 16 lanes: whole vectors (all but a tail) go plain, since a masked
-// access of data streamed from L3 or memory costs more (Zen 5, 2026-12-06).
-inline __m512 load16(__mmask16 m, const float* p) {
-  return m == __mmask16(0xffff) ? _mm512_loadu_ps(p) : _mm512_maskz_loadu_ps(m, p);
-}
-inline void store16(float* p, __mmask16 m, __m512 v) {
-  if (m == __mmask16(0xffff))
-    _mm512_storeu_ps(p, v);
-  else
-    _mm512_mask_storeu_ps(p, m, v);
-}
-inline void store16i(uint32_t* p, __mmask16 m, __m512i v) {
-  if (m == __mmask16(0xffff))
-    _mm512_storeu_si512(p, v);
-  else
-    _mm512_mask_storeu_epi32(p, m, v);
 }
 
 inline __m512 exp16(__m512 x) {
@@ -129,7 +112,7 @@ template <Act A>
 void act_loop(float* dst, const float* src, int64_t n) {
   for (int64_t i = 0; i < n; i += 16) {
     const __mmask16 m = tail_mask(n - i);
-    store16(dst + i, m, apply_act(load16(m, src + i), A));
+    store_lanes(dst + i, m, apply_act(load_lanes(m, src + i), A));
   }
 }
 
@@ -160,8 +143,8 @@ void affine_loop(float* dst, const float* src, int64_t n, double mean, float a, 
   const __m512 va = _mm512_set1_ps(a), vb = _mm512_set1_ps(b);
   for (int64_t i = 0; i < n; i += 16) {
     const __mmask16 m = tail_mask(n - i);
-    const __m512 d = _mm512_sub_ps(_mm512_sub_ps(load16(m, src + i), vh), vl);
-    store16(dst + i, m, apply_act(_mm512_fmadd_ps(d, va, vb), A));
+    const __m512 d = _mm512_sub_ps(_mm512_sub_ps(load_lanes(m, src + i), vh), vl);
+    store_lanes(dst + i, m, apply_act(_mm512_fmadd_ps(d, va, vb), A));
   }
 }
 
@@ -192,11 +175,11 @@ void norm_row512(float* dst, const float* src, int64_t n, double mean, float rst
   const __m512 vh = _mm512_set1_ps(hi), vl = _mm512_set1_ps(lo), vr = _mm512_set1_ps(rstd);
   for (int64_t i = 0; i < n; i += 16) {
     const __mmask16 m = tail_mask(n - i);
-    const __m512 d = _mm512_sub_ps(_mm512_sub_ps(load16(m, src + i), vh), vl);
+    const __m512 d = _mm512_sub_ps(_mm512_sub_ps(load_lanes(m, src + i), vh), vl);
     __m512 y = _mm512_mul_ps(d, vr);
-    if (gamma) y = _mm512_mul_ps(y, load16(m, gamma + i));
-    if (beta) y = _mm512_add_ps(y, load16(m, beta + i));
-    store16(dst + i, m, y);
+    if (gamma) y = _mm512_mul_ps(y, load_lanes(m, gamma + i));
+    if (beta) y = _mm512_add_ps(y, load_lanes(m, beta + i));
+    store_lanes(dst + i, m, y);
   }
 }
 
@@ -216,7 +199,7 @@ double sum512(const float* x, int64_t n) {
     }
     for (; i < e; i += 16) {
       const __mmask16 m = tail_mask(e - i);
-      acc0 = _mm512_add_ps(acc0, _mm512_maskz_sub_ps(m, load16(m, x + i), shift));
+      acc0 = _mm512_add_ps(acc0, _mm512_maskz_sub_ps(m, load_lanes(m, x + i), shift));
     }
     const __m512 acc = _mm512_add_ps(acc0, acc1);
     const __m512d lo = _mm512_cvtps_pd(_mm512_castps512_ps256(acc));
@@ -238,7 +221,7 @@ double sum_sq_dev512(const float* x, int64_t n, double mean) {
     __m512 acc = _mm512_setzero_ps(), acc_d = _mm512_setzero_ps();
     for (int64_t i = b; i < e; i += 16) {
       const __mmask16 m = tail_mask(e - i);
-      const __m512 d = _mm512_maskz_sub_ps(m, load16(m, x + i), vm);
+      const __m512 d = _mm512_maskz_sub_ps(m, load_lanes(m, x + i), vm);
       acc = _mm512_fmadd_ps(d, d, acc);
       acc_d = _mm512_add_ps(acc_d, d);
     }
@@ -256,20 +239,20 @@ void softmax512(float* dst, const float* src, int64_t n, float scale) {
   __m512 vmax = _mm512_set1_ps(-INFINITY);
   for (int64_t i = 0; i < n; i += 16) {
     const __mmask16 m = tail_mask(n - i);
-    vmax = _mm512_mask_max_ps(vmax, m, vmax, _mm512_mul_ps(load16(m, src + i), vs));
+    vmax = _mm512_mask_max_ps(vmax, m, vmax, _mm512_mul_ps(load_lanes(m, src + i), vs));
   }
   const __m512 mx = _mm512_set1_ps(_mm512_reduce_max_ps(vmax));
   __m512 vsum = _mm512_setzero_ps();
   for (int64_t i = 0; i < n; i += 16) {
     const __mmask16 m = tail_mask(n - i);
-    const __m512 e = exp16(_mm512_sub_ps(_mm512_mul_ps(load16(m, src + i), vs), mx));
-    store16(dst + i, m, e);
+    const __m512 e = exp16(_mm512_sub_ps(_mm512_mul_ps(load_lanes(m, src + i), vs), mx));
+    store_lanes(dst + i, m, e);
     vsum = _mm512_mask_add_ps(vsum, m, vsum, e);
   }
   const __m512 inv = _mm512_set1_ps(float(1.0 / double(_mm512_reduce_add_ps(vsum))));
   for (int64_t i = 0; i < n; i += 16) {
     const __mmask16 m = tail_mask(n - i);
-    store16(dst + i, m, _mm512_mul_ps(load16(m, dst + i), inv));
+    store_lanes(dst + i, m, _mm512_mul_ps(load_lanes(m, dst + i), inv));
   }
 }
 
@@ -277,8 +260,8 @@ void geglu512(float* dst, const float* v, const float* g, int64_t n) {
   for (int64_t i = 0; i < n; i += 16) {
     const __mmask16 m = tail_mask(n - i);
     const __m512 y =
-        _mm512_mul_ps(load16(m, v + i), gelu16(load16(m, g + i)));
-    store16(dst + i, m, y);
+        _mm512_mul_ps(load_lanes(m, v + i), gelu16(load_lanes(m, g + i)));
+    store_lanes(dst + i, m, y);
   }
 }
 
@@ -286,9 +269,9 @@ void axpby512(float* dst, float a, const float* x, float b, const float* y, int6
   const __m512 va = _mm512_set1_ps(a), vb = _mm512_set1_ps(b);
   for (int64_t i = 0; i < n; i += 16) {
     const __mmask16 m = tail_mask(n - i);
-    const __m512 r = _mm512_add_ps(_mm512_mul_ps(va, load16(m, x + i)),
-                                   _mm512_mul_ps(vb, load16(m, y + i)));
-    store16(dst + i, m, r);
+    const __m512 r = _mm512_add_ps(_mm512_mul_ps(va, load_lanes(m, x + i)),
+                                   _mm512_mul_ps(vb, load_lanes(m, y + i)));
+    store_lanes(dst + i, m, r);
   }
 }
 
@@ -308,18 +291,18 @@ inline __m512i bf16_lanes(__m512 x) {
 void pair_words512(uint32_t* dst, const float* lo, const float* hi, int64_t n) {
   for (int64_t i = 0; i < n; i += 16) {
     const __mmask16 m = tail_mask(n - i);
-    __m512i w = bf16_lanes(load16(m, lo + i));
+    __m512i w = bf16_lanes(load_lanes(m, lo + i));
     if (hi)
-      w = _mm512_or_si512(w, _mm512_slli_epi32(bf16_lanes(load16(m, hi + i)), 16));
-    store16i(dst + i, m, w);
+      w = _mm512_or_si512(w, _mm512_slli_epi32(bf16_lanes(load_lanes(m, hi + i)), 16));
+    store_lanes(dst + i, m, w);
   }
 }
 
 void round_bf16_512(float* x, int64_t n) {
   for (int64_t i = 0; i < n; i += 16) {
     const __mmask16 m = tail_mask(n - i);
-    const __m512i w = _mm512_slli_epi32(bf16_lanes(load16(m, x + i)), 16);
-    store16(x + i, m, _mm512_castsi512_ps(w));
+    const __m512i w = _mm512_slli_epi32(bf16_lanes(load_lanes(m, x + i)), 16);
+    store_lanes(x + i, m, _mm512_castsi512_ps(w));
   }
 }
 
