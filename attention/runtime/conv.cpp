@@ -94,10 +94,13 @@ void fill_row(const Im2colCtx& c, const Segment* segs, int nseg, int count, int 
       const int64_t hi = std::clamp<int64_t>((W - ix0 + 1) / 2, lo, sg.len);  // first ix >= W
       run(lo, hi, hi > lo ? row + split_col(ix0 + 2 * lo, W) : row);
     } else {
-      for (int i = 0; i < sg.len; ++i) {
-        const int64_t ix = ix0 + int64_t(i) * stride;
-        out[i] = (ix >= 0 && ix < W) ? row[ix] : T(0);
-      }
+      // Pixels [lo, hi) read row[ix0 + i stride]; zeros (padding) before and after.
+      const int64_t lo = std::clamp<int64_t>((-ix0 + stride - 1) / stride, 0, sg.len);
+      const int64_t hi = std::clamp<int64_t>((W - ix0 + stride - 1) / stride, lo, sg.len);
+      for (int64_t i = 0; i < lo; ++i) out[i] = T(0);
+      const T* src = row + ix0;
+      for (int64_t i = lo; i < hi; ++i) out[i] = src[i * stride];
+      for (int64_t i = hi; i < sg.len; ++i) out[i] = T(0);
     }
   }
   if (count < w) std::memset(out_row + count, 0, sizeof(T) * size_t(w - count));
