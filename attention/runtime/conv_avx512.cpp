@@ -1,6 +1,6 @@
 // AVX-512 im2col gather for stride-1 convs (the ConvRows contract in kernels.h): each k row of a
-// 32-column B panel is two masked loads per output-row run straight from the input plane (padding
-// lanes are masked off, so they read nothing and come out zero) and two stores. This replaces a
+// 32-column B panel is two loads per output-row run straight from the input plane (padding lanes
+// masked off, so they come out zero) and two stores. This replaces a
 // per-row bounds computation and memcpy; at 128 channels the gather is one value per 128 MACs and
 // was the conv's main overhead.
 // A run's lanes come by plain loads wherever the 32 words lie inside the input (a whole-panel run,
@@ -32,8 +32,8 @@ void conv_rows32(const ConvRows& a) {
   }
   int dy = int(tap / a.kw), dx = int(tap % a.kw);
   const __m512i zero = _mm512_setzero_si512();
-  // One past the input's last word (the last plane's h rows).
-  const uint32_t* x_end = a.x + (a.planes - 1) * a.hw + a.h * a.w;
+  // Words in the input (up to the last plane's h rows).
+  const int64_t x_words = (a.planes - 1) * a.hw + a.h * a.w;
   uint32_t* d = a.dst;
   for (int64_t r = 0; r < a.rows_padded; ++r, d += 32) {
     __m512i v0 = zero, v1 = zero;
@@ -49,17 +49,19 @@ void conv_rows32(const ConvRows& a) {
         if (lo >= hi) continue;
         const uint64_t bits = ((uint64_t(1) << hi) - 1) & ~((uint64_t(1) << lo) - 1);
         const uint64_t mask = bits << sg.col;  // lanes [col + lo, col + hi)
-        // Lane j reads row[ix0 + j - col]; masked-off lanes are never accessed.
+        // Lane j of the run reads row[ix0 + j - col], i.e. input word `at` + j; the other lanes
+        // keep what they hold (zero, or another run's words).
+        const int64_t at = plane * a.hw + iy * a.w + ix0 - sg.col;
         const uint32_t* src = base + iy * a.w + ix0 - sg.col;
         if (mask == 0xffffffffu) {  // the common case: plain loads (a masked load costs more)
           v0 = _mm512_loadu_si512(src);
           v1 = _mm512_loadu_si512(src + 16);
-        } else if (src >= a.x && src + 32 <= x_end) {
+        } else if (at >= 0 && at + 32 <= x_words) {
           // The 32 words lie inside the input: plain loads, the run's lanes merged in.
           v0 = _mm512_mask_mov_epi32(v0, __mmask16(mask & 0xffff), _mm512_loadu_si512(src));
           v1 = _mm512_mask_mov_epi32(v1, __mmask16((mask >> 16) & 0xffff),
                                      _mm512_loadu_si512(src + 16));
-        } else {
+        } else {  // masked-off lanes are never accessed
           v0 = _mm512_mask_loadu_epi32(v0, __mmask16(mask & 0xffff), src);
           v1 = _mm512_mask_loadu_epi32(v1, __mmask16((mask >> 16) & 0xffff), src + 16);
         }
