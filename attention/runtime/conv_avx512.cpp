@@ -38,7 +38,6 @@ void conv_rows32(const ConvRows& a) {
   for (int64_t r = 0; r < a.rows_padded; ++r, d += 32) {
     __m512i v0 = zero, v1 = zero;
     if (r < a.nrows) {
-      const uint32_t* base = a.x + plane * a.hw;
       for (int g = 0; g < a.nseg; ++g) {
         const ConvSegment& sg = a.segs[g];
         const int64_t iy = sg.oy + dy - a.pad_top;
@@ -52,7 +51,7 @@ void conv_rows32(const ConvRows& a) {
         // Lane j of the run reads row[ix0 + j - col], i.e. input word `at` + j; the other lanes
         // keep what they hold (zero, or another run's words).
         const int64_t at = plane * a.hw + iy * a.w + ix0 - sg.col;
-        const uint32_t* src = base + iy * a.w + ix0 - sg.col;
+        const uint32_t* src = a.x + at;
         if (mask == 0xffffffffu) {  // the common case: plain loads (a masked load costs more)
           v0 = _mm512_loadu_si512(src);
           v1 = _mm512_loadu_si512(src + 16);

@@ -102,7 +102,8 @@ const WinogradTransforms& winograd_transforms(Isa isa, bool f32 = false);
 const WinogradTransforms& winograd_scalar_transforms();
 const WinogradTransforms* winograd_avx512_transforms();      // fp32; conv_winograd_avx512.cpp
 const WinogradTransforms* winograd_avx512bf16_transforms();  // bf16; conv_winograd_avx512bf16.cpp
-const WinogradTransforms* winograd_avx512_bf16_transforms();  // bf16, AVX-512F; conv_winograd_avx512.cpp
+// bf16, AVX-512F; conv_winograd_avx512.cpp
+const WinogradTransforms* winograd_avx512_bf16_transforms();
 const WinogradTransforms* winograd_avx2_transforms(bool f32);  // conv_winograd_avx2.cpp
 
 // The 16 transformed weight packs U_xi (A operands of the `type` kernel of `isa`): [Cout, Cin2]

@@ -15,7 +15,8 @@
 // T provides: V (fp32 vector), Vi (32-bit integer vector), M (lane mask), W (lanes);
 //   lanes(start, limit): the lanes e in [0, W) with 0 <= start + e < limit;
 //   load(m, p): masked load, masked-off lanes zero and not accessed; store(p, m, v);
-//   store_words(p, m, w): masked store of 32-bit words; zero(), set1(x), add, sub, max(v, 0-vector);
+//   store_words(p, m, w): masked store of 32-bit words; zero(), set1(x), add, sub,
+//   max(v, 0-vector);
 //   evens(a, b), odds(a, b): the even and odd elements of the 2 W floats a | b, in order;
 //   interleave(y0, y1, lo, hi): y0[0] y1[0] y0[1] y1[1] .. as two vectors.
 // Include only from files compiled with the traits' ISA flags (internal linkage: each keeps its
@@ -31,7 +32,8 @@
 namespace macro {
 namespace {
 
-// V = B^T d B for one lane per tile: d[4 i + j] the patches' rows i, columns j; v[xi], xi = 4 i + j.
+// V = B^T d B for one lane per tile: d[4 i + j] the patches' rows i, columns j; v[xi],
+// xi = 4 i + j.
 template <typename T>
 inline void winograd_btdb(const typename T::V* d, typename T::V* v) {
   typename T::V r[16];

@@ -7,11 +7,12 @@
 //         ir: MR rows  (A micro-panel MR x KC stays in L1)
 //           jr: NR columns (B micro-panels stream from L2) -> micro-kernel MR x NR
 // KC <= kern.kc (from the L1 size for AVX-512, kc_for_l1) with K cut into equal blocks; NC sized so
-// the B block is about 7/16 of the L2 (448 KB of 1 MB; cpu.h l2_block_bytes); MC about 192 rows, the row tasks a multiple of the thread count
-// (equal shares for 1 and 2 threads), columns split only when there are fewer row blocks than
-// threads. Results never depend on the split (K blocking depends on K alone), so they are
-// thread-count invariant. (Tried: columns outermost with K inside, to keep C in L2 for the conv's
-// prepacked A: 3-5 points slower on the 128-channel VAE convs, 2026-11-22.)
+// the B block is about 7/16 of the L2 (448 KB of 1 MB; cpu.h l2_block_bytes); MC about 192 rows,
+// the row tasks a multiple of the thread count (equal shares for 1 and 2 threads), columns split
+// only when there are fewer row blocks than threads. Results never depend on the split (K blocking
+// depends on K alone), so they are thread-count invariant. (Tried: columns outermost with K
+// inside, to keep C in L2 for the conv's prepacked A: 3-5 points slower on the 128-channel VAE
+// convs, 2026-11-22.)
 // The scalar path runs the same driver with a small plain-C++ micro-kernel, so packing and
 // blocking are exercised by every path; the tests also compare against a naive loop.
 #include "attention/runtime/gemm.h"
