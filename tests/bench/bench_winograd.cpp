@@ -5,12 +5,19 @@
 //
 //   bench winograd [--threads N] [--reps R] [--quick] [--only SUBSTR] [--chunk TILES] [--f32]
 //                  [--wino-only]
+//   bench winograd --tile-error [--only SUBSTR]
 // --wino-only runs the Winograd conv alone (no direct baseline; for profiling it with perf).
+// --tile-error measures accuracy, not time: the rms error against the exact (fp64) conv of the
+// engine's bf16 convs (direct and Winograd F(2x2, 3x3), through conv2d) and of a model of bf16
+// Winograd F(m x m, 3 x 3) for larger tiles (m = 3, 4; Toom-Cook transforms from interpolation
+// points), which is why the bf16 path keeps 2 x 2 tiles.
 // Shapes: the Difix VAE's 3x3 convs at 960x536 and the SD-Turbo U-Net's at its 120x67 latent.
 // --quick crops the spatial sizes by 4 per side. GFLOP/s are the direct conv's FLOP per second
 // (2 Cin Cout 9 per pixel) for both, so the columns compare directly; "best w" is the fastest
 // Winograd run (ms: on a busy VM the least disturbed one).
 #include <algorithm>
+#include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -30,13 +37,221 @@ double median(std::vector<double> v) {
   return v.empty() ? 0 : v[v.size() / 2];
 }
 
+float bf16_round(float f) {  // nearest even, as the engine's bf16 rounding (finite values)
+  uint32_t u;
+  std::memcpy(&u, &f, 4);
+  u = (u + 0x7fffu + ((u >> 16) & 1u)) & 0xffff0000u;
+  std::memcpy(&f, &u, 4);
+  return f;
+}
+
+// The 1-D Toom-Cook transforms of F(m, 3) from m + 1 finite interpolation points (and infinity):
+// y = A^T [(G g) . (B^T d)] for a tile of m outputs from a = m + 2 inputs.
+struct TileTransforms {
+  int m = 0, a = 0;
+  std::vector<double> bt, g, at;  // [a][a], [a][3], [m][a]
+};
+
+TileTransforms toom_cook(const std::vector<double>& p) {
+  TileTransforms t;
+  const int np = int(p.size()), a = np + 1, m = a - 2;
+  t.m = m, t.a = a;
+  t.bt.assign(size_t(a * a), 0.0), t.g.assign(size_t(a * 3), 0.0), t.at.assign(size_t(m * a), 0.0);
+  for (int i = 0; i < m; ++i) {
+    for (int j = 0; j < np; ++j) t.at[size_t(i * a + j)] = std::pow(p[size_t(j)], i);
+    t.at[size_t(i * a + a - 1)] = i == m - 1 ? 1.0 : 0.0;
+  }
+  for (int j = 0; j < np; ++j) {
+    double nj = 1.0;
+    for (int l = 0; l < np; ++l)
+      if (l != j) nj *= p[size_t(j)] - p[size_t(l)];
+    for (int k = 0; k < 3; ++k) t.g[size_t(j * 3 + k)] = std::pow(p[size_t(j)], k) / nj;
+  }
+  t.g[size_t((a - 1) * 3 + 2)] = 1.0;
+  // Row j of B^T: the coefficients of prod_{l != j} (x - p_l) (all points for the last row).
+  for (int j = 0; j < a; ++j) {
+    std::vector<double> c(size_t(a + 1), 0.0);
+    c[0] = 1.0;
+    int deg = 0;
+    for (int l = 0; l < np; ++l) {
+      if (l == j) continue;
+      for (int d = deg + 1; d >= 1; --d) c[size_t(d)] = c[size_t(d - 1)] - p[size_t(l)] * c[size_t(d)];
+      c[0] = -p[size_t(l)] * c[0];
+      ++deg;
+    }
+    for (int d = 0; d < a; ++d) t.bt[size_t(j * a + d)] = c[size_t(d)];
+  }
+  return t;
+}
+
+// The bf16 Winograd conv as the engine computes it, for any tile: V = B^T d B in fp32, U = G g G^T
+// in double, both rounded to bf16, products summed over channels in fp32, Y = A^T M A in fp32.
+// x [cin][n + 2][n + 2] (the padding included), w [cin][3][3]; y [n][n] for one output channel.
+void winograd_model(const TileTransforms& t, const std::vector<double>& x,
+                    const std::vector<double>& w, int64_t cin, int64_t n, std::vector<double>& y) {
+  const int m = t.m, a = t.a;
+  const int64_t xs = n + 2, tiles = (n + m - 1) / m;
+  std::vector<float> u(size_t(cin * a * a));
+  for (int64_t c = 0; c < cin; ++c) {
+    std::vector<double> gg(size_t(a * 3));
+    for (int i = 0; i < a; ++i)
+      for (int k = 0; k < 3; ++k) {
+        double s = 0.0;
+        for (int l = 0; l < 3; ++l) s += t.g[size_t(i * 3 + l)] * w[size_t(c * 9 + l * 3 + k)];
+        gg[size_t(i * 3 + k)] = s;
+      }
+    for (int i = 0; i < a; ++i)
+      for (int j = 0; j < a; ++j) {
+        double s = 0.0;
+        for (int k = 0; k < 3; ++k) s += gg[size_t(i * 3 + k)] * t.g[size_t(j * 3 + k)];
+        u[size_t((c * a + i) * a + j)] = bf16_round(float(s));
+      }
+  }
+  std::vector<float> d(size_t(a * a)), r(size_t(a * a)), mm(size_t(a * a)), o(size_t(m * a));
+  for (int64_t ty = 0; ty < tiles; ++ty)
+    for (int64_t tx = 0; tx < tiles; ++tx) {
+      std::fill(mm.begin(), mm.end(), 0.0f);
+      for (int64_t c = 0; c < cin; ++c) {
+        for (int i = 0; i < a; ++i)
+          for (int j = 0; j < a; ++j) {
+            const int64_t iy = ty * m + i, ix = tx * m + j;
+            d[size_t(i * a + j)] =
+                iy < xs && ix < xs ? float(x[size_t((c * xs + iy) * xs + ix)]) : 0.0f;
+          }
+        for (int i = 0; i < a; ++i)
+          for (int j = 0; j < a; ++j) {
+            float s = 0.0f;
+            for (int k = 0; k < a; ++k) s += float(t.bt[size_t(i * a + k)]) * d[size_t(k * a + j)];
+            r[size_t(i * a + j)] = s;
+          }
+        for (int i = 0; i < a; ++i)
+          for (int j = 0; j < a; ++j) {
+            float s = 0.0f;
+            for (int k = 0; k < a; ++k) s += r[size_t(i * a + k)] * float(t.bt[size_t(j * a + k)]);
+            mm[size_t(i * a + j)] += bf16_round(s) * u[size_t((c * a + i) * a + j)];
+          }
+      }
+      for (int i = 0; i < m; ++i)
+        for (int j = 0; j < a; ++j) {
+          float s = 0.0f;
+          for (int k = 0; k < a; ++k) s += float(t.at[size_t(i * a + k)]) * mm[size_t(k * a + j)];
+          o[size_t(i * a + j)] = s;
+        }
+      for (int i = 0; i < m; ++i)
+        for (int j = 0; j < m; ++j) {
+          const int64_t oy = ty * m + i, ox = tx * m + j;
+          if (oy >= n || ox >= n) continue;
+          float s = 0.0f;
+          for (int k = 0; k < a; ++k) s += o[size_t(i * a + k)] * float(t.at[size_t(j * a + k)]);
+          y[size_t(oy * n + ox)] = s;
+        }
+    }
+}
+
+// --tile-error: rms of (conv - exact) over rms of exact, per method, for 128 and 512 channels.
+int tile_error(const std::string& only) {
+  constexpr int64_t kN = 48, kCout = 8;  // 48 x 48 outputs (divisible by 2, 3 and 4) per channel
+  struct Method {
+    const char* name;
+    std::vector<double> points;  // empty: the engine's conv2d
+    ConvWinograd mode = ConvWinograd::kOff;
+  };
+  const std::vector<Method> methods = {
+      {"engine direct bf16", {}, ConvWinograd::kOff},
+      {"engine Winograd F(2x2,3x3)", {}, ConvWinograd::kAlways},
+      {"model F(2x2,3x3) {0,1,-1}", {0, 1, -1}},
+      {"model F(3x3,3x3) {0,1,-1,1/2}", {0, 1, -1, 0.5}},
+      {"model F(3x3,3x3) {0,1,-1,2}", {0, 1, -1, 2}},
+      {"model F(4x4,3x3) {0,+-1,+-2}", {0, 1, -1, 2, -2}},
+      {"model F(4x4,3x3) {0,+-1,+-1/2}", {0, 1, -1, 0.5, -0.5}},
+  };
+  std::printf("bf16 3x3 conv accuracy by Winograd tile: rms error / rms of the exact (fp64) conv;"
+              " %ldx%ld outputs x %ld channels, inputs SiLU(N(0.2, 1)), weights N(0, 1/(9 Cin));"
+              " isa %s\n",
+              long(kN), long(kN), long(kCout), isa_name(active_isa()));
+  std::printf("  %-32s %12s %10s %12s %10s\n", "method", "Cin 128", "x direct", "Cin 512",
+              "x direct");
+  std::vector<std::vector<double>> err(methods.size(), std::vector<double>(2, 0.0));
+  const int64_t cins[2] = {128, 512};
+  for (int ci = 0; ci < 2; ++ci) {
+    const int64_t cin = cins[ci], xs = kN + 2;
+    std::mt19937 rng(uint32_t(11 + ci));
+    std::normal_distribution<double> nd(0.0, 1.0);
+    std::vector<double> x(size_t(cin * xs * xs), 0.0), w(size_t(kCout * cin * 9));
+    for (int64_t c = 0; c < cin; ++c)  // the border is the conv's zero padding
+      for (int64_t i = 1; i <= kN; ++i)
+        for (int64_t j = 1; j <= kN; ++j) {
+          const double v = nd(rng) + 0.2;
+          x[size_t((c * xs + i) * xs + j)] = v / (1.0 + std::exp(-v));
+        }
+    for (double& v : w) v = nd(rng) / std::sqrt(9.0 * double(cin));
+    // The engine's operands: x unpadded [cin][kN][kN] and w [kCout][cin][3][3] in fp32.
+    std::vector<float> xf(size_t(cin * kN * kN)), wf(w.begin(), w.end());
+    for (int64_t c = 0; c < cin; ++c)
+      for (int64_t i = 0; i < kN; ++i)
+        for (int64_t j = 0; j < kN; ++j)
+          xf[size_t((c * kN + i) * kN + j)] = float(x[size_t((c * xs + i + 1) * xs + j + 1)]);
+    std::vector<double> exact(size_t(kCout * kN * kN), 0.0);
+    double ref = 0.0;
+    for (int64_t co = 0; co < kCout; ++co)
+      for (int64_t i = 0; i < kN; ++i)
+        for (int64_t j = 0; j < kN; ++j) {
+          double s = 0.0;
+          for (int64_t c = 0; c < cin; ++c)
+            for (int u = 0; u < 3; ++u)
+              for (int v = 0; v < 3; ++v)
+                s += double(float(x[size_t((c * xs + i + u) * xs + j + v)])) *
+                     double(wf[size_t((co * cin + c) * 9 + u * 3 + v)]);
+          exact[size_t((co * kN + i) * kN + j)] = s;
+          ref += s * s;
+        }
+    const ConvWinograd old = conv2d_set_winograd(ConvWinograd::kAlways);
+    const Conv2dShape s = Conv2dShape::make(1, cin, kN, kN, kCout, 3, 1, 1);
+    const ConvWeights cw =
+        ConvWeights::pack(wf.data(), nullptr, kCout, cin, 3, 3, WeightType::kBf16);
+    std::vector<float> yf(size_t(kCout * kN * kN));
+    std::vector<double> y(size_t(kN * kN));
+    for (size_t mi = 0; mi < methods.size(); ++mi) {
+      const Method& me = methods[mi];
+      double e2 = 0.0;
+      if (me.points.empty()) {
+        conv2d_set_winograd(me.mode);
+        conv2d(s, xf.data(), cw, nullptr, yf.data(), nullptr);
+        for (size_t k = 0; k < yf.size(); ++k) e2 += (yf[k] - exact[k]) * (yf[k] - exact[k]);
+      } else {
+        const TileTransforms t = toom_cook(me.points);
+        std::vector<double> xd(x.begin(), x.end());
+        for (double& v : xd) v = double(float(v));
+        for (int64_t co = 0; co < kCout; ++co) {
+          const std::vector<double> wc(w.begin() + co * cin * 9, w.begin() + (co + 1) * cin * 9);
+          std::vector<double> wcf(wc.size());
+          for (size_t k = 0; k < wc.size(); ++k) wcf[k] = double(float(wc[k]));
+          winograd_model(t, xd, wcf, cin, kN, y);
+          for (int64_t k = 0; k < kN * kN; ++k) {
+            const double e = y[size_t(k)] - exact[size_t(co * kN * kN + k)];
+            e2 += e * e;
+          }
+        }
+      }
+      err[mi][size_t(ci)] = std::sqrt(e2 / ref);
+    }
+    conv2d_set_winograd(old);
+  }
+  for (size_t mi = 0; mi < methods.size(); ++mi) {
+    if (!only.empty() && std::string(methods[mi].name).find(only) == std::string::npos) continue;
+    std::printf("  %-32s %12.3e %9.2fx %12.3e %9.2fx\n", methods[mi].name, err[mi][0],
+                err[mi][0] / err[0][0], err[mi][1], err[mi][1] / err[0][1]);
+  }
+  return 0;
+}
+
 int run(int argc, char** argv) {
   int threads = ThreadPool::global().size();
   int reps = 5;
   bool quick = false;
   std::string only;
   size_t chunk = 0;
-  bool f32 = false, wino_only = false;
+  bool f32 = false, wino_only = false, tile_err = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--threads") && i + 1 < argc)
       threads = std::atoi(argv[++i]);
@@ -52,13 +267,16 @@ int run(int argc, char** argv) {
       f32 = true;
     else if (!std::strcmp(argv[i], "--wino-only"))
       wino_only = true;
+    else if (!std::strcmp(argv[i], "--tile-error"))
+      tile_err = true;
     else {
       std::fprintf(stderr,
                    "usage: bench winograd [--threads N] [--reps R] [--quick] [--only SUBSTR] "
-                   "[--chunk TILES] [--f32] [--wino-only]\n");
+                   "[--chunk TILES] [--f32] [--wino-only] [--tile-error]\n");
       return 2;
     }
   }
+  if (tile_err) return tile_error(only);
   ThreadPool local(threads);
   ThreadPool* pool = threads > 1 ? &local : nullptr;
   struct C {
