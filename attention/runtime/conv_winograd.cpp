@@ -20,6 +20,7 @@
 #include <string>
 
 #include "attention/runtime/conv.h"
+#include "attention/runtime/cpu.h"
 #include "attention/runtime/scratch.h"
 #include "attention/runtime/status.h"
 
@@ -53,6 +54,8 @@ constexpr int64_t kAutoMinTiles = 64;  // per image
 // for T >= 128) beats V 512 KB / M 256 KB by 5-25% on every VAE and U-Net shape.
 // Chunks are capped at 256 tiles: at 128 channels (T would be 512) 128 or 256 tiles are ~10%
 // faster in CPU time; at 256 channels 256 tiles are ~3% faster than 128.
+// Both budgets follow the CPU's L2 (twice it for V, an eighth for M; the constants are those of a
+// 1 MB L2, used where its size is unknown; cpu.h's l2_block_bytes clamps to [1/2, 4] of them).
 constexpr int64_t kVBytes = 2048 * 1024, kMBytes = 128 * 1024, kMaxAutoTiles = 256;
 struct Budgets {
   int64_t v = kVBytes, m = kMBytes;
@@ -60,6 +63,8 @@ struct Budgets {
 const Budgets& budgets() {
   static const Budgets b = [] {
     Budgets r;
+    r.v = l2_block_bytes(2, 1, kVBytes);
+    r.m = l2_block_bytes(1, 8, kMBytes);
     if (const char* e = std::getenv("MACRO_WINO_V_KB"))
       r.v = std::max<int64_t>(1, std::atoll(e)) * 1024;
     if (const char* e = std::getenv("MACRO_WINO_M_KB"))
