@@ -287,6 +287,37 @@ TEST_CASE("ops: every vector path matches the scalar reference", "[runtime][ops]
   });
 }
 
+TEST_CASE("ops: GEGLU's GELU is the activation's GELU, bit for bit, on every path",
+          "[runtime][ops]") {
+  // value 1 * GELU(gate) == GELU(gate) exactly; rows of 64 * 3 + 16 + 5 columns go through the
+  // AVX-512 path's 4-vector loop, its one-vector loop and its masked tail.
+  ThreadPool pool(2);
+  const int64_t m = 3, d = 64 * 3 + 16 + 5;
+  std::vector<float> gate = random_vec(size_t(m * d), -9.0f, 9.0f, 21);
+  for (float v : {0.0f, -0.0f, 1e-8f, -1e-8f, 20.0f, -20.0f, -100.0f, 3.4e38f}) gate[7 * 9] = v;
+  std::vector<float> u(size_t(m * 2 * d));
+  for (int64_t r = 0; r < m; ++r)
+    for (int64_t j = 0; j < d; ++j) {
+      u[size_t(r * 2 * d + j)] = 1.0f;
+      u[size_t(r * 2 * d + d + j)] = gate[size_t(r * d + j)];
+    }
+  const Isa before = active_isa();
+  std::vector<Isa> paths = vector_paths();
+  paths.push_back(Isa::kScalar);
+  for (Isa isa : paths) {
+    REQUIRE(set_isa(isa).is_ok());
+    std::vector<float> y(size_t(m * d)), want(size_t(m * d));
+    geglu(y.data(), u.data(), m, d, &pool);
+    activation(want.data(), gate.data(), m * d, Act::kGelu, &pool);
+    int64_t differ = 0;
+    for (size_t i = 0; i < y.size(); ++i)
+      differ += std::memcmp(&y[i], &want[i], sizeof(float)) != 0;
+    INFO("path " << isa_name(isa) << " (" << ops_kernels().name << ")");
+    CHECK(differ == 0);
+  }
+  REQUIRE(set_isa(before).is_ok());
+}
+
 TEST_CASE("ops: bf16 pair words and in-place rounding on every path are the scalar rounding's bits",
           "[runtime][ops]") {
   // Random values, exact ties (odd and even bf16 mantissa), the largest finite values (which round

@@ -256,8 +256,82 @@ void softmax512(float* dst, const float* src, int64_t n, float scale) {
   }
 }
 
+// exp16 and gelu16 of kN vectors at once, step by step across the vectors: each lane's operations
+// and their order are gelu16's (the same bits), but neighbouring instructions are independent, so
+// the core overlaps the vectors' long dependency chains (division, polynomial, exponential) that
+// one vector at a time leaves waiting on latency. 4 vectors: the GEGLU group of 64 columns.
+constexpr int kGeluVectors = 4;
+
+inline void exp16_n(__m512 (&x)[kGeluVectors]) {
+  const __m512 lo = _mm512_set1_ps(-104.0f), hi = _mm512_set1_ps(88.7228391f);
+  __m512 n[kGeluVectors], r[kGeluVectors], p[kGeluVectors];
+#pragma GCC unroll 4
+  for (int k = 0; k < kGeluVectors; ++k) {
+    x[k] = _mm512_min_ps(hi, _mm512_max_ps(lo, x[k]));
+    n[k] = _mm512_roundscale_ps(_mm512_mul_ps(x[k], _mm512_set1_ps(1.44269504088896341f)),
+                                _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+  }
+#pragma GCC unroll 4
+  for (int k = 0; k < kGeluVectors; ++k) {
+    r[k] = _mm512_fnmadd_ps(n[k], _mm512_set1_ps(0.693359375f), x[k]);
+    r[k] = _mm512_fnmadd_ps(n[k], _mm512_set1_ps(-2.12194440e-4f), r[k]);
+    p[k] = _mm512_set1_ps(1.9875691500e-4f);
+  }
+  const float c[5] = {1.3981999507e-3f, 8.3334519073e-3f, 4.1665795894e-2f, 1.6666665459e-1f,
+                      5.0000001201e-1f};
+#pragma GCC unroll 5
+  for (int j = 0; j < 5; ++j)
+#pragma GCC unroll 4
+    for (int k = 0; k < kGeluVectors; ++k)
+      p[k] = _mm512_fmadd_ps(p[k], r[k], _mm512_set1_ps(c[j]));
+#pragma GCC unroll 4
+  for (int k = 0; k < kGeluVectors; ++k) {
+    const __m512 r2 = _mm512_mul_ps(r[k], r[k]);
+    const __m512 y = _mm512_fmadd_ps(p[k], r2, _mm512_add_ps(r[k], _mm512_set1_ps(1.0f)));
+    x[k] = _mm512_scalef_ps(y, n[k]);
+  }
+}
+
+inline void gelu16_n(__m512 (&x)[kGeluVectors]) {
+  const __m512 one = _mm512_set1_ps(1.0f), half = _mm512_set1_ps(0.5f);
+  __m512 z[kGeluVectors], t[kGeluVectors], p[kGeluVectors], e[kGeluVectors];
+#pragma GCC unroll 4
+  for (int k = 0; k < kGeluVectors; ++k) {
+    z[k] = _mm512_mul_ps(_mm512_abs_ps(x[k]), _mm512_set1_ps(0.70710678118654752f));
+    t[k] = _mm512_div_ps(one, _mm512_fmadd_ps(half, z[k], one));
+    p[k] = _mm512_set1_ps(0.17087277f);
+  }
+  const float c[9] = {-0.82215223f, 1.48851587f, -1.13520398f, 0.27886807f, -0.18628806f,
+                      0.09678418f,  0.37409196f, 1.00002368f,  -1.26551223f};
+#pragma GCC unroll 9
+  for (int j = 0; j < 9; ++j)
+#pragma GCC unroll 4
+    for (int k = 0; k < kGeluVectors; ++k)
+      p[k] = _mm512_fmadd_ps(p[k], t[k], _mm512_set1_ps(c[j]));
+#pragma GCC unroll 4
+  for (int k = 0; k < kGeluVectors; ++k) e[k] = _mm512_fnmadd_ps(z[k], z[k], p[k]);
+  exp16_n(e);
+#pragma GCC unroll 4
+  for (int k = 0; k < kGeluVectors; ++k) {
+    const __m512 half_erfc = _mm512_mul_ps(_mm512_mul_ps(half, t[k]), e[k]);
+    const __mmask16 neg = _mm512_cmp_ps_mask(x[k], _mm512_setzero_ps(), _CMP_LT_OQ);
+    const __m512 phi = _mm512_mask_blend_ps(neg, _mm512_sub_ps(one, half_erfc), half_erfc);
+    x[k] = _mm512_mul_ps(x[k], phi);
+  }
+}
+
 void geglu512(float* dst, const float* v, const float* g, int64_t n) {
-  for (int64_t i = 0; i < n; i += 16) {
+  int64_t i = 0;
+  for (; i + 16 * kGeluVectors <= n; i += 16 * kGeluVectors) {
+    __m512 x[kGeluVectors];
+#pragma GCC unroll 4
+    for (int k = 0; k < kGeluVectors; ++k) x[k] = _mm512_loadu_ps(g + i + 16 * k);
+    gelu16_n(x);
+#pragma GCC unroll 4
+    for (int k = 0; k < kGeluVectors; ++k)
+      _mm512_storeu_ps(dst + i + 16 * k, _mm512_mul_ps(_mm512_loadu_ps(v + i + 16 * k), x[k]));
+  }
+  for (; i < n; i += 16) {
     const __mmask16 m = tail_mask(n - i);
     const __m512 y =
         _mm512_mul_ps(load_lanes(m, v + i), gelu16(load_lanes(m, g + i)));
