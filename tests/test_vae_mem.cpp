@@ -112,3 +112,64 @@ TEST_CASE("vae: bf16 skips decode to the same bits, fp32 models refuse them", "[
   REQUIRE_FALSE(dec.is_ok());
   CHECK(dec.status().message().find("skip0: expected contiguous F32 [") != std::string::npos);
 }
+
+TEST_CASE("upsample x2 + 3x3 conv by 2x2 phases equals the conv of the resized image",
+          "[vae][mem][conv]") {
+  // Upsample2D (layers.h): exact 2x outputs take the four phase convs; every entry point gives
+  // the same bits, and they match the conv of the nearest-resized image in double (fp32 to
+  // summation order, bf16 within the bf16 conv's rounding). A non-2x size takes the plain conv.
+  const int64_t c = 6, n = 2;
+  const std::vector<float> w = test::random_vec(size_t(c * c * 9), 41);
+  const std::vector<float> b = test::random_vec(size_t(c), 42);
+  for (Precision p : {Precision::kF32, Precision::kBf16}) {
+    Upsample2D up;
+    up.init(c);
+    up.conv.weight.data = w.data();
+    up.conv.weight.shape = {c, c, 3, 3};
+    up.conv.bias.data = b.data();
+    up.conv.bias.shape = {c};
+    up.pack(p);
+    for (auto [h, wd, oh, ow] : {std::array<int64_t, 4>{5, 7, 10, 14}, {4, 3, 8, 6},
+                                 {5, 7, 9, 13}}) {  // the last: nearest to 2h - 1 x 2w - 1
+      INFO(precision_name(p) << " " << h << "x" << wd << " -> " << oh << "x" << ow);
+      std::vector<float> x = test::random_vec(size_t(n * c * h * wd), 43);
+      // The reference: nearest source floor(y h / oh), then the conv, in double.
+      std::vector<double> ref(size_t(n * c * oh * ow));
+      for (int64_t i = 0; i < n; ++i)
+        for (int64_t co = 0; co < c; ++co)
+          for (int64_t y = 0; y < oh; ++y)
+            for (int64_t xx = 0; xx < ow; ++xx) {
+              double s = b[size_t(co)];
+              for (int64_t ci = 0; ci < c; ++ci)
+                for (int dy = 0; dy < 3; ++dy)
+                  for (int dx = 0; dx < 3; ++dx) {
+                    const int64_t uy = y + dy - 1, ux = xx + dx - 1;
+                    if (uy < 0 || uy >= oh || ux < 0 || ux >= ow) continue;
+                    s += double(w[size_t((co * c + ci) * 9 + dy * 3 + dx)]) *
+                         double(x[size_t(((i * c + ci) * h + uy * h / oh) * wd + ux * wd / ow)]);
+                  }
+              ref[size_t(((i * c + co) * oh + y) * ow + xx)] = s;
+            }
+      Arena arena(size_t(64) << 20);
+      Workspace ws(&arena);
+      const Run r{&ws, &ThreadPool::global(), p};
+      std::vector<float> y0(ref.size()), y1(ref.size()), tmp(ref.size());
+      up.forward(r, x.data(), n, c, h, wd, oh, ow, y0.data());
+      std::copy(x.begin(), x.end(), y1.begin());  // in place: x in a buffer the output's size
+      up.forward_in_place(r, y1.data(), n, c, h, wd, oh, ow, tmp.data());
+      CHECK(std::memcmp(y0.data(), y1.data(), y0.size() * sizeof(float)) == 0);
+      for (int64_t rows : {1, 2, 5, 64}) {  // one image by output bands
+        std::vector<float> y2(size_t(c * oh * ow));
+        up.forward_lean(r, x.data(), c, h, wd, oh, ow, y2.data(), rows);
+        INFO("band rows " << rows);
+        CHECK(std::memcmp(y0.data(), y2.data(), y2.size() * sizeof(float)) == 0);
+      }
+      double err = 0.0, mag = 0.0;
+      for (size_t k = 0; k < ref.size(); ++k) {
+        err = std::max(err, std::abs(double(y0[k]) - ref[k]));
+        mag = std::max(mag, std::abs(ref[k]));
+      }
+      CHECK(err <= (p == Precision::kF32 ? 1e-6 : 2e-2) * mag);
+    }
+  }
+}

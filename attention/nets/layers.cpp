@@ -632,16 +632,110 @@ void Upsample2D::init(int64_t channels) {
   conv.init(channels, channels, 3);
 }
 
+void Upsample2D::pack(Precision p) {
+  MACRO_CHECK(conv.weight.loaded() && conv.k == 3 && conv.c_in == conv.c_out);
+  const int64_t c = conv.c_in;
+  std::vector<float> w(size_t(conv.weight.numel())), bias;
+  read_param_f32(conv.weight, w.data());  // [C, C, 3, 3]; conv.pack releases it below
+  if (conv.has_bias) {
+    bias.resize(size_t(c));
+    read_param_f32(conv.bias, bias.data());
+  }
+  conv.pack(p);
+  // The phases only where the conv runs direct: a Winograd conv of the resized image (<= 640
+  // channels) is as fast (bench difix --stage decode, 2026-12-07) and needs no second pack.
+  if (!conv.packed.winograd().empty()) return;
+  // Tap rows (columns) of the 3x3 kernel that fall on 2x2 row (column) r of parity a: [a][r].
+  static constexpr int kFirst[2][2] = {{0, 1}, {0, 2}}, kLast[2][2] = {{0, 2}, {1, 2}};
+  std::vector<float> k2(size_t(c * c * 4));
+  for (int a = 0; a < 2; ++a)
+    for (int b = 0; b < 2; ++b) {
+      for (int64_t o = 0; o < c * c; ++o)
+        for (int ry = 0; ry < 2; ++ry)
+          for (int rx = 0; rx < 2; ++rx) {
+            double sum = 0.0;
+            for (int dy = kFirst[a][ry]; dy <= kLast[a][ry]; ++dy)
+              for (int dx = kFirst[b][rx]; dx <= kLast[b][rx]; ++dx)
+                sum += double(w[size_t(o * 9 + dy * 3 + dx)]);
+            k2[size_t(o * 4 + ry * 2 + rx)] = float(sum * double(conv.weight_scale));
+          }
+      phase[a * 2 + b] =
+          ConvWeights::pack(k2.data(), conv.has_bias ? bias.data() : nullptr, c, c, 2, 2,
+                            p == Precision::kBf16 ? WeightType::kBf16 : WeightType::kF32,
+                            active_isa(), true);
+    }
+}
+
+size_t Upsample2D::bytes() const {
+  size_t n = conv.bytes();
+  for (const ConvWeights& cw : phase) n += packed_bytes(cw);
+  return n;
+}
+
+namespace {
+
+// y [n, C, 2h, 2w] from x [n, C, h, w] by the four phase convs (Upsample2D): each writes
+// [n, C, h, w] into ph (room for 4 of them), then the phases are interleaved into y (which may
+// be x: x is read only by the convs). bf16 on the fp32 kernel: x is rounded in place first, as the
+// resized copy would be.
+void upsample_phases(const Run& r, const ConvWeights (&phase)[4], float* x, int64_t n, int64_t c,
+                     int64_t h, int64_t w, float* ph, float* y) {
+  if (r.planning()) return;
+  {
+    op_profile::OpScope prof("conv 3x3 upsample (2x2 phases)",
+                             2.0 * double(n * 4 * h * w) * double(c * c) * 4.0);
+    if (phase[0].type() != WeightType::kBf16) round_if_bf16(r, x, n * c * h * w);
+    for (int a = 0; a < 2; ++a)
+      for (int b = 0; b < 2; ++b) {
+        Conv2dShape s;
+        s.n = n, s.c_in = c, s.h = h, s.w = w, s.c_out = c, s.kh = 2, s.kw = 2;
+        s.stride = 1;
+        s.pad_top = 1 - a, s.pad_left = 1 - b, s.pad_bottom = a, s.pad_right = b;
+        conv2d(s, x, phase[a * 2 + b], nullptr, ph + (a * 2 + b) * n * c * h * w, r.pool);
+      }
+  }
+  op_profile::OpScope prof("copy");
+  const int64_t plane = n * c * h * w;
+  parallel(r, size_t(n * c), [&](size_t b0, size_t b1) {
+    for (size_t pc = b0; pc < b1; ++pc)
+      for (int64_t i = 0; i < h; ++i)
+        for (int a = 0; a < 2; ++a) {
+          const float* p0 = ph + (a * 2) * plane + (int64_t(pc) * h + i) * w;
+          const float* p1 = p0 + plane;
+          float* d = y + (int64_t(pc) * 2 * h + 2 * i + a) * 2 * w;
+          for (int64_t j = 0; j < w; ++j) {
+            d[2 * j] = p0[j];
+            d[2 * j + 1] = p1[j];
+          }
+        }
+  });
+}
+
+}  // namespace
+
 void Upsample2D::forward(const Run& r, const float* x, int64_t n, int64_t c, int64_t h, int64_t w,
                          int64_t oh, int64_t ow, float* out) const {
   ScratchFrame frame(r);
   float* t = r.alloc(n * c * oh * ow);
+  if (oh == 2 * h && ow == 2 * w && phase[0].c_out() == c) {
+    float* xs = const_cast<float*>(x);  // only read, unless the rounding below needs a copy
+    if (r.bf16() && phase[0].type() != WeightType::kBf16) {
+      xs = r.alloc(n * c * h * w);
+      copy_floats(r, xs, x, n * c * h * w);
+    }
+    upsample_phases(r, phase, xs, n, c, h, w, t, out);
+    return;
+  }
   if (!r.planning()) upsample_nearest(t, x, n * c, h, w, oh, ow, r.pool);
   conv.forward_scratch(r, t, n, oh, ow, out, nullptr, 1, 1, 1, 1, 1);
 }
 
 void Upsample2D::forward_in_place(const Run& r, float* x, int64_t n, int64_t c, int64_t h,
                                   int64_t w, int64_t oh, int64_t ow, float* tmp) const {
+  if (oh == 2 * h && ow == 2 * w && phase[0].c_out() == c) {
+    upsample_phases(r, phase, x, n, c, h, w, tmp, x);
+    return;
+  }
   if (!r.planning()) upsample_nearest(tmp, x, n * c, h, w, oh, ow, r.pool);
   conv.forward_scratch(r, tmp, n, oh, ow, x, nullptr, 1, 1, 1, 1, 1);
 }
@@ -649,6 +743,59 @@ void Upsample2D::forward_in_place(const Run& r, float* x, int64_t n, int64_t c, 
 void Upsample2D::forward_lean(const Run& r, const float* x, int64_t c, int64_t h, int64_t w,
                               int64_t oh, int64_t ow, float* out, int64_t band_rows) const {
   MACRO_CHECK(band_rows >= 1 && h > 0 && w > 0);
+  if (oh == 2 * h && ow == 2 * w && phase[0].c_out() == c) {
+    // Bands of lb input rows [i0, i1) -> output rows [2 i0, 2 i1): row parity 0 reads input rows
+    // [i0 - 1, i1), parity 1 rows [i0, i1 + 1) (clipped; the image's edge is the conv's padding),
+    // each gathered into its own buffer; the four phase outputs then interleave into out.
+    const int64_t lb = std::max<int64_t>(1, std::min(band_rows, oh) / 2);
+    ScratchFrame frame(r);
+    float* in[2] = {r.alloc(c * (lb + 1) * w), r.alloc(c * (lb + 1) * w)};
+    float* ph = r.alloc(4 * c * lb * w);
+    if (r.planning()) return;
+    const bool round = r.bf16() && phase[0].type() != WeightType::kBf16;
+    for (int64_t i0 = 0; i0 < h; i0 += lb) {
+      const int64_t i1 = std::min(h, i0 + lb), nb = i1 - i0;
+      int64_t first[2], count[2];
+      first[0] = std::max<int64_t>(0, i0 - 1), count[0] = i1 - first[0];
+      first[1] = i0, count[1] = std::min(h, i1 + 1) - i0;
+      for (int a = 0; a < 2; ++a)
+        parallel(r, size_t(c), [&](size_t b0, size_t b1) {
+          for (size_t ch = b0; ch < b1; ++ch)
+            std::memcpy(in[a] + int64_t(ch) * count[a] * w, x + (int64_t(ch) * h + first[a]) * w,
+                        size_t(count[a] * w) * sizeof(float));
+        });
+      {
+        op_profile::OpScope prof("conv 3x3 upsample (2x2 phases)",
+                                 2.0 * double(4 * nb * w) * double(c * c) * 4.0);
+        for (int a = 0; a < 2; ++a) {
+          if (round) round_if_bf16(r, in[a], c * count[a] * w);
+          for (int b = 0; b < 2; ++b) {
+            Conv2dShape s;
+            s.n = 1, s.c_in = c, s.h = count[a], s.w = w, s.c_out = c, s.kh = 2, s.kw = 2;
+            s.stride = 1;
+            s.pad_top = a == 0 && i0 == 0 ? 1 : 0, s.pad_bottom = a == 1 && i1 == h ? 1 : 0;
+            s.pad_left = 1 - b, s.pad_right = b;
+            conv2d(s, in[a], phase[a * 2 + b], nullptr, ph + (a * 2 + b) * c * nb * w, r.pool);
+          }
+        }
+      }
+      op_profile::OpScope prof("copy");
+      parallel(r, size_t(c), [&](size_t b0, size_t b1) {
+        for (size_t ch = b0; ch < b1; ++ch)
+          for (int64_t i = 0; i < nb; ++i)
+            for (int a = 0; a < 2; ++a) {
+              const float* p0 = ph + ((a * 2) * c + int64_t(ch)) * nb * w + i * w;
+              const float* p1 = p0 + c * nb * w;
+              float* d = out + (int64_t(ch) * oh + 2 * (i0 + i) + a) * ow;
+              for (int64_t j = 0; j < w; ++j) {
+                d[2 * j] = p0[j];
+                d[2 * j + 1] = p1[j];
+              }
+            }
+      });
+    }
+    return;
+  }
   const int64_t rows = std::min(band_rows, oh);
   ScratchFrame frame(r);
   float* in = r.alloc(c * (rows + 2) * ow);

@@ -265,14 +265,23 @@ struct Downsample2D {
 
 // Nearest-neighbour resize to (oh, ow) (x2 normally; the next skip's size for odd latents), then
 // a 3x3 pad-1 conv.
+// Nearest resize, then a 3x3 conv (padding 1). For an output exactly twice the input (oh = 2h,
+// ow = 2w) each output phase (row parity a, column parity b) is a 2x2 conv of the input itself,
+// whose taps are sums of the 3x3 taps: rows a = 0 read input rows i - 1 (tap row 0) and i (rows
+// 1 + 2), a = 1 rows i (rows 0 + 1) and i + 1 (row 2); columns likewise. The resized image's
+// zero padding is the input's, so this is the same conv in real arithmetic with 16 products per
+// output pixel and channel pair instead of 36 (sums formed in double, then packed like any
+// weight). Built only where the conv has no Winograd packs (which run the resized image about as
+// fast); other sizes, and those convs, take `conv` on the resized image.
 struct Upsample2D {
   Conv2d conv;
+  ConvWeights phase[4];  // [a * 2 + b]: 2x2 kernels with conv's bias; empty (c_out 0) if unused
   void init(int64_t channels);
   void visit(const std::string& prefix, ParamVisitor& v) {
     conv.visit(join_name(prefix, "conv"), v);
   }
-  void pack(Precision p) { conv.pack(p); }
-  size_t bytes() const { return conv.bytes(); }
+  void pack(Precision p);
+  size_t bytes() const;
   void forward(const Run& r, const float* x, int64_t n, int64_t c, int64_t h, int64_t w, int64_t oh,
                int64_t ow, float* out) const;
   // The same without a temporary: x is resized into `tmp`, then the conv writes back over `x`.
