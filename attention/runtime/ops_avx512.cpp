@@ -262,6 +262,17 @@ void softmax512(float* dst, const float* src, int64_t n, float scale) {
 // one vector at a time leaves waiting on latency. 4 vectors: the GEGLU group of 64 columns.
 constexpr int kGeluVectors = 4;
 
+// p[k] = (..((p[k] r[k] + c[0]) r[k] + c[1]) ..) r[k] + c[N - 1] for each of the vectors.
+template <int N>
+inline void horner_n(__m512 (&p)[kGeluVectors], const __m512 (&r)[kGeluVectors],
+                     const float (&c)[N]) {
+#pragma GCC unroll 9
+  for (int j = 0; j < N; ++j)
+#pragma GCC unroll 4
+    for (int k = 0; k < kGeluVectors; ++k)
+      p[k] = _mm512_fmadd_ps(p[k], r[k], _mm512_set1_ps(c[j]));
+}
+
 inline void exp16_n(__m512 (&x)[kGeluVectors]) {
   const __m512 lo = _mm512_set1_ps(-104.0f), hi = _mm512_set1_ps(88.7228391f);
   __m512 n[kGeluVectors], r[kGeluVectors], p[kGeluVectors];
@@ -279,11 +290,7 @@ inline void exp16_n(__m512 (&x)[kGeluVectors]) {
   }
   const float c[5] = {1.3981999507e-3f, 8.3334519073e-3f, 4.1665795894e-2f, 1.6666665459e-1f,
                       5.0000001201e-1f};
-#pragma GCC unroll 5
-  for (int j = 0; j < 5; ++j)
-#pragma GCC unroll 4
-    for (int k = 0; k < kGeluVectors; ++k)
-      p[k] = _mm512_fmadd_ps(p[k], r[k], _mm512_set1_ps(c[j]));
+  horner_n(p, r, c);
 #pragma GCC unroll 4
   for (int k = 0; k < kGeluVectors; ++k) {
     const __m512 r2 = _mm512_mul_ps(r[k], r[k]);
@@ -303,11 +310,7 @@ inline void gelu16_n(__m512 (&x)[kGeluVectors]) {
   }
   const float c[9] = {-0.82215223f, 1.48851587f, -1.13520398f, 0.27886807f, -0.18628806f,
                       0.09678418f,  0.37409196f, 1.00002368f,  -1.26551223f};
-#pragma GCC unroll 9
-  for (int j = 0; j < 9; ++j)
-#pragma GCC unroll 4
-    for (int k = 0; k < kGeluVectors; ++k)
-      p[k] = _mm512_fmadd_ps(p[k], t[k], _mm512_set1_ps(c[j]));
+  horner_n(p, t, c);
 #pragma GCC unroll 4
   for (int k = 0; k < kGeluVectors; ++k) e[k] = _mm512_fnmadd_ps(z[k], z[k], p[k]);
   exp16_n(e);
