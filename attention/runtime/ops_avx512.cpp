@@ -23,22 +23,50 @@ inline __mmask16 tail_mask(int64_t rem) {
   return rem >= 16 ? __mmask16(0xffff) : __mmask16((1u << rem) - 1u);
 }
 
-inline __m512 exp16(__m512 x) {
+// p[k] = (..((p[k] r[k] + c[0]) r[k] + c[1]) ..) r[k] + c[N - 1] for each of V vectors.
+template <int V, int N>
+inline void horner_n(__m512 (&p)[V], const __m512 (&r)[V], const float (&c)[N]) {
+#pragma GCC unroll 9
+  for (int j = 0; j < N; ++j)
+#pragma GCC unroll 4
+    for (int k = 0; k < V; ++k) p[k] = _mm512_fmadd_ps(p[k], r[k], _mm512_set1_ps(c[j]));
+}
+
+// exp and GELU of V vectors, step by step across them: each lane's operations and their order
+// do not depend on V (the same bits), but for V > 1 neighbouring instructions are independent, so
+// the core overlaps the vectors' long dependency chains (division, polynomials, exponential) that
+// one vector at a time leaves waiting on latency.
+template <int V>
+inline void exp_n(__m512 (&x)[V]) {
   const __m512 lo = _mm512_set1_ps(-104.0f), hi = _mm512_set1_ps(88.7228391f);
-  x = _mm512_min_ps(hi, _mm512_max_ps(lo, x));  // constant first: NaN passes through
-  const __m512 n = _mm512_roundscale_ps(_mm512_mul_ps(x, _mm512_set1_ps(1.44269504088896341f)),
-                                        _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
-  __m512 r = _mm512_fnmadd_ps(n, _mm512_set1_ps(0.693359375f), x);
-  r = _mm512_fnmadd_ps(n, _mm512_set1_ps(-2.12194440e-4f), r);
-  __m512 p = _mm512_set1_ps(1.9875691500e-4f);
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.3981999507e-3f));
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(8.3334519073e-3f));
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(4.1665795894e-2f));
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.6666665459e-1f));
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(5.0000001201e-1f));
-  const __m512 r2 = _mm512_mul_ps(r, r);
-  __m512 y = _mm512_fmadd_ps(p, r2, _mm512_add_ps(r, _mm512_set1_ps(1.0f)));
-  return _mm512_scalef_ps(y, n);
+  __m512 n[V], r[V], p[V];
+#pragma GCC unroll 4
+  for (int k = 0; k < V; ++k) {
+    x[k] = _mm512_min_ps(hi, _mm512_max_ps(lo, x[k]));  // constant first: NaN passes through
+    n[k] = _mm512_roundscale_ps(_mm512_mul_ps(x[k], _mm512_set1_ps(1.44269504088896341f)),
+                                _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+  }
+#pragma GCC unroll 4
+  for (int k = 0; k < V; ++k) {
+    r[k] = _mm512_fnmadd_ps(n[k], _mm512_set1_ps(0.693359375f), x[k]);
+    r[k] = _mm512_fnmadd_ps(n[k], _mm512_set1_ps(-2.12194440e-4f), r[k]);
+    p[k] = _mm512_set1_ps(1.9875691500e-4f);
+  }
+  const float c[5] = {1.3981999507e-3f, 8.3334519073e-3f, 4.1665795894e-2f, 1.6666665459e-1f,
+                      5.0000001201e-1f};
+  horner_n(p, r, c);
+#pragma GCC unroll 4
+  for (int k = 0; k < V; ++k) {
+    const __m512 r2 = _mm512_mul_ps(r[k], r[k]);
+    const __m512 y = _mm512_fmadd_ps(p[k], r2, _mm512_add_ps(r[k], _mm512_set1_ps(1.0f)));
+    x[k] = _mm512_scalef_ps(y, n[k]);
+  }
+}
+
+inline __m512 exp16(__m512 x) {
+  __m512 v[1] = {x};
+  exp_n(v);
+  return v[0];
 }
 
 inline __m512 silu16(__m512 x) {
@@ -47,27 +75,36 @@ inline __m512 silu16(__m512 x) {
 }
 
 // Phi(x) * x, via erfc.
-inline __m512 gelu16(__m512 x) {
+template <int V>
+inline void gelu_n(__m512 (&x)[V]) {
   const __m512 one = _mm512_set1_ps(1.0f), half = _mm512_set1_ps(0.5f);
-  const __m512 ax = _mm512_abs_ps(x);
-  const __m512 z = _mm512_mul_ps(ax, _mm512_set1_ps(0.70710678118654752f));
-  const __m512 t = _mm512_div_ps(one, _mm512_fmadd_ps(half, z, one));
-  __m512 p = _mm512_set1_ps(0.17087277f);
-  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(-0.82215223f));
-  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(1.48851587f));
-  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(-1.13520398f));
-  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(0.27886807f));
-  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(-0.18628806f));
-  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(0.09678418f));
-  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(0.37409196f));
-  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(1.00002368f));
-  p = _mm512_fmadd_ps(p, t, _mm512_set1_ps(-1.26551223f));
-  const __m512 e = _mm512_fnmadd_ps(z, z, p);  // -z^2 + P(t)
-  const __m512 half_erfc = _mm512_mul_ps(_mm512_mul_ps(half, t), exp16(e));
-  // x >= 0: Phi = 1 - erfc/2; x < 0: Phi = erfc/2
-  const __mmask16 neg = _mm512_cmp_ps_mask(x, _mm512_setzero_ps(), _CMP_LT_OQ);
-  const __m512 phi = _mm512_mask_blend_ps(neg, _mm512_sub_ps(one, half_erfc), half_erfc);
-  return _mm512_mul_ps(x, phi);
+  __m512 z[V], t[V], p[V], e[V];
+#pragma GCC unroll 4
+  for (int k = 0; k < V; ++k) {
+    z[k] = _mm512_mul_ps(_mm512_abs_ps(x[k]), _mm512_set1_ps(0.70710678118654752f));
+    t[k] = _mm512_div_ps(one, _mm512_fmadd_ps(half, z[k], one));
+    p[k] = _mm512_set1_ps(0.17087277f);
+  }
+  const float c[9] = {-0.82215223f, 1.48851587f, -1.13520398f, 0.27886807f, -0.18628806f,
+                      0.09678418f,  0.37409196f, 1.00002368f,  -1.26551223f};
+  horner_n(p, t, c);
+#pragma GCC unroll 4
+  for (int k = 0; k < V; ++k) e[k] = _mm512_fnmadd_ps(z[k], z[k], p[k]);  // -z^2 + P(t)
+  exp_n(e);
+#pragma GCC unroll 4
+  for (int k = 0; k < V; ++k) {
+    const __m512 half_erfc = _mm512_mul_ps(_mm512_mul_ps(half, t[k]), e[k]);
+    // x >= 0: Phi = 1 - erfc/2; x < 0: Phi = erfc/2
+    const __mmask16 neg = _mm512_cmp_ps_mask(x[k], _mm512_setzero_ps(), _CMP_LT_OQ);
+    const __m512 phi = _mm512_mask_blend_ps(neg, _mm512_sub_ps(one, half_erfc), half_erfc);
+    x[k] = _mm512_mul_ps(x[k], phi);
+  }
+}
+
+inline __m512 gelu16(__m512 x) {
+  __m512 v[1] = {x};
+  gelu_n(v);
+  return v[0];
 }
 
 inline __m512 tanh16(__m512 x) {
@@ -256,72 +293,8 @@ void softmax512(float* dst, const float* src, int64_t n, float scale) {
   }
 }
 
-// exp16 and gelu16 of kN vectors at once, step by step across the vectors: each lane's operations
-// and their order are gelu16's (the same bits), but neighbouring instructions are independent, so
-// the core overlaps the vectors' long dependency chains (division, polynomial, exponential) that
-// one vector at a time leaves waiting on latency. 4 vectors: the GEGLU group of 64 columns.
+// GEGLU takes the GELU of 4 vectors at a time (gelu_n): the GEGLU group of 64 columns.
 constexpr int kGeluVectors = 4;
-
-// p[k] = (..((p[k] r[k] + c[0]) r[k] + c[1]) ..) r[k] + c[N - 1] for each of the vectors.
-template <int N>
-inline void horner_n(__m512 (&p)[kGeluVectors], const __m512 (&r)[kGeluVectors],
-                     const float (&c)[N]) {
-#pragma GCC unroll 9
-  for (int j = 0; j < N; ++j)
-#pragma GCC unroll 4
-    for (int k = 0; k < kGeluVectors; ++k)
-      p[k] = _mm512_fmadd_ps(p[k], r[k], _mm512_set1_ps(c[j]));
-}
-
-inline void exp16_n(__m512 (&x)[kGeluVectors]) {
-  const __m512 lo = _mm512_set1_ps(-104.0f), hi = _mm512_set1_ps(88.7228391f);
-  __m512 n[kGeluVectors], r[kGeluVectors], p[kGeluVectors];
-#pragma GCC unroll 4
-  for (int k = 0; k < kGeluVectors; ++k) {
-    x[k] = _mm512_min_ps(hi, _mm512_max_ps(lo, x[k]));
-    n[k] = _mm512_roundscale_ps(_mm512_mul_ps(x[k], _mm512_set1_ps(1.44269504088896341f)),
-                                _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
-  }
-#pragma GCC unroll 4
-  for (int k = 0; k < kGeluVectors; ++k) {
-    r[k] = _mm512_fnmadd_ps(n[k], _mm512_set1_ps(0.693359375f), x[k]);
-    r[k] = _mm512_fnmadd_ps(n[k], _mm512_set1_ps(-2.12194440e-4f), r[k]);
-    p[k] = _mm512_set1_ps(1.9875691500e-4f);
-  }
-  const float c[5] = {1.3981999507e-3f, 8.3334519073e-3f, 4.1665795894e-2f, 1.6666665459e-1f,
-                      5.0000001201e-1f};
-  horner_n(p, r, c);
-#pragma GCC unroll 4
-  for (int k = 0; k < kGeluVectors; ++k) {
-    const __m512 r2 = _mm512_mul_ps(r[k], r[k]);
-    const __m512 y = _mm512_fmadd_ps(p[k], r2, _mm512_add_ps(r[k], _mm512_set1_ps(1.0f)));
-    x[k] = _mm512_scalef_ps(y, n[k]);
-  }
-}
-
-inline void gelu16_n(__m512 (&x)[kGeluVectors]) {
-  const __m512 one = _mm512_set1_ps(1.0f), half = _mm512_set1_ps(0.5f);
-  __m512 z[kGeluVectors], t[kGeluVectors], p[kGeluVectors], e[kGeluVectors];
-#pragma GCC unroll 4
-  for (int k = 0; k < kGeluVectors; ++k) {
-    z[k] = _mm512_mul_ps(_mm512_abs_ps(x[k]), _mm512_set1_ps(0.70710678118654752f));
-    t[k] = _mm512_div_ps(one, _mm512_fmadd_ps(half, z[k], one));
-    p[k] = _mm512_set1_ps(0.17087277f);
-  }
-  const float c[9] = {-0.82215223f, 1.48851587f, -1.13520398f, 0.27886807f, -0.18628806f,
-                      0.09678418f,  0.37409196f, 1.00002368f,  -1.26551223f};
-  horner_n(p, t, c);
-#pragma GCC unroll 4
-  for (int k = 0; k < kGeluVectors; ++k) e[k] = _mm512_fnmadd_ps(z[k], z[k], p[k]);
-  exp16_n(e);
-#pragma GCC unroll 4
-  for (int k = 0; k < kGeluVectors; ++k) {
-    const __m512 half_erfc = _mm512_mul_ps(_mm512_mul_ps(half, t[k]), e[k]);
-    const __mmask16 neg = _mm512_cmp_ps_mask(x[k], _mm512_setzero_ps(), _CMP_LT_OQ);
-    const __m512 phi = _mm512_mask_blend_ps(neg, _mm512_sub_ps(one, half_erfc), half_erfc);
-    x[k] = _mm512_mul_ps(x[k], phi);
-  }
-}
 
 void geglu512(float* dst, const float* v, const float* g, int64_t n) {
   int64_t i = 0;
@@ -329,7 +302,7 @@ void geglu512(float* dst, const float* v, const float* g, int64_t n) {
     __m512 x[kGeluVectors];
 #pragma GCC unroll 4
     for (int k = 0; k < kGeluVectors; ++k) x[k] = _mm512_loadu_ps(g + i + 16 * k);
-    gelu16_n(x);
+    gelu_n(x);
 #pragma GCC unroll 4
     for (int k = 0; k < kGeluVectors; ++k)
       _mm512_storeu_ps(dst + i + 16 * k, _mm512_mul_ps(_mm512_loadu_ps(v + i + 16 * k), x[k]));
