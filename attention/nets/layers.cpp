@@ -674,35 +674,41 @@ size_t Upsample2D::bytes() const {
 
 namespace {
 
-// y [n, C, 2h, 2w] from x [n, C, h, w] by the four phase convs (Upsample2D): each writes
-// [n, C, h, w] into ph (room for 4 of them), then the phases are interleaved into y (which may
-// be x: x is read only by the convs). bf16 on the fp32 kernel: x is rounded in place first, as the
-// resized copy would be.
-void upsample_phases(const Run& r, const ConvWeights (&phase)[4], float* x, int64_t n, int64_t c,
-                     int64_t h, int64_t w, float* ph, float* y) {
-  if (r.planning()) return;
-  {
-    op_profile::OpScope prof("conv 3x3 upsample (2x2 phases)",
-                             2.0 * double(n * 4 * h * w) * double(c * c) * 4.0);
-    if (phase[0].type() != WeightType::kBf16) round_if_bf16(r, x, n * c * h * w);
-    for (int a = 0; a < 2; ++a)
-      for (int b = 0; b < 2; ++b) {
-        Conv2dShape s;
-        s.n = n, s.c_in = c, s.h = h, s.w = w, s.c_out = c, s.kh = 2, s.kw = 2;
-        s.stride = 1;
-        s.pad_top = 1 - a, s.pad_left = 1 - b, s.pad_bottom = a, s.pad_right = b;
-        conv2d(s, x, phase[a * 2 + b], nullptr, ph + (a * 2 + b) * n * c * h * w, r.pool);
-      }
+// The four phase convs (Upsample2D): rows of parity a read in[a] ([n, C, rows[a], w]) with
+// pad_top[a] / pad_bottom[a] rows of zeros; phase a * 2 + b writes [n, C, out_rows, w] at
+// ph + (a * 2 + b) * stride. bf16 on the fp32 kernel: the inputs are rounded in place first, as
+// the resized copy would be (in[1] may be in[0]).
+void run_phases(const Run& r, const ConvWeights (&phase)[4], float* const (&in)[2],
+                const int64_t (&rows)[2], const int (&pad_top)[2], const int (&pad_bottom)[2],
+                int64_t n, int64_t c, int64_t w, int64_t out_rows, float* ph, int64_t stride) {
+  op_profile::OpScope prof("conv 3x3 upsample (2x2 phases)",
+                           2.0 * double(n * 4 * out_rows * w) * double(c * c) * 4.0);
+  if (phase[0].type() != WeightType::kBf16) {
+    round_if_bf16(r, in[0], n * c * rows[0] * w);
+    if (in[1] != in[0]) round_if_bf16(r, in[1], n * c * rows[1] * w);
   }
+  for (int a = 0; a < 2; ++a)
+    for (int b = 0; b < 2; ++b) {
+      Conv2dShape s;
+      s.n = n, s.c_in = c, s.h = rows[a], s.w = w, s.c_out = c, s.kh = 2, s.kw = 2;
+      s.stride = 1;
+      s.pad_top = pad_top[a], s.pad_bottom = pad_bottom[a], s.pad_left = 1 - b, s.pad_right = b;
+      conv2d(s, in[a], phase[a * 2 + b], nullptr, ph + (a * 2 + b) * stride, r.pool);
+    }
+}
+
+// Interleave the phases (run_phases' layout, `planes` planes of `rows` x w each) into rows
+// 2 (row0 + i) + a, columns 2 j + b of y's planes (y_plane floats apart, 2w wide).
+void interleave_phases(const Run& r, const float* ph, int64_t stride, int64_t planes,
+                       int64_t rows, int64_t w, float* y, int64_t y_plane, int64_t row0) {
   op_profile::OpScope prof("copy");
-  const int64_t plane = n * c * h * w;
-  parallel(r, size_t(n * c), [&](size_t b0, size_t b1) {
+  parallel(r, size_t(planes), [&](size_t b0, size_t b1) {
     for (size_t pc = b0; pc < b1; ++pc)
-      for (int64_t i = 0; i < h; ++i)
+      for (int64_t i = 0; i < rows; ++i)
         for (int a = 0; a < 2; ++a) {
-          const float* p0 = ph + (a * 2) * plane + (int64_t(pc) * h + i) * w;
-          const float* p1 = p0 + plane;
-          float* d = y + (int64_t(pc) * 2 * h + 2 * i + a) * 2 * w;
+          const float* p0 = ph + (a * 2) * stride + (int64_t(pc) * rows + i) * w;
+          const float* p1 = p0 + stride;
+          float* d = y + int64_t(pc) * y_plane + (2 * (row0 + i) + a) * 2 * w;
           for (int64_t j = 0; j < w; ++j) {
             d[2 * j] = p0[j];
             d[2 * j + 1] = p1[j];
@@ -711,13 +717,26 @@ void upsample_phases(const Run& r, const ConvWeights (&phase)[4], float* x, int6
   });
 }
 
+// y [n, C, 2h, 2w] from x [n, C, h, w] (y may be x: x is read only by the convs); ph holds 4 x
+// [n, C, h, w].
+void upsample_phases(const Run& r, const ConvWeights (&phase)[4], float* x, int64_t n, int64_t c,
+                     int64_t h, int64_t w, float* ph, float* y) {
+  if (r.planning()) return;
+  float* const in[2] = {x, x};
+  const int64_t rows[2] = {h, h};
+  const int pad_top[2] = {1, 0}, pad_bottom[2] = {0, 1};
+  const int64_t stride = n * c * h * w;
+  run_phases(r, phase, in, rows, pad_top, pad_bottom, n, c, w, h, ph, stride);
+  interleave_phases(r, ph, stride, n * c, h, w, y, 4 * h * w, 0);
+}
+
 }  // namespace
 
 void Upsample2D::forward(const Run& r, const float* x, int64_t n, int64_t c, int64_t h, int64_t w,
                          int64_t oh, int64_t ow, float* out) const {
   ScratchFrame frame(r);
   float* t = r.alloc(n * c * oh * ow);
-  if (oh == 2 * h && ow == 2 * w && phase[0].c_out() == c) {
+  if (phased(c, h, w, oh, ow)) {
     float* xs = const_cast<float*>(x);  // only read, unless the rounding below needs a copy
     if (r.bf16() && phase[0].type() != WeightType::kBf16) {
       xs = r.alloc(n * c * h * w);
@@ -732,7 +751,7 @@ void Upsample2D::forward(const Run& r, const float* x, int64_t n, int64_t c, int
 
 void Upsample2D::forward_in_place(const Run& r, float* x, int64_t n, int64_t c, int64_t h,
                                   int64_t w, int64_t oh, int64_t ow, float* tmp) const {
-  if (oh == 2 * h && ow == 2 * w && phase[0].c_out() == c) {
+  if (phased(c, h, w, oh, ow)) {
     upsample_phases(r, phase, x, n, c, h, w, tmp, x);
     return;
   }
@@ -743,56 +762,28 @@ void Upsample2D::forward_in_place(const Run& r, float* x, int64_t n, int64_t c, 
 void Upsample2D::forward_lean(const Run& r, const float* x, int64_t c, int64_t h, int64_t w,
                               int64_t oh, int64_t ow, float* out, int64_t band_rows) const {
   MACRO_CHECK(band_rows >= 1 && h > 0 && w > 0);
-  if (oh == 2 * h && ow == 2 * w && phase[0].c_out() == c) {
+  if (phased(c, h, w, oh, ow)) {
     // Bands of lb input rows [i0, i1) -> output rows [2 i0, 2 i1): row parity 0 reads input rows
     // [i0 - 1, i1), parity 1 rows [i0, i1 + 1) (clipped; the image's edge is the conv's padding),
     // each gathered into its own buffer; the four phase outputs then interleave into out.
     const int64_t lb = std::max<int64_t>(1, std::min(band_rows, oh) / 2);
     ScratchFrame frame(r);
-    float* in[2] = {r.alloc(c * (lb + 1) * w), r.alloc(c * (lb + 1) * w)};
+    float* const in[2] = {r.alloc(c * (lb + 1) * w), r.alloc(c * (lb + 1) * w)};
     float* ph = r.alloc(4 * c * lb * w);
     if (r.planning()) return;
-    const bool round = r.bf16() && phase[0].type() != WeightType::kBf16;
     for (int64_t i0 = 0; i0 < h; i0 += lb) {
       const int64_t i1 = std::min(h, i0 + lb), nb = i1 - i0;
-      int64_t first[2], count[2];
-      first[0] = std::max<int64_t>(0, i0 - 1), count[0] = i1 - first[0];
-      first[1] = i0, count[1] = std::min(h, i1 + 1) - i0;
+      const int64_t first[2] = {std::max<int64_t>(0, i0 - 1), i0};
+      const int64_t count[2] = {i1 - first[0], std::min(h, i1 + 1) - i0};
+      const int pad_top[2] = {i0 == 0 ? 1 : 0, 0}, pad_bottom[2] = {0, i1 == h ? 1 : 0};
       for (int a = 0; a < 2; ++a)
         parallel(r, size_t(c), [&](size_t b0, size_t b1) {
           for (size_t ch = b0; ch < b1; ++ch)
             std::memcpy(in[a] + int64_t(ch) * count[a] * w, x + (int64_t(ch) * h + first[a]) * w,
                         size_t(count[a] * w) * sizeof(float));
         });
-      {
-        op_profile::OpScope prof("conv 3x3 upsample (2x2 phases)",
-                                 2.0 * double(4 * nb * w) * double(c * c) * 4.0);
-        for (int a = 0; a < 2; ++a) {
-          if (round) round_if_bf16(r, in[a], c * count[a] * w);
-          for (int b = 0; b < 2; ++b) {
-            Conv2dShape s;
-            s.n = 1, s.c_in = c, s.h = count[a], s.w = w, s.c_out = c, s.kh = 2, s.kw = 2;
-            s.stride = 1;
-            s.pad_top = a == 0 && i0 == 0 ? 1 : 0, s.pad_bottom = a == 1 && i1 == h ? 1 : 0;
-            s.pad_left = 1 - b, s.pad_right = b;
-            conv2d(s, in[a], phase[a * 2 + b], nullptr, ph + (a * 2 + b) * c * nb * w, r.pool);
-          }
-        }
-      }
-      op_profile::OpScope prof("copy");
-      parallel(r, size_t(c), [&](size_t b0, size_t b1) {
-        for (size_t ch = b0; ch < b1; ++ch)
-          for (int64_t i = 0; i < nb; ++i)
-            for (int a = 0; a < 2; ++a) {
-              const float* p0 = ph + ((a * 2) * c + int64_t(ch)) * nb * w + i * w;
-              const float* p1 = p0 + c * nb * w;
-              float* d = out + (int64_t(ch) * oh + 2 * (i0 + i) + a) * ow;
-              for (int64_t j = 0; j < w; ++j) {
-                d[2 * j] = p0[j];
-                d[2 * j + 1] = p1[j];
-              }
-            }
-      });
+      run_phases(r, phase, in, count, pad_top, pad_bottom, 1, c, w, nb, ph, c * nb * w);
+      interleave_phases(r, ph, c * nb * w, c, nb, w, out, oh * ow, i0);
     }
     return;
   }

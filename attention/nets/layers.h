@@ -264,8 +264,7 @@ struct Downsample2D {
 };
 
 // Nearest-neighbour resize to (oh, ow) (x2 normally; the next skip's size for odd latents), then
-// a 3x3 pad-1 conv.
-// Nearest resize, then a 3x3 conv (padding 1). For an output exactly twice the input (oh = 2h,
+// a 3x3 pad-1 conv. For an output exactly twice the input (oh = 2h,
 // ow = 2w) each output phase (row parity a, column parity b) is a 2x2 conv of the input itself,
 // whose taps are sums of the 3x3 taps: rows a = 0 read input rows i - 1 (tap row 0) and i (rows
 // 1 + 2), a = 1 rows i (rows 0 + 1) and i + 1 (row 2); columns likewise. The resized image's
@@ -282,6 +281,10 @@ struct Upsample2D {
   }
   void pack(Precision p);
   size_t bytes() const;
+  // Whether this call takes the phases (they exist and the output is exactly twice the input).
+  bool phased(int64_t c, int64_t h, int64_t w, int64_t oh, int64_t ow) const {
+    return phase[0].c_out() == c && oh == 2 * h && ow == 2 * w;
+  }
   void forward(const Run& r, const float* x, int64_t n, int64_t c, int64_t h, int64_t w, int64_t oh,
                int64_t ow, float* out) const;
   // The same without a temporary: x is resized into `tmp`, then the conv writes back over `x`.
