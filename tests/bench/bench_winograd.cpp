@@ -75,13 +75,33 @@ TileTransforms toom_cook(const std::vector<double>& p) {
     int deg = 0;
     for (int l = 0; l < np; ++l) {
       if (l == j) continue;
-      for (int d = deg + 1; d >= 1; --d) c[size_t(d)] = c[size_t(d - 1)] - p[size_t(l)] * c[size_t(d)];
+      for (int d = deg + 1; d >= 1; --d)
+        c[size_t(d)] = c[size_t(d - 1)] - p[size_t(l)] * c[size_t(d)];
       c[0] = -p[size_t(l)] * c[0];
       ++deg;
     }
     for (int d = 0; d < a; ++d) t.bt[size_t(j * a + d)] = c[size_t(d)];
   }
   return t;
+}
+
+// out [rows x rows] = L in L^T for L [rows x k] (row-major), in [k x k], in T arithmetic: the
+// left product first, each sum over k in order (the transforms of the engine's Winograd).
+template <typename T>
+void sandwich(const std::vector<double>& l, int rows, int k, const T* in, T* out) {
+  T left[8 * 8];
+  for (int i = 0; i < rows; ++i)
+    for (int j = 0; j < k; ++j) {
+      T s = 0;
+      for (int q = 0; q < k; ++q) s += T(l[size_t(i * k + q)]) * in[q * k + j];
+      left[i * k + j] = s;
+    }
+  for (int i = 0; i < rows; ++i)
+    for (int j = 0; j < rows; ++j) {
+      T s = 0;
+      for (int q = 0; q < k; ++q) s += left[i * k + q] * T(l[size_t(j * k + q)]);
+      out[i * rows + j] = s;
+    }
 }
 
 // The bf16 Winograd conv as the engine computes it, for any tile: V = B^T d B in fp32, U = G g G^T
@@ -92,58 +112,29 @@ void winograd_model(const TileTransforms& t, const std::vector<double>& x,
   const int m = t.m, a = t.a;
   const int64_t xs = n + 2, tiles = (n + m - 1) / m;
   std::vector<float> u(size_t(cin * a * a));
+  double ud[8 * 8];
   for (int64_t c = 0; c < cin; ++c) {
-    std::vector<double> gg(size_t(a * 3));
-    for (int i = 0; i < a; ++i)
-      for (int k = 0; k < 3; ++k) {
-        double s = 0.0;
-        for (int l = 0; l < 3; ++l) s += t.g[size_t(i * 3 + l)] * w[size_t(c * 9 + l * 3 + k)];
-        gg[size_t(i * 3 + k)] = s;
-      }
-    for (int i = 0; i < a; ++i)
-      for (int j = 0; j < a; ++j) {
-        double s = 0.0;
-        for (int k = 0; k < 3; ++k) s += gg[size_t(i * 3 + k)] * t.g[size_t(j * 3 + k)];
-        u[size_t((c * a + i) * a + j)] = bf16_round(float(s));
-      }
+    sandwich(t.g, a, 3, w.data() + c * 9, ud);
+    for (int e = 0; e < a * a; ++e) u[size_t(c * a * a + e)] = bf16_round(float(ud[e]));
   }
-  std::vector<float> d(size_t(a * a)), r(size_t(a * a)), mm(size_t(a * a)), o(size_t(m * a));
+  float d[8 * 8], v[8 * 8], mm[8 * 8], yt[8 * 8];
   for (int64_t ty = 0; ty < tiles; ++ty)
     for (int64_t tx = 0; tx < tiles; ++tx) {
-      std::fill(mm.begin(), mm.end(), 0.0f);
+      std::fill(mm, mm + a * a, 0.0f);
       for (int64_t c = 0; c < cin; ++c) {
         for (int i = 0; i < a; ++i)
           for (int j = 0; j < a; ++j) {
             const int64_t iy = ty * m + i, ix = tx * m + j;
-            d[size_t(i * a + j)] =
-                iy < xs && ix < xs ? float(x[size_t((c * xs + iy) * xs + ix)]) : 0.0f;
+            d[i * a + j] = iy < xs && ix < xs ? float(x[size_t((c * xs + iy) * xs + ix)]) : 0.0f;
           }
-        for (int i = 0; i < a; ++i)
-          for (int j = 0; j < a; ++j) {
-            float s = 0.0f;
-            for (int k = 0; k < a; ++k) s += float(t.bt[size_t(i * a + k)]) * d[size_t(k * a + j)];
-            r[size_t(i * a + j)] = s;
-          }
-        for (int i = 0; i < a; ++i)
-          for (int j = 0; j < a; ++j) {
-            float s = 0.0f;
-            for (int k = 0; k < a; ++k) s += r[size_t(i * a + k)] * float(t.bt[size_t(j * a + k)]);
-            mm[size_t(i * a + j)] += bf16_round(s) * u[size_t((c * a + i) * a + j)];
-          }
+        sandwich(t.bt, a, a, d, v);
+        for (int e = 0; e < a * a; ++e) mm[e] += bf16_round(v[e]) * u[size_t(c * a * a + e)];
       }
-      for (int i = 0; i < m; ++i)
-        for (int j = 0; j < a; ++j) {
-          float s = 0.0f;
-          for (int k = 0; k < a; ++k) s += float(t.at[size_t(i * a + k)]) * mm[size_t(k * a + j)];
-          o[size_t(i * a + j)] = s;
-        }
+      sandwich(t.at, m, a, mm, yt);
       for (int i = 0; i < m; ++i)
         for (int j = 0; j < m; ++j) {
           const int64_t oy = ty * m + i, ox = tx * m + j;
-          if (oy >= n || ox >= n) continue;
-          float s = 0.0f;
-          for (int k = 0; k < a; ++k) s += o[size_t(i * a + k)] * float(t.at[size_t(j * a + k)]);
-          y[size_t(oy * n + ox)] = s;
+          if (oy < n && ox < n) y[size_t(oy * n + ox)] = yt[i * m + j];
         }
     }
 }
