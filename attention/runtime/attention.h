@@ -152,6 +152,11 @@ using BlockFn = void (*)(const BlockJob* jobs, int count, const BlockScratch* sc
 // S^T = K Q^T micro-GEMM of the block kernel, exposed so the benchmark can measure its rate alone.
 using ScoreTileFn = void (*)(const float* const* k_rows, int keys, const float* qt, int d,
                              float* s);
+// The bf16 kernels' online softmax of one key block: S^T of `cols` keys x BQ query lanes (base-2
+// scores) updates m, l and alpha and becomes the probability pairs pp (BlockScratch). Exposed so
+// the benchmark can time it alone.
+using SoftmaxBf16Fn = void (*)(const float* s, int cols, float* m, float* l, float* alpha,
+                               uint32_t* pp);
 // A register-only FMA loop: returns the flops it did (for the machine-peak measurement).
 using FmaPeakFn = double (*)(int64_t iterations);
 
@@ -169,6 +174,7 @@ struct AttentionKernels {
   ToBf16Fn to_bf16 = nullptr;
   // The bf16 K / V layout of BlockJob the bf16 kernel reads (see Bf16Layout).
   Bf16Layout bf16_layout = Bf16Layout::kRows;
+  SoftmaxBf16Fn softmax_bf16 = nullptr;  // the bf16 kernel's softmax, where it has one
 };
 
 // The table for a path (the scalar table for paths without their own kernels).

@@ -230,6 +230,7 @@ const AttentionKernels& avx512bf16_kernels() {
     t.isa = Isa::kAvx512Bf16;
     t.block_bf16 = blocks_bf16;
     t.bf16_d_multiple = 32;
+    t.softmax_bf16 = softmax_pack_bf16;
     t.to_bf16 = to_bf16_avx512;
     t.bf16_layout = Bf16Layout::kPairs;
     return t;

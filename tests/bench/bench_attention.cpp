@@ -5,7 +5,8 @@
 //
 // --bf16: every case also runs with bf16 products (AttentionArgs::bf16) and prints its time and
 // the fp32 / bf16 ratio (the fp32 run of the same case is the baseline); adds the VAE mid-block
-// shape (960x536 / 8 = 8040 tokens, 1 head x 512).
+// shape (960x536 / 8 = 8040 tokens, 1 head x 512) and times the bf16 kernel's online softmax
+// alone on one in-cache 64 x 64 tile.
 // --closeup: only the U-Net level-0 attention of the MACRO close-up 960x536, K = P = 3 (a close-up
 // and 9 crops of 120 x 67 tokens, 5 heads x 64, the close-up mask rule), against dense attention
 // over one view of the same size: the masked time should be the dense time scaled by the allowed
@@ -25,6 +26,7 @@
 #include <cstring>
 #include <ctime>
 #include <functional>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
@@ -59,6 +61,24 @@ double score_tile_gflops(const AttentionKernels& k, int d) {
     for (int i = 0; i < calls; ++i) k.score_tile(rows.data(), kAttnBlockK, qt.data(), d, s.data());
   });
   return 2.0 * kAttnBlockQ * kAttnBlockK * d * calls / t.cpu * 1e-9;  // per CPU-second
+}
+
+// CPU nanoseconds per call of the bf16 kernel's online softmax on one 64 x 64 tile of scores
+// N(0, 1.5) in base 2, in cache, in the steady state (m already holds the running max).
+double softmax_tile_ns(const AttentionKernels& k) {
+  LineVec s(size_t(kAttnBlockK) * kAttnBlockQ), m(kAttnBlockQ), l(kAttnBlockQ, 0.0f),
+      alpha(kAttnBlockQ);
+  std::vector<uint32_t> pp(size_t(kAttnBlockK) / 2 * kAttnBlockQ);
+  std::mt19937 rng(7);
+  std::normal_distribution<float> score(0.0f, 1.5f);
+  for (float& x : s) x = score(rng);
+  for (float& x : m) x = -std::numeric_limits<float>::infinity();
+  const int calls = 20000;
+  const Timing t = median_timing(5, [&] {
+    for (int i = 0; i < calls; ++i)
+      k.softmax_bf16(s.data(), kAttnBlockK, m.data(), l.data(), alpha.data(), pp.data());
+  });
+  return t.cpu / calls * 1e9;
 }
 
 // Plane maps in spatial blobs, different per view, like depth planes of a close-up.
@@ -176,6 +196,9 @@ int run(int argc, char** argv) {
         double(m.mask.computed_pairs()) / (double(n) * n), m.mask.partial_tiles(),
         m.mask.entries());
   const double tile_rate = score_tile_gflops(kern, d);
+  if (bf16 && kern.softmax_bf16)
+    std::printf("  bf16 online softmax of one %d x %d tile (in cache): %.0f ns of CPU time\n",
+                kAttnBlockQ, kAttnBlockK, softmax_tile_ns(kern));
   for (int threads : thread_counts) {
     ThreadPool pool(threads);
     const Timing peak_t = fma_peak_gflops(kern, pool);
