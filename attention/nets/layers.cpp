@@ -635,16 +635,21 @@ void Upsample2D::init(int64_t channels) {
 void Upsample2D::pack(Precision p) {
   MACRO_CHECK(conv.weight.loaded() && conv.k == 3 && conv.c_in == conv.c_out);
   const int64_t c = conv.c_in;
-  std::vector<float> w(size_t(conv.weight.numel())), bias;
-  read_param_f32(conv.weight, w.data());  // [C, C, 3, 3]; conv.pack releases it below
-  if (conv.has_bias) {
-    bias.resize(size_t(c));
-    read_param_f32(conv.bias, bias.data());
-  }
+  // conv.pack unbinds its params; keep them to read the taps again only if the phases are built
+  // (their file pages fault back in).
+  const Param weight = conv.weight, bias_param = conv.bias;
   conv.pack(p);
   // The phases only where the conv runs direct: a Winograd conv of the resized image (<= 640
   // channels) is as fast (bench difix --stage decode, 2026-12-07) and needs no second pack.
   if (!conv.packed.winograd().empty()) return;
+  std::vector<float> w(size_t(weight.numel())), bias;
+  read_param_f32(weight, w.data());  // [C, C, 3, 3]
+  release_param(weight);
+  if (conv.has_bias) {
+    bias.resize(size_t(c));
+    read_param_f32(bias_param, bias.data());
+    release_param(bias_param);
+  }
   // Tap rows (columns) of the 3x3 kernel that fall on 2x2 row (column) r of parity a: [a][r].
   static constexpr int kFirst[2][2] = {{0, 1}, {0, 2}}, kLast[2][2] = {{0, 2}, {1, 2}};
   std::vector<float> k2(size_t(c * c * 4));
